@@ -1,0 +1,100 @@
+"""The kdsl exception hierarchy and the rendering of source locations.
+
+Every user mistake raises a ``KdslError`` subclass carrying a ``Loc``. Its message
+names the file, line and column, shows the source line with carets under the
+span, and says what was expected and what was found::
+
+    kdsl.errors.KdslTypeError: cannot add f32 and f64: operands must have the same type
+      File "sim.py", line 12, column 9, in integrate:
+        v1 = v0 + dt * 2.0
+             ^^^^^^^^^^^^^
+"""
+
+from __future__ import annotations
+
+import linecache
+import os
+
+from kdsl.ir.core import Loc
+
+
+class KdslError(Exception):
+    """Base class of every error kdsl raises for a user mistake."""
+
+    def __init__(self, message: str, loc: Loc | None = None, func: str | None = None) -> None:
+        self.message = message
+        self.loc = loc
+        self.func = func
+        self.context: list[str] = []
+        super().__init__(message)
+
+    def add_context(self, note: str) -> KdslError:
+        """Record where the error passed through ("during pass fold", ...)."""
+        self.context.append(note)
+        return self
+
+    def __str__(self) -> str:
+        text = self.message
+        if self.loc is not None and self.loc.line > 0:
+            text += "\n" + render_loc(self.loc, self.func)
+        for note in self.context:
+            text += f"\n  ({note})"
+        return text
+
+
+class KdslSyntaxError(KdslError):
+    """Python the kernel language does not accept (lambda, try, a list, ...)."""
+
+
+class KdslTypeError(KdslError):
+    """Operands, arguments or assignments whose types do not fit."""
+
+
+class KdslNameError(KdslError):
+    """An undefined name, or a variable that may be unassigned where it is read."""
+
+
+class KdslVerifyError(KdslError):
+    """IR that breaks an invariant (raised by the verifier and the parser)."""
+
+
+class KdslCapabilityError(KdslError):
+    """A kernel needs something the chosen backend does not support."""
+
+
+class KdslLaunchError(KdslError):
+    """Bad arguments to ``kdsl.launch`` (count, dtype, ndim, device)."""
+
+
+class KdslRuntimeError(KdslError):
+    """A failure while a kernel ran (out-of-bounds access in debug mode, ...)."""
+
+
+def source_line(file: str, line: int) -> str | None:
+    """The text of ``line`` in ``file``, or None when it cannot be read."""
+    text = linecache.getline(file, line)
+    return text.rstrip("\n") if text else None
+
+
+def render_loc(loc: Loc, func: str | None = None) -> str:
+    """The ``File ..., line ...`` header, the source line and carets under the span."""
+    where = f'  File "{loc.file}", line {loc.line}, column {loc.col}'
+    if func:
+        where += f", in {func}"
+    where += ":"
+    text = source_line(loc.file, loc.line)
+    if text is None:
+        return where
+    stripped = text.lstrip()
+    indent = len(text) - len(stripped)
+    start = max(loc.col - 1 - indent, 0)
+    if loc.end_line == loc.line and loc.end_col is not None and loc.end_col > loc.col:
+        width = loc.end_col - loc.col
+    else:
+        width = max(len(stripped) - start, 1)
+    return f"{where}\n    {stripped}\n    {' ' * start}{'^' * width}"
+
+
+def full_tracebacks() -> bool:
+    """True when ``KDSL_TRACEBACK=full`` asks for kdsl-internal frames."""
+    return os.environ.get("KDSL_TRACEBACK", "").lower() == "full"

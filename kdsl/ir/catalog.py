@@ -1,0 +1,128 @@
+"""The op catalog: every op is defined once, here, with all it means.
+
+An ``OpDef`` holds an op's name, traits, type rule, verifier, folder and
+interpreter semantics (its VJP joins it with autodiff). Passes and backends look
+ops up in ``CATALOG`` by name; no second table of ops exists anywhere. Dialect
+files (``ops_arith``, ``ops_math``, ``ops_vec``, ``ops_mem``, ``ops_scf``,
+``ops_func``) define their ops with ``CATALOG.define``; importing ``kdsl.ir`` loads
+them all.
+
+Interpreter semantics: ``interp(ctx, op, *operand_values)`` returns the result
+value (one result), a tuple (several) or None (none). ``ctx`` is the interpreter's
+thread context (thread index, region runner). Values are NumPy scalars, NumPy
+arrays for vectors and matrices, tuples for structs and NumPy arrays for arrays.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from kdsl.ir.core import Operation
+from kdsl.ir.types import Type
+
+#: Traits an op may carry.
+PURE = "pure"  # no side effects; may be CSE'd, hoisted, or removed when unused
+TERMINATOR = "terminator"  # ends a block (scf.yield, func.return, scf.condition)
+COMMUTATIVE = "commutative"
+READS = "reads"  # reads memory (kd.load): not removable across writes
+WRITES = "writes"  # writes memory (kd.store, atomics): never removed
+SPECULATABLE = "speculatable"  # pure and safe to run on paths that did not ask for it
+
+TypeRule = Callable[[Sequence[Type], dict[str, Any]], Sequence[Type]]
+Verifier = Callable[[Operation], None]
+Folder = Callable[[Operation, Sequence[Any]], Sequence[Any] | None]
+InterpRule = Callable[..., Any]
+
+
+def no_results(types: Sequence[Type], attrs: dict[str, Any]) -> Sequence[Type]:
+    """Type rule of ops that give no value (terminators, stores)."""
+    return []
+
+
+@dataclass
+class OpDef:
+    """Everything kdsl knows about one op. See the module docstring."""
+
+    name: str
+    doc: str
+    traits: frozenset[str] = frozenset()
+    #: Result types from operand types and attributes; None when results are given
+    #: explicitly by the builder (constants, casts, constructors).
+    type_rule: TypeRule | None = None
+    #: Extra invariants beyond the type rule; raises ``KdslVerifyError``.
+    verifier: Verifier | None = None
+    #: Constant folding: given constant operand values (None where unknown),
+    #: return the folded result values or None. Pure ops with an interpreter
+    #: rule fold through it by default when every operand is constant.
+    folder: Folder | None = None
+    interp: InterpRule | None = None
+    #: Number of regions the op must have.
+    num_regions: int = 0
+    #: Attribute names the op requires.
+    required_attrs: tuple[str, ...] = ()
+    #: Text-form example for the docs.
+    example: str = ""
+    #: Documentation group (the docs' section).
+    group: str = ""
+    #: Free-form extension slots (e.g. "vjp") filled by later subsystems.
+    rules: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def is_pure(self) -> bool:
+        return PURE in self.traits
+
+    @property
+    def is_terminator(self) -> bool:
+        return TERMINATOR in self.traits
+
+    @property
+    def has_side_effects(self) -> bool:
+        return WRITES in self.traits
+
+    def __hash__(self) -> int:
+        return hash(self.name)
+
+    def __eq__(self, other: object) -> bool:
+        return self is other
+
+
+class OpRegistry:
+    """Ops by name, refusing a second definition of the same name."""
+
+    def __init__(self) -> None:
+        self._ops: dict[str, OpDef] = {}
+
+    def define(self, name: str, doc: str, **kwargs: Any) -> OpDef:
+        """Define a new op; raises ValueError if ``name`` is taken."""
+        if name in self._ops:
+            raise ValueError(f"op {name!r} is defined twice")
+        opdef = OpDef(name=name, doc=doc, **kwargs)
+        self._ops[name] = opdef
+        return opdef
+
+    def add_rule(self, name: str, rule: str, fn: Any) -> None:
+        """Attach an extra rule (such as a VJP) to an existing op, once."""
+        opdef = self[name]
+        if rule in opdef.rules:
+            raise ValueError(f"op {name!r} already has a {rule!r} rule")
+        opdef.rules[rule] = fn
+
+    def __getitem__(self, name: str) -> OpDef:
+        try:
+            return self._ops[name]
+        except KeyError:
+            raise KeyError(f"unknown op {name!r}") from None
+
+    def __contains__(self, name: str) -> bool:
+        return name in self._ops
+
+    def __iter__(self):
+        return iter(self._ops.values())
+
+    def __len__(self) -> int:
+        return len(self._ops)
+
+
+CATALOG = OpRegistry()

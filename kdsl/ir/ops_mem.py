@@ -1,0 +1,201 @@
+"""The ``kd`` dialect: thread indices, array shapes, loads, stores and atomics.
+
+Arrays are memory. Reads and writes go through these ops, which carry effects;
+every other value is an immutable SSA value. Indices are integers, one per array
+dimension. An index out of range is an error: the interpreter always checks, the
+compiled backends check in debug mode.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from kdsl.errors import KdslRuntimeError
+from kdsl.ir import semantics as sem
+from kdsl.ir.catalog import CATALOG, PURE, READS, SPECULATABLE, WRITES
+from kdsl.ir.types import I32, ArrayType, ScalarType, StructType, Type, elem_type
+
+ATOMIC_KINDS = ("add", "sub", "min", "max", "and", "or", "xor", "exch")
+
+
+def _tid_verify(op) -> None:
+    dim, ndim = op.attrs["dim"], op.attrs["ndim"]
+    if not (1 <= ndim <= 4 and 0 <= dim < ndim):
+        raise TypeError(f"kd.tid dim={dim} ndim={ndim} is out of range (ndim is 1 to 4)")
+    if op.results[0].type != I32:
+        raise TypeError("kd.tid gives an i32")
+
+
+def _tid_interp(ctx, op):
+    return ctx.tid(op.attrs["dim"], op.attrs["ndim"])
+
+
+CATALOG.define(
+    "kd.tid",
+    "Index of the running thread. With ``ndim = 1`` it is the linear index over the "
+    "whole launch; with ``ndim = n`` (the launch must have n dimensions) it is "
+    "component ``dim`` of the n-dimensional index.",
+    traits=frozenset({PURE, SPECULATABLE}),
+    verifier=_tid_verify,
+    interp=_tid_interp,
+    required_attrs=("dim", "ndim"),
+    example="%0 = kd.tid {dim = 0, ndim = 1} : i32",
+    group="memory",
+)
+
+
+def _shape_rule(ts: Sequence[Type], attrs: dict[str, Any]) -> list[Type]:
+    (a,) = ts
+    if not isinstance(a, ArrayType):
+        raise TypeError(f"only arrays have a shape, not {a}")
+    dim = attrs.get("dim")
+    if not isinstance(dim, int) or not 0 <= dim < a.ndim:
+        raise TypeError(f"shape[{dim}] is out of range for a {a.ndim}-d array")
+    return [I32]
+
+
+CATALOG.define(
+    "kd.array_shape",
+    "Extent of dimension ``dim`` of an array.",
+    traits=frozenset({PURE, SPECULATABLE}),
+    type_rule=_shape_rule,
+    interp=lambda ctx, op, a: np.int32(a.shape[op.attrs["dim"]]),
+    required_attrs=("dim",),
+    example="%1 = kd.array_shape %0 {dim = 0} : i32",
+    group="memory",
+)
+
+
+def _check_access(a: Type, idx: Sequence[Type]) -> ArrayType:
+    if not isinstance(a, ArrayType):
+        raise TypeError(f"only arrays can be indexed this way, not {a}")
+    if len(idx) != a.ndim:
+        raise TypeError(f"a {a.ndim}-d array needs {a.ndim} indices, got {len(idx)}")
+    for t in idx:
+        if not (isinstance(t, ScalarType) and t.is_int):
+            raise TypeError(f"an array index must be an integer, not {t}")
+    return a
+
+
+def _load_rule(ts: Sequence[Type], attrs: dict[str, Any]) -> list[Type]:
+    return [_check_access(ts[0], ts[1:]).dtype]
+
+
+def element_index(ctx, op, arr: np.ndarray, array_operand: int, idx: Sequence[Any]) -> tuple:
+    """Bounds-checked element index: raises a ``KdslRuntimeError`` naming it all."""
+    at: ArrayType = op.operands[array_operand].type
+    shape = arr.shape[: at.ndim]
+    ix = tuple(int(i) for i in idx)
+    for i, n in zip(ix, shape):
+        if not 0 <= i < n:
+            name = op.operands[array_operand].name_hint or "array"
+            kernel = getattr(ctx, "kernel_name", "?")
+            raise KdslRuntimeError(
+                f"index {list(ix)} is out of bounds for array '{name}' of shape "
+                f"{tuple(shape)} in kernel '{kernel}'",
+                op.loc,
+                kernel,
+            )
+    return ix
+
+
+def to_value(raw: Any, t: Type) -> Any:
+    """An element read from a NumPy array, as the interpreter's value of type ``t``."""
+    if isinstance(t, StructType):
+        return tuple(to_value(raw[name], ft) for name, ft in t.fields)
+    if isinstance(raw, np.ndarray):
+        return raw.copy()
+    return raw
+
+
+def from_value(value: Any, t: Type) -> Any:
+    """The interpreter's value of type ``t`` as something NumPy can store."""
+    if isinstance(t, StructType):
+        return tuple(from_value(v, ft) for v, (_, ft) in zip(value, t.fields))
+    return value
+
+
+def _load_interp(ctx, op, a, *idx):
+    ix = element_index(ctx, op, a, 0, idx)
+    return to_value(a[ix], op.results[0].type)
+
+
+CATALOG.define(
+    "kd.load",
+    "Read one element of an array.",
+    traits=frozenset({READS}),
+    type_rule=_load_rule,
+    interp=_load_interp,
+    example="%2 = kd.load %0, %1 : f32",
+    group="memory",
+)
+
+
+def _store_rule(ts: Sequence[Type], attrs: dict[str, Any]) -> list[Type]:
+    v, a = ts[0], ts[1]
+    at = _check_access(a, ts[2:])
+    if v != at.dtype:
+        raise TypeError(f"cannot store a {v} into an array of {at.dtype}")
+    return []
+
+
+def _store_interp(ctx, op, v, a, *idx):
+    ix = element_index(ctx, op, a, 1, idx)
+    a[ix] = from_value(v, op.operands[0].type)
+
+
+CATALOG.define(
+    "kd.store",
+    "Write a value into one element of an array: ``kd.store %value, %array, %i...``.",
+    traits=frozenset({WRITES}),
+    type_rule=_store_rule,
+    interp=_store_interp,
+    example="kd.store %2, %0, %1",
+    group="memory",
+)
+
+
+def _atomic_rule(ts: Sequence[Type], attrs: dict[str, Any]) -> list[Type]:
+    kind = attrs.get("kind")
+    if kind not in ATOMIC_KINDS:
+        raise TypeError(f"unknown atomic kind {kind!r}")
+    v, a = ts[0], ts[1]
+    at = _check_access(a, ts[2:])
+    if v != at.dtype:
+        raise TypeError(f"cannot atomically {kind} a {v} into an array of {at.dtype}")
+    et = elem_type(v)
+    if kind in ("and", "or", "xor") and not et.is_int:
+        raise TypeError(f"atomic {kind} needs an integer array, not {at.dtype}")
+    return [v]
+
+
+_ATOMIC_FNS = {
+    "add": np.add, "sub": np.subtract, "min": np.fmin, "max": np.fmax,
+    "and": np.bitwise_and, "or": np.bitwise_or, "xor": np.bitwise_xor,
+    "exch": lambda old, new: new,
+}  # fmt: skip
+
+
+def _atomic_interp(ctx, op, v, a, *idx):
+    ix = element_index(ctx, op, a, 1, idx)
+    old = to_value(a[ix], op.results[0].type)
+    with np.errstate(all="ignore"):
+        new = _ATOMIC_FNS[op.attrs["kind"]](np.asarray(old), np.asarray(v))
+    a[ix] = sem.unwrap(np.asarray(new).astype(np.asarray(old).dtype))
+    return old
+
+
+CATALOG.define(
+    "kd.atomic_rmw",
+    "Atomic read-modify-write of one array element with ``kind`` (add, sub, min, "
+    "max, and, or, xor, exch); gives the old value. Vectors work componentwise.",
+    traits=frozenset({READS, WRITES}),
+    type_rule=_atomic_rule,
+    interp=_atomic_interp,
+    required_attrs=("kind",),
+    example='%3 = kd.atomic_rmw %2, %0, %1 {kind = "add"} : f32',
+    group="memory",
+)

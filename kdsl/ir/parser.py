@@ -1,0 +1,386 @@
+"""Parsing the text form that ``printer`` writes, so print -> parse -> print is exact.
+
+``//`` starts a comment that runs to the end of the line, so FileCheck test files
+(``// RUN:``, ``// CHECK:``) parse as they are. Errors are ``KdslVerifyError`` with
+the line and column in the text.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from typing import Any
+
+from kdsl.errors import KdslVerifyError
+from kdsl.ir.builder import create_op
+from kdsl.ir.catalog import CATALOG
+from kdsl.ir.core import Block, Loc, Module, Operation, Region, Value
+from kdsl.ir.types import (
+    SCALARS,
+    ArrayType,
+    HandleType,
+    MatrixType,
+    QuatType,
+    StructType,
+    TransformType,
+    Type,
+    VectorType,
+)
+
+_TOKEN = re.compile(
+    r"""
+    (?P<ws>[ \t\r\n]+|//[^\n]*)
+  | (?P<value>%[A-Za-z0-9_]+)
+  | (?P<symbol>@[A-Za-z_][A-Za-z0-9_]*)
+  | (?P<string>"(?:[^"\\]|\\.)*")
+  | (?P<number>-?(?:\d+\.\d*(?:[eE][+-]?\d+)?|\d+[eE][+-]?\d+|\d+))
+  | (?P<ident>[A-Za-z_][A-Za-z0-9_.]*)
+  | (?P<arrow>->)
+  | (?P<punct>[(){}<>,:=\[\]^-])
+    """,
+    re.VERBOSE,
+)
+
+
+class _Tok:
+    __slots__ = ("kind", "text", "line", "col")
+
+    def __init__(self, kind: str, text: str, line: int, col: int) -> None:
+        self.kind, self.text, self.line, self.col = kind, text, line, col
+
+
+def _tokenize(text: str, file: str) -> list[_Tok]:
+    toks: list[_Tok] = []
+    pos, line, line_start = 0, 1, 0
+    while pos < len(text):
+        m = _TOKEN.match(text, pos)
+        if m is None:
+            col = pos - line_start + 1
+            raise KdslVerifyError(
+                f"unexpected character {text[pos]!r} in IR text", Loc(file, line, col)
+            )
+        kind = m.lastgroup or ""
+        tok = m.group()
+        if kind != "ws":
+            toks.append(_Tok(kind, tok, line, pos - line_start + 1))
+        newlines = tok.count("\n")
+        if newlines:
+            line += newlines
+            line_start = pos + tok.rindex("\n") + 1
+        pos = m.end()
+    toks.append(_Tok("eof", "", line, pos - line_start + 1))
+    return toks
+
+
+class Parser:
+    """Recursive-descent parser for one module."""
+
+    def __init__(self, text: str, file: str = "<ir>") -> None:
+        self.file = file
+        self.toks = _tokenize(text, file)
+        self.pos = 0
+        self.module = Module()
+        self.scopes: list[dict[str, Value]] = []
+
+    # --- token helpers -----------------------------------------------------
+
+    @property
+    def tok(self) -> _Tok:
+        return self.toks[self.pos]
+
+    def peek(self, offset: int = 1) -> _Tok:
+        return self.toks[min(self.pos + offset, len(self.toks) - 1)]
+
+    def loc(self, tok: _Tok | None = None) -> Loc:
+        t = tok or self.tok
+        return Loc(self.file, t.line, t.col)
+
+    def error(self, message: str, tok: _Tok | None = None) -> KdslVerifyError:
+        t = tok or self.tok
+        found = t.text or "end of input"
+        return KdslVerifyError(f"{message} (found {found!r})", self.loc(t))
+
+    def at(self, text: str) -> bool:
+        return self.tok.text == text and self.tok.kind in ("punct", "ident", "arrow")
+
+    def accept(self, text: str) -> bool:
+        if self.at(text):
+            self.pos += 1
+            return True
+        return False
+
+    def expect(self, text: str) -> _Tok:
+        if not self.at(text):
+            raise self.error(f"expected {text!r}")
+        tok = self.tok
+        self.pos += 1
+        return tok
+
+    def expect_kind(self, kind: str, what: str) -> _Tok:
+        if self.tok.kind != kind:
+            raise self.error(f"expected {what}")
+        tok = self.tok
+        self.pos += 1
+        return tok
+
+    # --- module level --------------------------------------------------------
+
+    def parse_module(self) -> Module:
+        while self.tok.kind != "eof":
+            if self.at("struct"):
+                self.parse_struct()
+            elif self.at("func.func"):
+                self.module.add_func(self.parse_func())
+            else:
+                raise self.error("expected 'struct' or 'func.func'")
+        return self.module
+
+    def parse_struct(self) -> None:
+        self.expect("struct")
+        name = self.expect_kind("ident", "a struct name").text
+        self.expect("{")
+        fields: list[tuple[str, Type]] = []
+        while not self.accept("}"):
+            if fields:
+                self.expect(",")
+            fname = self.expect_kind("ident", "a field name").text
+            self.expect(":")
+            fields.append((fname, self.parse_type()))
+        self.module.add_struct(StructType(name, tuple(fields)))
+
+    def parse_func(self) -> Operation:
+        start = self.expect("func.func")
+        name = self.expect_kind("symbol", "a function name like @f").text[1:]
+        self.scopes = [{}]
+        self.expect("(")
+        arg_names, arg_types = [], []
+        while not self.accept(")"):
+            if arg_names:
+                self.expect(",")
+            arg_names.append(self.expect_kind("value", "an argument like %x"))
+            self.expect(":")
+            arg_types.append(self.parse_type())
+        self.expect("->")
+        res_types = self.parse_type_list_parens()
+        attrs = self.parse_attrs() if self.at_attrs() else {}
+        block = Block(arg_types, [self.hint(t.text) for t in arg_names])
+        for tok, arg in zip(arg_names, block.args):
+            self.define(tok, arg)
+        attrs = {"sym_name": name, **attrs, "res_types": res_types}
+        self.expect("{")
+        self.parse_ops_until_brace(block)
+        func = Operation(CATALOG["func.func"], (), (), attrs, [Region(block)], self.loc(start))
+        if self.at("loc"):
+            func.loc = self.parse_loc()
+        return func
+
+    # --- ops -----------------------------------------------------------------
+
+    def parse_ops_until_brace(self, block: Block) -> None:
+        while not self.accept("}"):
+            block.append(self.parse_op())
+
+    def parse_op(self) -> Operation:
+        start = self.tok
+        result_toks: list[_Tok] = []
+        if self.tok.kind == "value":
+            result_toks.append(self.expect_kind("value", "a value"))
+            while self.accept(","):
+                result_toks.append(self.expect_kind("value", "a value"))
+            self.expect("=")
+        name_tok = self.expect_kind("ident", "an op name")
+        if name_tok.text not in CATALOG:
+            raise self.error("unknown op", name_tok)
+        operands: list[Value] = []
+        if self.tok.kind == "value":
+            operands.append(self.use(self.expect_kind("value", "a value")))
+            while self.accept(","):
+                operands.append(self.use(self.expect_kind("value", "a value")))
+        attrs = self.parse_attrs() if self.at_attrs() else {}
+        result_types: list[Type] = []
+        if self.accept(":"):
+            result_types.append(self.parse_type())
+            while self.accept(","):
+                result_types.append(self.parse_type())
+        if len(result_types) != len(result_toks):
+            raise self.error(
+                f"{name_tok.text} names {len(result_toks)} results but gives "
+                f"{len(result_types)} types", name_tok,
+            )  # fmt: skip
+        regions: list[Region] = []
+        while self.at("{"):
+            regions.append(self.parse_region())
+        try:
+            op = create_op(name_tok.text, operands, result_types, attrs, regions, self.loc(start))
+        except (TypeError, ValueError) as e:
+            raise KdslVerifyError(str(e), self.loc(name_tok)) from None
+        if self.at("loc"):
+            op.loc = self.parse_loc()
+        for tok, r in zip(result_toks, op.results):
+            r.name_hint = self.hint(tok.text)
+            self.define(tok, r)
+        return op
+
+    def parse_region(self) -> Region:
+        self.expect("{")
+        self.scopes.append({})
+        block = Block()
+        if self.accept("^"):
+            self.expect_kind("ident", "a block label")
+            self.expect("(")
+            while not self.accept(")"):
+                if block.args:
+                    self.expect(",")
+                tok = self.expect_kind("value", "a block argument")
+                self.expect(":")
+                arg = block.add_arg(self.parse_type(), self.hint(tok.text))
+                self.define(tok, arg)
+            self.expect(":")
+        self.parse_ops_until_brace(block)
+        self.scopes.pop()
+        return Region(block)
+
+    # --- values ----------------------------------------------------------------
+
+    @staticmethod
+    def hint(text: str) -> str | None:
+        name = text[1:]
+        return None if name[:1].isdigit() else name
+
+    def define(self, tok: _Tok, value: Value) -> None:
+        for scope in self.scopes:
+            if tok.text in scope:
+                raise self.error(f"value {tok.text} is defined twice", tok)
+        self.scopes[-1][tok.text] = value
+
+    def use(self, tok: _Tok) -> Value:
+        for scope in reversed(self.scopes):
+            if tok.text in scope:
+                return scope[tok.text]
+        raise self.error(f"use of undefined value {tok.text}", tok)
+
+    # --- attributes, types, locations ------------------------------------------
+
+    def at_attrs(self) -> bool:
+        return self.at("{") and self.peek().kind == "ident" and self.peek(2).text == "="
+
+    def parse_attrs(self) -> dict[str, Any]:
+        self.expect("{")
+        attrs: dict[str, Any] = {}
+        while not self.accept("}"):
+            if attrs:
+                self.expect(",")
+            key = self.expect_kind("ident", "an attribute name").text
+            self.expect("=")
+            attrs[key] = self.parse_attr_value()
+        return attrs
+
+    def parse_attr_value(self) -> Any:
+        tok = self.tok
+        if tok.kind == "number":
+            self.pos += 1
+            text = tok.text
+            return float(text) if any(c in text for c in ".eE") else int(text)
+        if tok.kind == "string":
+            self.pos += 1
+            return json.loads(tok.text)
+        if self.accept("-"):
+            self.expect("inf")
+            return float("-inf")
+        if self.accept("["):
+            items: list[Any] = []
+            while not self.accept("]"):
+                if items:
+                    self.expect(",")
+                items.append(self.parse_attr_value())
+            return items
+        words = {"true": True, "false": False, "inf": float("inf"), "nan": float("nan")}
+        if tok.kind == "ident" and tok.text in words:
+            self.pos += 1
+            return words[tok.text]
+        if self.accept("type"):
+            self.expect("(")
+            t = self.parse_type()
+            self.expect(")")
+            return t
+        raise self.error("expected an attribute value")
+
+    def parse_type_list_parens(self) -> list[Type]:
+        self.expect("(")
+        types: list[Type] = []
+        while not self.accept(")"):
+            if types:
+                self.expect(",")
+            types.append(self.parse_type())
+        return types
+
+    def parse_int(self) -> int:
+        tok = self.expect_kind("number", "an integer")
+        return int(tok.text)
+
+    def parse_type(self) -> Type:
+        tok = self.expect_kind("ident", "a type")
+        name = tok.text
+        if name in SCALARS:
+            return SCALARS[name]
+        self.expect("<")
+        if name == "vec":
+            n = self.parse_int()
+            self.expect(",")
+            t: Type = VectorType(n, self.parse_scalar())
+        elif name == "mat":
+            r = self.parse_int()
+            self.expect(",")
+            c = self.parse_int()
+            self.expect(",")
+            t = MatrixType(r, c, self.parse_scalar())
+        elif name == "quat":
+            t = QuatType(self.parse_scalar())
+        elif name == "transform":
+            t = TransformType(self.parse_scalar())
+        elif name == "array":
+            dtype = self.parse_type()
+            self.expect(",")
+            t = ArrayType(dtype, self.parse_int())
+        elif name == "struct":
+            sname = self.expect_kind("ident", "a struct name")
+            if sname.text not in self.module.structs:
+                raise self.error(f"struct {sname.text} is not defined", sname)
+            t = self.module.structs[sname.text]
+        elif name == "handle":
+            t = HandleType(self.expect_kind("ident", "a handle kind").text)
+        else:
+            raise self.error("unknown type", tok)
+        self.expect(">")
+        return t
+
+    def parse_scalar(self):
+        tok = self.tok
+        t = self.parse_type()
+        if t not in SCALARS.values():
+            raise self.error("expected a scalar type", tok)
+        return t
+
+    def parse_loc(self) -> Loc:
+        self.expect("loc")
+        self.expect("(")
+        file = json.loads(self.expect_kind("string", "a file name").text)
+        nums = []
+        while self.accept(":"):
+            nums.append(self.parse_int())
+        self.expect(")")
+        if len(nums) == 2:
+            return Loc(file, nums[0], nums[1])
+        if len(nums) == 4:
+            return Loc(file, *nums)
+        raise self.error("a location has a line and column, and optionally an end")
+
+
+def parse_module(text: str, file: str = "<ir>", verify: bool = True) -> Module:
+    """Parse the text form of a module; verifies it unless ``verify=False``."""
+    module = Parser(text, file).parse_module()
+    if verify:
+        from kdsl.ir.verifier import verify_module
+
+        verify_module(module)
+    return module

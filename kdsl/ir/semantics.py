@@ -1,0 +1,112 @@
+"""Reference numeric semantics shared by the interpreter rules and the folder.
+
+These helpers define, once, what integer overflow, division by zero, casts and
+rounding do in kdsl. Every backend must match them (the conformance suite checks).
+
+- Integers wrap (two's complement). ``a / 0``, ``a // 0`` and ``a % 0`` give 0.
+- Integer ``/`` truncates toward zero (C); ``//`` floors (Python); ``%`` takes the
+  sign of the dividend (C ``%``, Warp's ``mod``).
+- Float to integer casts truncate toward zero and saturate; NaN gives 0 (PTX
+  ``cvt.rzi.sat``, LLVM ``fptosi.sat``).
+- Shifts by the bit width or more give 0 (``>>`` of a negative signed value: -1).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from kdsl.ir.types import ScalarType, Type, elem_type, value_shape
+
+
+def np_value(value: Any, t: Type) -> Any:
+    """``value`` as the interpreter's representation of type ``t``."""
+    et = elem_type(t)
+    if isinstance(t, ScalarType):
+        return cast_scalar_array(np.asarray(value), et)[()]
+    return cast_scalar_array(np.asarray(value), et).reshape(value_shape(t))
+
+
+def unwrap(arr: np.ndarray) -> Any:
+    """A 0-d array becomes a NumPy scalar; anything else stays an array."""
+    return arr[()] if arr.ndim == 0 else arr
+
+
+def cast_scalar_array(x: np.ndarray, to: ScalarType) -> np.ndarray:
+    """Elementwise cast with kdsl's rules (wrap, saturate, NaN to 0, bool = != 0)."""
+    x = np.asarray(x)
+    if to.is_bool:
+        return x != 0
+    if to.is_float:
+        with np.errstate(all="ignore"):
+            return x.astype(to.np_dtype)
+    info = np.iinfo(to.np_dtype)
+    if x.dtype.kind == "f":
+        with np.errstate(all="ignore"):
+            t = np.trunc(np.where(np.isnan(x), 0.0, x.astype(np.float64)))
+            # float(info.max) of a 64-bit type rounds up past the range, so compare
+            # with >= and pick the exact bound.
+            inner = np.clip(t, float(info.min), float(info.max)).astype(to.np_dtype, casting="unsafe")
+            return np.where(t >= float(info.max), info.max,
+                            np.where(t <= float(info.min), info.min, inner)).astype(to.np_dtype)
+    if x.dtype.kind == "b":
+        return x.astype(to.np_dtype)
+    # Integer to integer: wrap through the unsigned width.
+    return x.astype(np.int64 if x.dtype.kind == "i" else np.uint64).astype(
+        to.np_dtype, casting="unsafe"
+    )
+
+
+def int_div(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """C-style integer division (truncate toward zero); division by zero gives 0."""
+    zero = b == 0
+    safe_b = np.where(zero, 1, b).astype(b.dtype)
+    with np.errstate(all="ignore"):
+        q = np.floor_divide(a, safe_b)
+        r = a - q * safe_b
+        if a.dtype.kind == "i":
+            fix = (r != 0) & ((a < 0) != (safe_b < 0))
+            q = np.where(fix, q + 1, q).astype(a.dtype)
+    return np.where(zero, 0, q).astype(a.dtype)
+
+
+def int_floordiv(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Python-style floor division for integers; division by zero gives 0."""
+    zero = b == 0
+    safe_b = np.where(zero, 1, b).astype(b.dtype)
+    with np.errstate(all="ignore"):
+        q = np.floor_divide(a, safe_b)
+    return np.where(zero, 0, q).astype(a.dtype)
+
+
+def int_mod(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """C-style remainder (sign of the dividend); modulo zero gives 0."""
+    zero = b == 0
+    safe_b = np.where(zero, 1, b).astype(b.dtype)
+    with np.errstate(all="ignore"):
+        r = np.fmod(a, safe_b)
+    return np.where(zero, 0, r).astype(a.dtype)
+
+
+def shift_left(a: np.ndarray, s: np.ndarray) -> np.ndarray:
+    bits = a.dtype.itemsize * 8
+    big = (s < 0) | (s >= bits)
+    safe = np.where(big, 0, s).astype(a.dtype)
+    return np.where(big, 0, np.left_shift(a, safe)).astype(a.dtype)
+
+
+def shift_right(a: np.ndarray, s: np.ndarray) -> np.ndarray:
+    bits = a.dtype.itemsize * 8
+    big = (s < 0) | (s >= bits)
+    safe = np.where(big, 0, s).astype(a.dtype)
+    fill = np.where(a < 0, -1, 0) if a.dtype.kind == "i" else 0
+    return np.where(big, fill, np.right_shift(a, safe)).astype(a.dtype)
+
+
+def round_half_away(x: np.ndarray) -> np.ndarray:
+    """C ``round``: halves go away from zero (exact for every float)."""
+    t = np.trunc(x)
+    frac = np.abs(x - t)
+    return np.where(frac >= 0.5, t + np.sign(x), t).astype(x.dtype)
+
