@@ -1,0 +1,30 @@
+"""kdsl: a Python kernel DSL for GPU and CPU simulation and graphics code.
+
+Its public API follows NVIDIA Warp's, so ``import kdsl as wp`` ports a Warp program.
+Each subsystem lists its public names in its own ``api`` module; this file only
+gathers them. Importing kdsl imports no GPU, torch or jax package.
+"""
+
+from kdsl import errors
+from kdsl.errors import (
+    KdslCapabilityError,
+    KdslError,
+    KdslLaunchError,
+    KdslNameError,
+    KdslRuntimeError,
+    KdslSyntaxError,
+    KdslTypeError,
+    KdslVerifyError,
+)
+from kdsl.frontend.api import *  # noqa: F403
+from kdsl.runtime.api import *  # noqa: F403
+from kdsl.types import *  # noqa: F403
+from kdsl.types import (
+    bool,  # noqa: A004 - Warp's name
+    class_of,
+    dtype_from_numpy,
+    dtype_to_numpy,
+    type_of,
+)
+
+__version__ = "0.1.0"

@@ -17,6 +17,17 @@ import numpy as np
 
 from kdsl.ir import types as T
 
+__all__ = [
+    "Scalar", "Composite", "bool", "int8", "int16", "int32", "int64", "uint8", "uint16",
+    "uint32", "uint64", "float16", "float32", "float64", "half", "vector", "matrix",
+    "quaternion", "transformation", "vec2", "vec3", "vec4", "vec2f", "vec3f", "vec4f",
+    "vec2d", "vec3d", "vec4d", "vec2h", "vec3h", "vec4h", "vec2i", "vec3i", "vec4i",
+    "vec2ui", "vec3ui", "vec4ui", "mat22", "mat33", "mat44", "mat22f", "mat33f", "mat44f",
+    "mat22d", "mat33d", "mat44d", "mat22h", "mat33h", "mat44h", "quat", "quatf", "quatd",
+    "quath", "transform", "transformf", "transformd", "transformh", "type_of", "class_of",
+    "dtype_to_numpy", "dtype_from_numpy",
+]  # fmt: skip
+
 
 class Scalar:
     """Base of the scalar type classes. Calling one converts a Python value."""
