@@ -14,8 +14,10 @@ from __future__ import annotations
 
 import linecache
 import os
+from typing import TYPE_CHECKING
 
-from kdsl.ir.core import Loc
+if TYPE_CHECKING:
+    from kdsl.ir.core import Loc
 
 
 class KdslError(Exception):
