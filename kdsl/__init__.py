@@ -16,9 +16,9 @@ from kdsl.errors import (
     KdslTypeError,
     KdslVerifyError,
 )
-from kdsl.frontend.api import *  # noqa: F403
-from kdsl.runtime.api import *  # noqa: F403
-from kdsl.types import *  # noqa: F403
+from kdsl.frontend.api import *
+from kdsl.runtime.api import *
+from kdsl.types import *
 from kdsl.types import (
     bool,  # noqa: A004 - Warp's name
     class_of,

@@ -5,11 +5,20 @@ Import from here, not from the submodules::
     from kdsl.ir import Builder, CATALOG, Module, parse_module, print_module, types
 """
 
-from kdsl.ir import ops_arith, ops_func, ops_math, ops_mem, ops_scf, ops_vec  # noqa: F401
-from kdsl.ir import types
+from kdsl.ir import ops_arith, ops_func, ops_math, ops_mem, ops_scf, ops_vec, types
 from kdsl.ir.builder import Builder, create_op, new_func
 from kdsl.ir.catalog import CATALOG, OpDef, OpRegistry
-from kdsl.ir.core import UNKNOWN_LOC, Block, BlockArgument, Loc, Module, Operation, OpResult, Region, Value
+from kdsl.ir.core import (
+    UNKNOWN_LOC,
+    Block,
+    BlockArgument,
+    Loc,
+    Module,
+    Operation,
+    OpResult,
+    Region,
+    Value,
+)
 from kdsl.ir.parser import parse_module
 from kdsl.ir.printer import print_module, print_op
 from kdsl.ir.verifier import verify_module

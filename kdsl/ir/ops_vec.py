@@ -215,15 +215,13 @@ def _normalize(v):
 
 def _matmul_type(ts):
     a, b = ts
-    if isinstance(a, MatrixType) and isinstance(b, MatrixType):
-        if a.cols == b.rows and a.elem == b.elem:
-            return MatrixType(a.rows, b.cols, a.elem)
-    elif isinstance(a, MatrixType) and isinstance(b, VectorType):
-        if a.cols == b.length and a.elem == b.elem:
-            return VectorType(a.rows, a.elem)
-    elif isinstance(a, VectorType) and isinstance(b, MatrixType):
-        if a.length == b.rows and a.elem == b.elem:
-            return VectorType(b.cols, a.elem)
+    same_elem = elem_type(a) == elem_type(b) if a.is_value and b.is_value else False
+    if same_elem and isinstance(a, MatrixType) and isinstance(b, MatrixType) and a.cols == b.rows:
+        return MatrixType(a.rows, b.cols, a.elem)
+    if same_elem and isinstance(a, MatrixType) and isinstance(b, VectorType) and a.cols == b.length:
+        return VectorType(a.rows, a.elem)
+    if same_elem and isinstance(a, VectorType) and isinstance(b, MatrixType) and a.length == b.rows:
+        return VectorType(b.cols, a.elem)
     raise TypeError(f"cannot multiply {a} by {b}: shapes or element types do not match")
 
 
