@@ -42,6 +42,9 @@ _TOKEN = re.compile(
 )
 
 
+_COMPOSITE_TYPES = frozenset({"vec", "mat", "quat", "transform", "array", "struct", "handle"})
+
+
 class _Tok:
     __slots__ = ("kind", "text", "line", "col")
 
@@ -323,6 +326,8 @@ class Parser:
         name = tok.text
         if name in SCALARS:
             return SCALARS[name]
+        if name not in _COMPOSITE_TYPES:
+            raise self.error(f"unknown type {name!r}", tok)
         self.expect("<")
         if name == "vec":
             n = self.parse_int()

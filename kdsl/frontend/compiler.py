@@ -1,0 +1,184 @@
+"""Compiling a kernel and the user functions it calls into one IR module."""
+
+from __future__ import annotations
+
+import ast
+import builtins as pybuiltins
+from typing import TYPE_CHECKING, Any
+
+from kdsl.errors import KdslError, KdslSyntaxError, KdslTypeError
+from kdsl.frontend.analysis import always_returns, has_nontail_return
+from kdsl.frontend.control import RET
+from kdsl.frontend.statements import StatementLowering
+from kdsl.frontend.values import describe, is_weak
+from kdsl.ir import Module, Operation, Value, new_func
+from kdsl.ir.types import BOOL, ScalarType, Type
+
+if TYPE_CHECKING:
+    from kdsl.frontend.kernel import Function, Overload
+
+
+class FunctionCompiler(StatementLowering):
+    """Lowers one Python function (kernel or ``@func`` overload) into a ``func.func``."""
+
+    def __init__(self, unit: ModuleCompiler, target: Any, kind: str) -> None:
+        super().__init__(target.src)
+        self.unit = unit
+        self.kind = kind
+        self.target = target
+        self.globals = {**target.src.fn.__globals__, **target.src.closure_vars()}
+
+    def compile(self, sym_name: str, arg_types: list[Type]) -> Operation:
+        fdef = self.src.tree
+        if isinstance(fdef, ast.AsyncFunctionDef):
+            raise self.error(KdslSyntaxError, "an async def cannot be a kernel or function", fdef)
+        _check_signature(self, fdef)
+        names = [a.arg for a in fdef.args.args]
+        func = new_func(self.unit.module, sym_name, arg_types, names, [], self.kind,
+                        self.loc(fdef))  # fmt: skip
+        body = func.regions[0].block
+        for name, arg in zip(names, body.args):
+            self.vars[name] = arg
+        if self.kind == "func" and _returns_value(fdef) and not always_returns(fdef.body):
+            raise self.error(
+                KdslSyntaxError,
+                f"function '{self.src.name}' may end without returning a value; every path "
+                "must return",
+                fdef,
+            )
+        with self.b.at_end(body):
+            if has_nontail_return(fdef.body):
+                self.vars[RET] = self.const(False, BOOL, fdef)
+            self.visit_body(fdef.body)
+            res = self.res_types or []
+            rv = [self.vars[f"$rv{k}"] for k in range(len(res))]
+            end = fdef.body[-1] if fdef.body else fdef
+            self.b.create("func.return", rv, loc=self.loc(end))
+        func.attrs["res_types"] = list(res)
+        return func
+
+    def call_user(self, fn: Function, args: list[Any], node: ast.Call) -> Any:
+        """A call of a ``@kdsl.func``: pick the overload, compile it once, ``func.call``."""
+        overload, values = self.pick_overload(fn, args, node)
+        callee = self.unit.compile_func(overload, self, node)
+        res = callee.attrs["res_types"]
+        op = self.b.create("func.call", values, list(res), {"callee": callee.attrs["sym_name"]},
+                           loc=self.loc(node))  # fmt: skip
+        if not op.results:
+            return None
+        return op.results[0] if len(op.results) == 1 else tuple(op.results)
+
+    def pick_overload(self, fn: Function, args: list[Any], node: ast.Call):
+        for a in args:
+            if not (isinstance(a, Value) or is_weak(a)):
+                raise self.error(KdslTypeError, f"cannot pass {describe(a)} to {fn.name}()", node)
+        candidates = []
+        for ov in fn.overloads:
+            types = ov.arg_types()
+            if len(types) != len(args):
+                continue
+            score = _match(args, types)
+            if score is not None:
+                candidates.append((score, ov))
+        if not candidates:
+            if len(fn.overloads) == 1:
+                want = fn.overloads[0].arg_types()
+                if len(want) != len(args):
+                    raise self.error(KdslTypeError, f"{fn.name}() takes {len(want)} arguments, "
+                                     f"got {len(args)}", node)  # fmt: skip
+            got = ", ".join(str(a.type) if isinstance(a, Value) else repr(a) for a in args)
+            sigs = "; ".join("(" + ", ".join(map(str, ov.arg_types())) + ")"
+                             for ov in fn.overloads)  # fmt: skip
+            raise self.error(
+                KdslTypeError, f"no overload of {fn.name}() takes ({got}); it takes: {sigs}", node
+            )
+        candidates.sort(key=lambda c: c[0])
+        ov = candidates[0][1]
+        values = [self.value(a, node, want=t) for a, t in zip(args, ov.arg_types())]
+        return ov, values
+
+
+def _match(args: list[Any], types: list[Type]) -> int | None:
+    """How well ``args`` fit ``types``: 0 exact, more for weak literals; None if not."""
+    score = 0
+    for a, t in zip(args, types):
+        if isinstance(a, Value):
+            if a.type != t:
+                return None
+        elif isinstance(t, ScalarType):
+            if isinstance(a, bool) != t.is_bool or (isinstance(a, float) and not t.is_float):
+                return None
+            score += 1
+        else:
+            return None
+    return score
+
+
+def _returns_value(fdef: ast.FunctionDef) -> bool:
+    return any(isinstance(n, ast.Return) and n.value is not None for n in ast.walk(fdef))
+
+
+def _check_signature(em: FunctionCompiler, fdef: ast.FunctionDef) -> None:
+    a = fdef.args
+    extra = a.vararg or a.kwarg or a.kwonlyargs or a.posonlyargs or a.defaults
+    if extra:
+        raise em.error(KdslSyntaxError, "kernel and function parameters must be plain "
+                       "annotated names (no *args, **kwargs, defaults)", fdef)  # fmt: skip
+    for node in ast.walk(fdef):
+        if node is not fdef and isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef |
+                                           ast.ClassDef | ast.Lambda):  # fmt: skip
+            raise em.error(KdslSyntaxError, f"{_what(node)} cannot be defined inside a kernel "
+                           "or function", node)  # fmt: skip
+
+
+def _what(node: ast.AST) -> str:
+    return {"ClassDef": "a class", "Lambda": "a lambda"}.get(type(node).__name__, "a function")
+
+
+class ModuleCompiler:
+    """One build: the module, compiled overloads, and the call stack (for recursion)."""
+
+    def __init__(self, name: str) -> None:
+        self.module = Module(name)
+        self.done: dict[int, Operation] = {}
+        self.stack: list[Overload] = []
+
+    def compile_func(self, ov: Overload, caller: FunctionCompiler, node: ast.AST) -> Operation:
+        if ov in self.stack:
+            chain = " -> ".join(o.name for o in [*self.stack, ov])
+            raise caller.error(KdslSyntaxError, f"recursion is not supported ({chain})", node)
+        if id(ov) in self.done:
+            return self.done[id(ov)]
+        self.stack.append(ov)
+        try:
+            fc = FunctionCompiler(self, ov, "func")
+            func = fc.compile(ov.key, ov.arg_types())
+        finally:
+            self.stack.pop()
+        self.done[id(ov)] = func
+        return func
+
+
+def resolve_annotation(target: Any, name: str, ann: Any, node: ast.AST | None) -> Type:
+    """The IR type of a parameter annotation, or a located KdslTypeError."""
+    from kdsl.types import type_of
+
+    src = target.src
+    if ann is None:
+        raise KdslTypeError(
+            f"parameter '{name}' of {src.name} needs a type annotation (e.g. {name}: float)",
+            src.loc(node), src.name,
+        )  # fmt: skip
+    if isinstance(ann, str):
+        try:
+            ann = eval(ann, {**vars(pybuiltins), **src.fn.__globals__})  # noqa: S307
+        except Exception:
+            raise KdslTypeError(f"cannot resolve the annotation {ann!r} of '{name}'",
+                                src.loc(node), src.name) from None  # fmt: skip
+    try:
+        return type_of(ann)
+    except (TypeError, KdslError):
+        raise KdslTypeError(
+            f"the annotation of '{name}' is not a kdsl type: {ann!r} (expected float, int, "
+            "wp.vec3, wp.array(dtype=...), ...)", src.loc(node), src.name,
+        ) from None  # fmt: skip

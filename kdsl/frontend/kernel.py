@@ -1,0 +1,180 @@
+"""``@kdsl.kernel`` and ``@kdsl.func``: the objects users decorate functions into."""
+
+from __future__ import annotations
+
+import hashlib
+import inspect
+from collections.abc import Callable
+from functools import cached_property
+from typing import Any
+
+from kdsl.errors import KdslError, full_tracebacks
+from kdsl.frontend.source import ParsedSource
+from kdsl.ir import Module, verify_module
+from kdsl.ir.types import Type
+
+
+def _symbol(fn: Callable[..., Any], extra: str = "") -> str:
+    """A unique, readable symbol: the name plus a short hash of where it is defined."""
+    where = f"{fn.__module__}.{fn.__qualname__}:{fn.__code__.co_firstlineno}{extra}"
+    digest = hashlib.sha1(where.encode()).hexdigest()[:8]
+    return f"{fn.__name__}_{digest}"
+
+
+class _Target:
+    """Shared by kernels and overloads: the parsed source and parameter types."""
+
+    fn: Callable[..., Any]
+
+    @cached_property
+    def src(self) -> ParsedSource:
+        return ParsedSource(self.fn)
+
+    def arg_types(self) -> list[Type]:
+        if not hasattr(self, "_arg_types"):
+            from kdsl.frontend.compiler import resolve_annotation
+
+            args = self.src.tree.args.args
+            anns = self.fn.__annotations__
+            self._arg_types = [resolve_annotation(self, a.arg, anns.get(a.arg), a) for a in args]
+        return self._arg_types
+
+
+class Kernel(_Target):
+    """A compiled-on-demand kernel. Launch it with ``kdsl.launch``.
+
+    Attributes: ``name``, ``key`` (its unique symbol in IR modules), ``arg_names``,
+    ``arg_types`` (IR types), ``tid_ndim`` (how many dims ``tid()`` unpacks into),
+    ``source_file``, ``options``, ``module`` (the Python module name).
+    """
+
+    __kdsl_kernel__ = True
+
+    def __init__(self, fn: Callable[..., Any], **options: Any) -> None:
+        self.fn = fn
+        self.func = fn
+        self.name = fn.__name__
+        self.key = _symbol(fn)
+        self.module = fn.__module__
+        self.options = {"enable_backward": True, **options}
+        self.arg_names = list(inspect.signature(fn).parameters)
+        self.source_file = inspect.getsourcefile(fn) or fn.__code__.co_filename
+        self._tid_ndim: int | None = None
+        self.__doc__ = fn.__doc__
+        self.__name__ = fn.__name__
+
+    @property
+    def arg_types(self) -> list[Type]:  # type: ignore[override]
+        return _trimmed(lambda: _Target.arg_types(self))
+
+    @property
+    def tid_ndim(self) -> int:
+        """Number of dimensions ``tid()`` is unpacked into (1 when it is not used)."""
+        if self._tid_ndim is None:
+            self.build_module()
+        return self._tid_ndim or 1
+
+    def build_module(self) -> Module:
+        """A fresh, verified, unoptimized module: this kernel plus the funcs it calls."""
+        return _trimmed(self._build)
+
+    def _build(self) -> Module:
+        from kdsl.frontend.compiler import FunctionCompiler, ModuleCompiler
+
+        unit = ModuleCompiler(self.key)
+        fc = FunctionCompiler(unit, self, "kernel")
+        try:
+            func = fc.compile(self.key, _Target.arg_types(self))
+        except KdslError as e:
+            raise e.add_context(f"while compiling kernel '{self.name}'")
+        # The kernel goes first, then the functions in the order they were compiled.
+        unit.module.body.ops.remove(func)
+        unit.module.body.ops.insert(0, func)
+        verify_module(unit.module)
+        self._tid_ndim = fc.tid_ndim or 1
+        return unit.module
+
+    def __call__(self, *args: Any, **kwargs: Any) -> Any:
+        raise KdslError(
+            f"kernel '{self.name}' cannot be called directly from Python; launch it with "
+            f"kdsl.launch({self.name}, dim=..., inputs=[...])"
+        )
+
+    def __repr__(self) -> str:
+        return f"<kdsl.Kernel {self.name}>"
+
+
+class Overload(_Target):
+    """One signature of a ``@kdsl.func``."""
+
+    def __init__(self, fn: Callable[..., Any], index: int) -> None:
+        self.fn = fn
+        self.name = fn.__name__
+        self.key = _symbol(fn, f"#{index}")
+
+
+class Function:
+    """A ``@kdsl.func``: one or more overloads picked by argument types at each call."""
+
+    def __init__(self, name: str) -> None:
+        self.name = name
+        self.__name__ = name
+        self.overloads: list[Overload] = []
+
+    @property
+    def __kdsl_overloads__(self) -> list[Overload]:
+        return self.overloads
+
+    def add(self, fn: Callable[..., Any]) -> None:
+        sig = _annotation_key(fn)
+        self.overloads = [o for o in self.overloads if _annotation_key(o.fn) != sig]
+        self.overloads.append(Overload(fn, len(self.overloads)))
+
+    def __call__(self, *args: Any) -> Any:
+        # In Python scope a function runs as plain Python (its first overload of that arity).
+        for ov in self.overloads:
+            if len(inspect.signature(ov.fn).parameters) == len(args):
+                return ov.fn(*args)
+        raise TypeError(f"{self.name}() has no overload taking {len(args)} arguments")
+
+    def __repr__(self) -> str:
+        return f"<kdsl.Function {self.name} ({len(self.overloads)} overloads)>"
+
+
+def _annotation_key(fn: Callable[..., Any]) -> tuple:
+    return tuple(repr(v) for k, v in fn.__annotations__.items() if k != "return")
+
+
+_FUNCTIONS: dict[tuple[str, str], Function] = {}
+
+
+def func(fn: Callable[..., Any]) -> Function:
+    """Decorate a kernel-language function. Several definitions with one name and
+    different annotations are overloads; calls pick one by argument types."""
+    key = (fn.__module__, fn.__qualname__)
+    f = _FUNCTIONS.get(key)
+    if f is None:
+        f = _FUNCTIONS[key] = Function(fn.__name__)
+    f.add(fn)
+    return f
+
+
+def kernel(fn: Callable[..., Any] | None = None, **options: Any) -> Any:
+    """Decorate a kernel: ``@kdsl.kernel`` or ``@kdsl.kernel(enable_backward=False)``."""
+    if fn is None:
+        return lambda f: Kernel(f, **options)
+    return Kernel(fn, **options)
+
+
+def _trimmed(fn: Callable[[], Any]) -> Any:
+    """Run ``fn``; a KdslError leaves without the compiler's internal frames."""
+    if full_tracebacks():
+        return fn()
+    try:
+        return fn()
+    except KdslError as e:
+        err = e
+    raise err.with_traceback(None) from None
+
+
+__all__ = ["Function", "Kernel", "Overload", "func", "kernel"]

@@ -1,0 +1,342 @@
+"""Lowering of statements: assignment, if/for/while, break/continue/return."""
+
+from __future__ import annotations
+
+import ast
+from typing import Any
+
+from kdsl.errors import KdslNameError, KdslSyntaxError, KdslTypeError
+from kdsl.frontend.analysis import BREAK, CONTINUE, RETURN, always_exits, exits
+from kdsl.frontend.builtins import BUILTINS
+from kdsl.frontend.control import CONT, MAX_UNROLL, RET, BRK, ControlFlowLowering
+from kdsl.frontend.expressions import _BINOPS, _COMPONENTS
+from kdsl.frontend.static import static
+from kdsl.frontend.values import ShapeOf, describe, is_weak
+from kdsl.ir import Value
+from kdsl.ir.types import BOOL, I32, ArrayType, MatrixType, StructType, VectorType
+
+
+class StatementLowering(ControlFlowLowering):
+    """Statement visitors. ``kind`` is "kernel" or "func"; ``loop_depth`` counts loops."""
+
+    kind: str
+    loop_depth: int = 0
+    res_types: list | None = None
+    tid_ndim: int | None = None
+
+    def visit_body(self, stmts: list[ast.stmt]) -> None:
+        for i, s in enumerate(stmts):
+            rest = stmts[i + 1 :]
+            if isinstance(s, ast.If) and not s.orelse and rest and always_exits(s.body):
+                # `if c: return` + rest lowers as if/else: no flag guard needed.
+                self.visit_If(s, else_body=rest)
+                return
+            self.visit(s)
+            if isinstance(s, ast.Return | ast.Break | ast.Continue):
+                return  # the rest is unreachable
+            kinds = exits(s)
+            if kinds and rest:
+                guard = self.flag_guard(kinds, s)
+                if guard is not None:
+                    self.emit_if(guard, lambda r=rest: self.visit_body(r), None, rest[0])
+                    return
+
+    # --- simple statements ----------------------------------------------------------
+
+    def visit_Pass(self, node: ast.Pass) -> None:
+        pass
+
+    def visit_Expr(self, node: ast.Expr) -> None:
+        if isinstance(node.value, ast.Constant) and isinstance(node.value.value, str):
+            return  # docstring
+        self.visit(node.value)
+
+    def visit_Assign(self, node: ast.Assign) -> None:
+        value = self.rhs(node.value, node.targets)
+        for target in node.targets:
+            self.assign(target, value, node)
+
+    def rhs(self, value: ast.expr, targets: list[ast.expr]) -> Any:
+        # tid() takes its dimension count from the names it is unpacked into.
+        if isinstance(value, ast.Call) and not value.args and not value.keywords:
+            if self.visit(value.func) is BUILTINS["tid"]:
+                t = targets[0]
+                n = len(t.elts) if isinstance(t, ast.Tuple | ast.List) else 1
+                return self.tid(n, value)
+        return self.visit(value)
+
+    def visit_AnnAssign(self, node: ast.AnnAssign) -> None:
+        from kdsl.types import type_of
+
+        if node.value is None:
+            raise self.error(KdslSyntaxError, "a declaration needs a value", node)
+        ann = self.visit(node.annotation)
+        try:
+            t = type_of(ann)
+        except TypeError:
+            raise self.error(KdslTypeError, f"{describe(ann)} is not a kdsl type", node) from None
+        v = self.value(self.visit(node.value), node.value, want=t)
+        if v.type != t:
+            raise self.error(KdslTypeError, f"cannot assign a {v.type} to a {t} variable", node)
+        self.assign(node.target, v, node)
+
+    def visit_AugAssign(self, node: ast.AugAssign) -> None:
+        current = self.visit(node.target)
+        op = _BINOPS[type(node.op)]
+        self.assign(node.target, self.binop(op, current, self.visit(node.value), node), node)
+
+    def assign(self, target: ast.expr, value: Any, node: ast.AST) -> None:
+        """Bind ``value`` to ``target``: a name, a tuple, an element or a component."""
+        if isinstance(target, ast.Tuple | ast.List):
+            if not isinstance(value, tuple):
+                raise self.error(KdslTypeError, f"cannot unpack {describe(value)}", target)
+            if len(value) != len(target.elts):
+                raise self.error(
+                    KdslTypeError,
+                    f"cannot unpack {len(value)} values into {len(target.elts)} names",
+                    target,
+                )
+            for t, v in zip(target.elts, value):
+                self.assign(t, v, node)
+        elif isinstance(target, ast.Name):
+            self.assign_name(target.id, value, target)
+        elif isinstance(target, ast.Subscript):
+            self.assign_subscript(target, value)
+        elif isinstance(target, ast.Attribute):
+            self.assign_attribute(target, value)
+        elif isinstance(target, ast.Starred):
+            raise self.error(KdslSyntaxError, "starred assignment is not supported", target)
+        else:
+            raise self.error(KdslSyntaxError, "cannot assign to this expression", target)
+
+    def assign_name(self, name: str, value: Any, node: ast.AST) -> None:
+        if isinstance(value, tuple):
+            raise self.error(
+                KdslTypeError,
+                f"cannot store a tuple of {len(value)} values in '{name}'; unpack it: a, b = ...",
+                node,
+            )
+        old = self.vars.get(name)
+        if old is not None and isinstance(old.type, ArrayType):
+            raise self.error(KdslSyntaxError, f"cannot assign to the array '{name}'", node)
+        v = self.value(value, node, want=old.type if old is not None else None)
+        if not v.type.is_value:
+            raise self.error(KdslTypeError, f"cannot store a {v.type} in a variable", node)
+        if old is not None and old.type != v.type:
+            raise self.error(
+                KdslTypeError,
+                f"variable '{name}' changes type from {old.type} to {v.type}; a variable "
+                "keeps the type of its first assignment (cast the value)",
+                node,
+            )
+        self.bind_raw(name, v)
+
+    def assign_subscript(self, target: ast.Subscript, value: Any) -> None:
+        base = self.visit(target.value)
+        idx = self.index_list(target.slice)
+        if not isinstance(base, Value) or isinstance(base, ShapeOf):
+            raise self.error(KdslTypeError, f"cannot assign into {describe(base)}", target)
+        t = base.type
+        if isinstance(t, ArrayType):
+            if len(idx) != t.ndim:
+                raise self.error(
+                    KdslTypeError, f"a {t.ndim}-d array needs {t.ndim} indices, got {len(idx)}",
+                    target)  # fmt: skip
+            v = self.value(value, target, want=t.dtype)
+            try:
+                self.b.create("kd.store", [v, base, *self.indices(base, idx, target)],
+                              loc=self.loc(target))  # fmt: skip
+            except TypeError as e:
+                raise self.error(KdslTypeError, str(e), target) from None
+            return
+        if not isinstance(t, VectorType | MatrixType):
+            raise self.error(KdslTypeError, f"a value of type {t} cannot be indexed", target)
+        ix = self.indices(base, idx, target)
+        want = t.elem if isinstance(t, VectorType) or len(ix) == 2 else t.row_type
+        v = self.value(value, target, want=want)
+        self.assign(target.value, self.emit("vec.insert", base, v, *ix, node=target), target)
+
+    def assign_attribute(self, target: ast.Attribute, value: Any) -> None:
+        base = self.visit(target.value)
+        if not isinstance(base, Value):
+            raise self.error(KdslSyntaxError, f"cannot assign to an attribute of {describe(base)}",
+                             target)  # fmt: skip
+        t = base.type
+        if isinstance(t, VectorType) and target.attr in _COMPONENTS:
+            k = _COMPONENTS[target.attr]
+            if k >= t.length:
+                raise self.error(KdslTypeError, f"a {t} has no component '.{target.attr}'", target)
+            v = self.value(value, target, want=t.elem)
+            new = self.emit("vec.insert", base, v, self.const(k, I32, target), node=target)
+        elif isinstance(t, StructType):
+            v = self.value(value, target, want=t.field_type(target.attr))
+            new = self.emit("struct.insert", base, v, node=target, field=target.attr)
+        else:
+            raise self.error(KdslTypeError, f"a {t} has no attribute '.{target.attr}'", target)
+        self.assign(target.value, new, target)
+
+    # --- control flow ---------------------------------------------------------------
+
+    def visit_If(self, node: ast.If, else_body: list[ast.stmt] | None = None) -> None:
+        orelse = node.orelse if else_body is None else else_body
+        cond = self.visit(node.test)
+        if is_weak(cond):  # a compile-time condition picks its branch now
+            self.visit_body(node.body if cond else orelse)
+            return
+        c = self.to_bool(cond, node.test)
+        self.emit_if(
+            c, lambda: self.visit_body(node.body),
+            (lambda: self.visit_body(orelse)) if orelse else None, node,
+        )  # fmt: skip
+
+    def visit_For(self, node: ast.For) -> None:
+        if node.orelse:
+            raise self.error(KdslSyntaxError, "for/else is not supported", node)
+        if not isinstance(node.target, ast.Name):
+            raise self.error(KdslSyntaxError, "a for loop needs one loop variable", node.target)
+        it = node.iter
+        static_iter = isinstance(it, ast.Call) and self.visit(it.func) is static
+        if static_iter:
+            values = self.visit(it)
+            if not isinstance(values, range | tuple | list):
+                raise self.error(KdslTypeError, "static() in a for loop must give a range", it)
+            self.unroll(node, list(values))
+            return
+        if not (isinstance(it, ast.Call) and self.visit(it.func) is range):
+            raise self.error(KdslSyntaxError, "a for loop must iterate over range(...)", it)
+        if it.keywords or not 1 <= len(it.args) <= 3:
+            raise self.error(KdslTypeError, "range() takes 1 to 3 positional arguments", it)
+        args = [self.visit(a) for a in it.args]
+        unroll = any(isinstance(a, ast.Call) and self.visit(a.func) is static for a in it.args)
+        if unroll:
+            if not all(isinstance(a, int) and not isinstance(a, bool) for a in args):
+                raise self.error(KdslTypeError, "static range bounds must be integers", it)
+            self.unroll(node, list(range(*args)))
+            return
+        self.loop_depth += 1
+        try:
+            bounds = self.range_bounds(args, it)
+            self.lower_range_for(node.target.id, bounds, node.body, node)
+        finally:
+            self.loop_depth -= 1
+
+    def range_bounds(self, args: list[Any], node: ast.AST) -> list[Value]:
+        lb, ub, step = (0, args[0], 1) if len(args) == 1 else (*args, 1)[:3]
+        out = []
+        for a in (lb, ub, step):
+            v = self.value(a, node, want=I32)
+            if not (v.type.is_scalar and v.type.is_int):
+                raise self.error(KdslTypeError, f"range() bounds must be integers, not {v.type}",
+                                 node)  # fmt: skip
+            out.append(v)
+        if len({v.type for v in out}) != 1:
+            raise self.error(KdslTypeError, "range() bounds must have one integer type", node)
+        if isinstance(step, int) and step == 0:
+            raise self.error(KdslTypeError, "range() step must not be zero", node)
+        return out
+
+    def unroll(self, node: ast.For, values: list[int]) -> None:
+        if len(values) > MAX_UNROLL:
+            raise self.error(KdslTypeError, f"static loop of {len(values)} iterations is too "
+                             f"long to unroll (at most {MAX_UNROLL})", node.iter)  # fmt: skip
+        name = node.target.id
+        saved = {k: self.vars.get(k) for k in (BRK, CONT)}
+        level = set().union(*(exits(s) for s in node.body)) if node.body else set()
+        if BREAK in level:
+            self.vars[BRK] = self.const(False, BOOL, node)
+        stop_kinds = level & {BREAK, RETURN}
+        self.loop_depth += 1
+
+        def iteration(k: int) -> None:
+            if k == len(values):
+                return
+            self.bind_raw(name, self.const(values[k], I32, node.target))
+            if CONTINUE in level:
+                self.vars[CONT] = self.const(False, BOOL, node)
+            self.visit_body(node.body)
+            guard = self.flag_guard(stop_kinds, node) if stop_kinds and k + 1 < len(values) else None
+            if guard is not None:
+                self.emit_if(guard, lambda: iteration(k + 1), None, node)
+            else:
+                iteration(k + 1)
+
+        try:
+            iteration(0)
+        finally:
+            self.loop_depth -= 1
+        for k, v in saved.items():
+            if v is None:
+                self.vars.pop(k, None)
+            else:
+                self.vars[k] = v
+
+    def visit_While(self, node: ast.While) -> None:
+        if node.orelse:
+            raise self.error(KdslSyntaxError, "while/else is not supported", node)
+        self.loop_depth += 1
+        try:
+            carried, saved = self.loop_setup(node.body, None)
+
+            def cond(vals: dict[str, Value]) -> Value:
+                return self.to_bool(self.visit(node.test), node.test)
+
+            self.lower_while(carried, saved, node.body, node, cond)
+        finally:
+            self.loop_depth -= 1
+
+    def visit_Break(self, node: ast.Break) -> None:
+        if self.loop_depth == 0:
+            raise self.error(KdslSyntaxError, "'break' outside a loop", node)
+        self.vars[BRK] = self.const(True, BOOL, node)
+
+    def visit_Continue(self, node: ast.Continue) -> None:
+        if self.loop_depth == 0:
+            raise self.error(KdslSyntaxError, "'continue' outside a loop", node)
+        self.vars[CONT] = self.const(True, BOOL, node)
+
+    def visit_Return(self, node: ast.Return) -> None:
+        values: list[Value] = []
+        if node.value is not None:
+            if self.kind == "kernel":
+                raise self.error(KdslSyntaxError, "a kernel cannot return a value", node)
+            got = self.visit(node.value)
+            items = got if isinstance(got, tuple) else (got,)
+            values = [self.value(v, node.value) for v in items]
+        types = [v.type for v in values]
+        if self.res_types is None:
+            self.res_types = types
+        elif self.res_types != types:
+            raise self.error(
+                KdslTypeError,
+                f"this return gives ({', '.join(map(str, types))}) but an earlier return gives "
+                f"({', '.join(map(str, self.res_types))}); every return must agree",
+                node,
+            )
+        for k, v in enumerate(values):
+            self.vars[f"$rv{k}"] = v
+        if RET in self.vars:
+            self.vars[RET] = self.const(True, BOOL, node)
+
+    def tid(self, n: int, node: ast.AST) -> Any:
+        if self.kind != "kernel":
+            raise self.error(KdslSyntaxError, "tid() can only be used in a kernel", node)
+        if not 1 <= n <= 4:
+            raise self.error(KdslTypeError, f"tid() gives 1 to 4 indices, not {n}", node)
+        if self.tid_ndim is not None and self.tid_ndim != n:
+            raise self.error(
+                KdslTypeError, f"tid() unpacked into {n} names here but {self.tid_ndim} before",
+                node)  # fmt: skip
+        self.tid_ndim = n
+        vals = tuple(self.emit_typed("kd.tid", [], I32, node, dim=d, ndim=n) for d in range(n))
+        return vals[0] if n == 1 else vals
+
+    def visit_Global(self, node: ast.AST) -> None:
+        raise self.error(KdslSyntaxError, "'global'/'nonlocal' are not supported in kernels", node)
+
+    visit_Nonlocal = visit_Global
+
+    def visit_Assert(self, node: ast.Assert) -> None:
+        raise self.error(KdslSyntaxError, "assert is not supported in kernels", node)
+
+    def undefined(self, name: str, node: ast.AST) -> None:
+        raise self.error(KdslNameError, f"name '{name}' is not defined", node)

@@ -1,0 +1,149 @@
+"""Constant folding through the op catalog's interpreter rules and folder hooks.
+
+A pure op whose operands are all ``arith.constant`` is evaluated with its catalog
+``interp`` rule (``ctx`` is None: pure ops need no thread context) and its scalar
+results become constants. Per-op ``folder`` hooks run too. Control flow folds when
+its condition is constant: ``scf.if`` is replaced by the region that runs,
+``arith.select`` by the chosen value, and an ``scf.for`` that runs no iteration by
+its initial values.
+
+Invariants: results are bit-exact with what the interpreter computes at run time
+(the catalog rule *is* the run-time semantics), so no float reassociation ever
+happens. An op whose rule raises (an out-of-range ``vec.extract``) is left alone,
+so the error still happens at run time.
+
+Options: ``max_iters`` bounds the rounds over the module (each round folds what the
+previous one exposed).
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+
+from kdsl.ir import Module, Operation, Value
+from kdsl.ir.catalog import PURE
+from kdsl.ir.semantics import np_value
+from kdsl.ir.types import ScalarType
+from kdsl.passes._rewrite import (
+    constant_of,
+    inline_block_before,
+    make_constant,
+    replace_op,
+    rewrite_module,
+)
+from kdsl.passes.manager import ModulePass
+
+
+def _constants(values: list[Value]) -> list[Any] | None:
+    out = []
+    for v in values:
+        ok, c = constant_of(v)
+        if not ok:
+            return None
+        out.append(np_value(c, v.type))
+    return out
+
+
+def _evaluate(op: Operation, args: list[Any]) -> list[Any] | None:
+    """The op's results from constant operands, or None if it cannot (or must not) fold."""
+    opdef = op.opdef
+    try:
+        with np.errstate(all="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            if opdef.folder is not None:
+                out = opdef.folder(op, args)
+                if out is not None:
+                    return list(out)
+            if opdef.interp is None:
+                return None
+            out = opdef.interp(None, op, *args)
+    except Exception:
+        # The op would fail at run time (or the rule needs a context): keep it.
+        return None
+    if len(op.results) == 1:
+        return [out]
+    return list(out) if isinstance(out, tuple) else None
+
+
+def _fold_pure(op: Operation) -> bool:
+    if PURE not in op.opdef.traits or op.regions or not op.operands or not op.results:
+        return False
+    if op.name == "arith.constant":
+        return False
+    if not all(isinstance(r.type, ScalarType) for r in op.results):
+        return False
+    args = _constants(op.operands)
+    if args is None:
+        return False
+    out = _evaluate(op, args)
+    if out is None or len(out) != len(op.results):
+        return False
+    try:
+        values = [make_constant(v, r.type, op) for v, r in zip(out, op.results)]
+    except (TypeError, ValueError):
+        return False
+    for v, r in zip(values, op.results):
+        v.name_hint = r.name_hint
+    replace_op(op, values)
+    return True
+
+
+def _fold_if(op: Operation) -> bool:
+    ok, cond = constant_of(op.operands[0])
+    if not ok:
+        return False
+    region = op.regions[0] if cond else op.regions[1]
+    replace_op(op, inline_block_before(region.block, op, ()))
+    return True
+
+
+def _fold_select(op: Operation) -> bool:
+    ok, cond = constant_of(op.operands[0])
+    if not ok:
+        return False
+    replace_op(op, [op.operands[1] if cond else op.operands[2]])
+    return True
+
+
+def _fold_for(op: Operation) -> bool:
+    bounds = [constant_of(v) for v in op.operands[:3]]
+    if not all(ok for ok, _ in bounds):
+        return False
+    lb, ub, step = (int(c) for _, c in bounds)
+    runs = (step > 0 and lb < ub) or (step < 0 and lb > ub)
+    if runs:
+        return False
+    replace_op(op, list(op.operands[3:]))
+    return True
+
+
+_CONTROL = {"scf.if": _fold_if, "arith.select": _fold_select, "scf.for": _fold_for}
+
+
+def fold_op(op: Operation) -> bool:
+    """Fold one op if its operands allow; returns whether it was replaced."""
+    rule = _CONTROL.get(op.name)
+    if rule is not None:
+        return rule(op)
+    return _fold_pure(op)
+
+
+@dataclass(frozen=True)
+class FoldPass(ModulePass):
+    """Constant folding (see the module docstring)."""
+
+    name: ClassVar[str] = "fold"
+    #: Upper bound on rounds over the module.
+    max_iters: int = 8
+
+    def apply(self, module: Module) -> bool:
+        changed = False
+        for _ in range(self.max_iters):
+            if not rewrite_module(module, fold_op):
+                break
+            changed = True
+        return changed

@@ -1,0 +1,151 @@
+"""Launch argument checking and conversion.
+
+Each argument is checked against its parameter's IR type and turned into what
+backends take: arrays as NumPy buffers with element dims appended, scalars as
+NumPy scalars of the exact type, vectors/matrices as NumPy arrays, structs as
+tuples. Python numbers get Warp's leniency (an int for a float parameter is
+fine); NumPy data must match exactly, so a float64 array or scalar is never
+narrowed to float32 silently.
+"""
+
+from __future__ import annotations
+
+import builtins
+from typing import Any
+
+import numpy as np
+
+from kdsl.errors import KdslLaunchError
+from kdsl.ir import types as T
+from kdsl.runtime.array import array
+from kdsl.runtime.device import Device
+
+
+class ArgError(Exception):
+    """A mismatch found by ``convert``; the launcher adds kernel and parameter names."""
+
+
+def describe(value: Any) -> str:
+    """A short description of a launch argument for error messages."""
+    if isinstance(value, array):
+        return f"array of {value._t} with {value.ndim} dims on '{value.device}'"
+    if isinstance(value, np.ndarray):
+        return f"NumPy {value.dtype} array of shape {value.shape}"
+    t = getattr(type(value), "__kdsl_type__", None)
+    if isinstance(t, T.Type):
+        return str(t)
+    if isinstance(value, np.generic):
+        return f"NumPy {value.dtype}"
+    return f"{type(value).__name__} {value!r}" if np.ndim(value) == 0 else type(value).__name__
+
+
+def convert(t: T.Type, value: Any, device: Device) -> Any:
+    """``value`` as the backend value of IR type ``t``; raises ``ArgError``."""
+    if isinstance(t, T.ArrayType):
+        return _array(t, value, device)
+    if isinstance(t, T.ScalarType):
+        return _scalar(t, value)
+    if isinstance(t, T.VectorType | T.MatrixType):
+        return _composite(t, value)
+    if isinstance(t, T.StructType):
+        return _struct(t, value, device)
+    if isinstance(t, T.HandleType):
+        if isinstance(value, builtins.int | np.integer) and not isinstance(value, builtins.bool):
+            return np.uint64(value)
+        raise ArgError(f"expected a {t} (an integer id), got {describe(value)}")
+    raise ArgError(f"parameters of type {t} are not supported by launch")
+
+
+def _array(t: T.ArrayType, value: Any, device: Device) -> np.ndarray:
+    inner = T.value_shape(t.dtype)
+    if isinstance(value, array):
+        if value.device != device:
+            raise ArgError(f"expected an array on device '{device}', got one on '{value.device}'")
+        if value._t != t.dtype:
+            raise ArgError(f"expected an array of {t.dtype}, got an array of {value._t}")
+        if value.ndim != t.ndim:
+            raise ArgError(f"expected a {t.ndim}-d array, got a {value.ndim}-d array")
+        return value._buf
+    if isinstance(value, np.ndarray):
+        if not device.is_cpu:
+            raise ArgError(f"a NumPy array lives on the cpu, but the launch is on '{device}'")
+        want = T.elem_type(t.dtype).np_dtype
+        if value.dtype != want:
+            raise ArgError(
+                f"expected an array of {t.dtype} (NumPy {want}), got a NumPy {value.dtype} "
+                f"array; convert it with .astype(np.{want})"
+            )
+        outer = value.ndim - len(inner)
+        if outer != t.ndim or value.shape[outer:] != inner:
+            want_shape = ("n",) * t.ndim + inner
+            raise ArgError(
+                f"expected a {t.ndim}-d array of {t.dtype} (NumPy shape like "
+                f"{want_shape}), got shape {value.shape}".replace("'", "")
+            )
+        return value
+    raise ArgError(f"expected an array of {t.dtype}, got {describe(value)}")
+
+
+def _scalar(t: T.ScalarType, value: Any) -> Any:
+    if isinstance(value, np.ndarray) and value.ndim == 0:
+        value = value[()]
+    if isinstance(value, np.generic):
+        if value.dtype != t.np_dtype:
+            raise ArgError(
+                f"expected {t}, got NumPy {value.dtype} (NumPy scalars must match exactly)"
+            )
+        return value
+    if t.is_bool:
+        if isinstance(value, builtins.bool):
+            return np.bool_(value)
+    elif isinstance(value, builtins.bool):
+        pass  # True for a number parameter is almost always a mistake
+    elif isinstance(value, builtins.int):
+        if t.is_int:
+            info = np.iinfo(t.np_dtype)
+            if not info.min <= value <= info.max:
+                raise ArgError(f"expected {t}, got {value}, which does not fit in {t}")
+        return t.np_dtype.type(value)
+    elif isinstance(value, builtins.float) and t.is_float:
+        return t.np_dtype.type(value)
+    elif isinstance(value, builtins.float):
+        raise ArgError(f"expected {t}, got float {value!r}; pass an int (floats are not truncated)")
+    raise ArgError(f"expected {t}, got {describe(value)}")
+
+
+def _composite(t: T.Type, value: Any) -> np.ndarray:
+    shape = T.value_shape(t)
+    et = T.elem_type(t)
+    vt = getattr(type(value), "__kdsl_type__", None)
+    if isinstance(value, np.ndarray) and value.dtype != et.np_dtype:
+        what = str(vt) if isinstance(vt, T.Type) else f"NumPy {value.dtype} array"
+        raise ArgError(f"expected {t}, got {what}")
+    if isinstance(value, list | tuple | np.ndarray):
+        arr = np.asarray(value)
+        if arr.dtype.kind not in "biuf":
+            raise ArgError(f"expected {t}, got {describe(value)}")
+        if arr.shape != shape:
+            raise ArgError(
+                f"expected {t} ({'x'.join(map(str, shape))} components), got "
+                f"{'x'.join(map(str, arr.shape)) or 'a scalar'}"
+            )
+        if et.is_int and arr.dtype.kind == "f":
+            raise ArgError(f"expected {t}, got float components")
+        return np.array(arr, dtype=et.np_dtype)
+    raise ArgError(f"expected {t}, got {describe(value)}")
+
+
+def _struct(t: T.StructType, value: Any, device: Device) -> tuple:
+    vt = getattr(type(value), "__kdsl_type__", None)
+    if isinstance(value, tuple) and len(value) == len(t.fields):
+        parts = value
+    elif vt == t:
+        parts = tuple(getattr(value, name) for name, _ in t.fields)
+    else:
+        raise ArgError(f"expected {t}, got {describe(value)}")
+    return tuple(convert(ft, v, device) for (_, ft), v in zip(t.fields, parts))
+
+
+def launch_error(kernel_name: str, index: int, param: str, message: str) -> KdslLaunchError:
+    """The error for a bad argument, naming kernel and parameter."""
+    return KdslLaunchError(f"kernel '{kernel_name}', argument {index} '{param}': {message}")

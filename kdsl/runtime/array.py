@@ -1,0 +1,307 @@
+"""``kdsl.array``: a typed, strided array on one device, backed by a NumPy buffer.
+
+The buffer holds the element shape after the array's own dims: a ``vec3`` array
+of shape ``(n,)`` wraps an ``(n, 3)`` float32 buffer. ``array(dtype=X, ndim=k)``
+with no data and no shape is also how kernels annotate array parameters; every
+array exposes ``__kdsl_type__`` (``ArrayType(dtype, ndim)``) for the frontend.
+"""
+
+from __future__ import annotations
+
+import builtins
+from typing import Any
+
+import numpy as np
+
+from kdsl.errors import KdslError
+from kdsl.ir import types as T
+from kdsl.runtime.device import Device, get_device
+from kdsl.runtime.dtypes import (
+    inner_shape,
+    normalize_shape,
+    np_dtype,
+    public_dtype,
+    resolve_dtype,
+    scalar_dtype_of_numpy,
+)
+
+
+def _is_any(dtype: Any) -> bool:
+    return dtype is Any or dtype is None
+
+
+class array:
+    """A typed, strided array (see the module docstring)."""
+
+    def __init__(
+        self,
+        data: Any = None,
+        dtype: Any = Any,
+        shape: Any = None,
+        device: Any = None,
+        requires_grad: bool = False,
+        copy: bool = True,
+        ndim: int | None = None,
+        length: int | None = None,
+        **_warp_only: Any,  # pinned=, owner=, ...: meaningless on the CPU
+    ) -> None:
+        dev = _check_device(device)
+        if isinstance(data, array):
+            if _is_any(dtype):
+                dtype = data._t
+            data = data._buf
+        t = None if _is_any(dtype) else resolve_dtype(dtype)
+        if data is None:
+            buf, t = _alloc(t, shape if shape is not None else length, ndim)
+        else:
+            buf, t = _from_data(data, t, shape if shape is not None else length, ndim, copy)
+        self._init(buf, t, dev, requires_grad)
+
+    def _init(self, buf: np.ndarray, t: T.Type | None, dev: Device, requires_grad: bool) -> None:
+        self._buf = buf
+        self._t = t
+        self._inner = inner_shape(t) if t is not None else ()
+        self._ndim = buf.ndim - len(self._inner)
+        self._device = dev
+        self._grad: array | None = None
+        self.requires_grad = requires_grad
+
+    @classmethod
+    def _wrap(
+        cls, buf: np.ndarray, t: T.Type, device: Device, requires_grad: bool = False
+    ) -> array:
+        """An array over ``buf`` without copying (views, constructors)."""
+        out = array.__new__(array)
+        out._init(buf, t, device, requires_grad)
+        return out
+
+    # --- type ----------------------------------------------------------------
+    @property
+    def __kdsl_type__(self) -> T.ArrayType:
+        if self._t is None:
+            raise TypeError("array(dtype=Any) is generic: kernels need a concrete dtype")
+        return T.ArrayType(self._t, self._ndim)
+
+    @property
+    def dtype(self) -> Any:
+        """The element type: ``kdsl.float32``, ``kdsl.vec3``... (Any when generic)."""
+        return Any if self._t is None else public_dtype(self._t)
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        return self._buf.shape[: self._ndim]
+
+    @property
+    def ndim(self) -> int:
+        return self._ndim
+
+    @property
+    def size(self) -> int:
+        return int(np.prod(self.shape, dtype=np.int64))
+
+    @property
+    def strides(self) -> tuple[int, ...]:
+        """Byte strides of the array's dims (not of the element's components)."""
+        return self._buf.strides[: self._ndim]
+
+    @property
+    def device(self) -> Device:
+        return self._device
+
+    @property
+    def ptr(self) -> int:
+        """Address of the first element."""
+        return int(self._buf.__array_interface__["data"][0])
+
+    @property
+    def is_contiguous(self) -> bool:
+        return bool(self._buf.flags.c_contiguous)
+
+    @property
+    def requires_grad(self) -> bool:
+        return self._requires_grad
+
+    @requires_grad.setter
+    def requires_grad(self, value: bool) -> None:
+        self._requires_grad = builtins.bool(value)
+        if self._requires_grad and self._grad is None and self._t is not None:
+            self._grad = array._wrap(np.zeros_like(self._buf), self._t, self._device)
+
+    @property
+    def grad(self) -> array | None:
+        """The gradient array (allocated when ``requires_grad`` is set)."""
+        return self._grad
+
+    @grad.setter
+    def grad(self, value: array | None) -> None:
+        self._grad = value
+
+    # --- data ----------------------------------------------------------------
+    def numpy(self) -> np.ndarray:
+        """A zero-copy NumPy view (element dims appended for vector dtypes)."""
+        return self._buf.view()
+
+    @property
+    def __array_interface__(self) -> dict:
+        return self._buf.__array_interface__
+
+    def list(self) -> list:
+        """The elements as a flat Python list (vector classes for vector dtypes)."""
+        flat = np.ascontiguousarray(self._buf).reshape(-1, *self._inner)
+        if not self._inner:
+            return list(flat)
+        cls = self.dtype
+        return [cls(x) for x in flat]
+
+    def fill_(self, value: Any) -> array:
+        """Set every element to ``value`` (a scalar, or a vector for vector dtypes)."""
+        try:
+            self._buf[...] = np.asarray(value, dtype=self._buf.dtype)
+        except ValueError as e:
+            raise KdslError(f"cannot fill an array of {self._t} with {value!r}: {e}") from None
+        return self
+
+    fill = fill_
+
+    def zero_(self) -> array:
+        """Set every element to zero."""
+        self._buf[...] = 0
+        return self
+
+    def assign(self, src: Any) -> array:
+        """Copy ``src`` (an array, NumPy array or list of the same shape) into this one."""
+        data = src._buf if isinstance(src, array) else np.asarray(src, dtype=self._buf.dtype)
+        if data.size == self._buf.size and data.shape != self._buf.shape:
+            data = data.reshape(self._buf.shape)
+        try:
+            np.copyto(self._buf, data, casting="unsafe")
+        except ValueError as e:
+            raise KdslError(
+                f"cannot assign a {data.shape} array to a {self.shape} array: {e}"
+            ) from None
+        return self
+
+    def to(self, device: Any) -> array:
+        """This array on ``device`` (itself when it already lives there)."""
+        dev = _check_device(device)
+        return self if dev == self._device else array(self, device=dev)
+
+    def copy(self) -> array:
+        """A new contiguous array with a copy of the data."""
+        return array._wrap(
+            np.array(self._buf, copy=True), self._t, self._device, self._requires_grad
+        )
+
+    def reshape(self, shape: Any) -> array:
+        """A view (or copy, when strides forbid a view) with a new shape."""
+        dims = normalize_shape(shape)
+        if -1 not in dims and int(np.prod(dims)) != self.size:
+            raise KdslError(f"cannot reshape an array of shape {self.shape} to {dims}")
+        return array._wrap(self._buf.reshape(dims + self._inner), self._t, self._device)
+
+    def flatten(self) -> array:
+        """A 1-d view (or copy) of the elements."""
+        return self.reshape((self.size,))
+
+    # --- indexing ------------------------------------------------------------
+    def _key(self, key: Any) -> tuple:
+        key = key if isinstance(key, tuple) else (key,)
+        for k in key:
+            ok = (
+                isinstance(k, slice)
+                or k is Ellipsis
+                or (isinstance(k, builtins.int | np.integer) and not isinstance(k, builtins.bool))
+            )
+            if not ok:
+                raise TypeError(f"a kdsl array is indexed by integers and slices, not {k!r}")
+        real = [k for k in key if k is not Ellipsis]
+        if len(real) > self._ndim:
+            raise IndexError(f"too many indices for a {self._ndim}-d array: {len(real)}")
+        if any(k is Ellipsis for k in key):
+            i = next(i for i, k in enumerate(key) if k is Ellipsis)
+            fill = (slice(None),) * (self._ndim - len(real))
+            key = key[:i] + fill + tuple(k for k in key[i + 1 :] if k is not Ellipsis)
+        return key
+
+    def __getitem__(self, key: Any) -> Any:
+        view = self._buf[self._key(key)]
+        if view.ndim == len(self._inner):  # one element
+            if not self._inner:
+                return view[()]
+            return self.dtype(view)
+        return array._wrap(view, self._t, self._device)
+
+    def __setitem__(self, key: Any, value: Any) -> None:
+        self._buf[self._key(key)] = np.asarray(value, dtype=self._buf.dtype)
+
+    def __len__(self) -> int:
+        return self._buf.shape[0]
+
+    def __repr__(self) -> str:
+        name = getattr(self.dtype, "__name__", str(self.dtype))
+        body = np.array2string(self._buf, separator=", ", prefix="array(")
+        return f"array({body}, dtype={name}, device='{self._device}')"
+
+    def __str__(self) -> str:
+        return str(self._buf)
+
+
+def _subclass(ndim: int) -> type:
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs["ndim"] = ndim
+        array.__init__(self, *args, **kwargs)
+
+    doc = f"A {ndim}-d ``array``: ``array{ndim}d(dtype=float)`` annotates a kernel parameter."
+    return type(f"array{ndim}d", (array,), {"__init__": __init__, "__doc__": doc})
+
+
+array1d, array2d, array3d, array4d = (_subclass(n) for n in (1, 2, 3, 4))
+
+
+def _check_device(device: Any) -> Device:
+    dev = get_device(device)
+    if not dev.is_cpu:
+        raise KdslError(f"arrays on device '{dev}' are not supported yet; use device='cpu'")
+    return dev
+
+
+def _alloc(t: T.Type | None, shape: Any, ndim: int | None) -> tuple[np.ndarray, T.Type | None]:
+    if shape is None:  # an annotation, or an empty array
+        dims = (0,) * (ndim or 1)
+    else:
+        dims = normalize_shape(shape)
+        if ndim is not None and len(dims) != ndim:
+            raise KdslError(f"shape {dims} has {len(dims)} dimensions but ndim={ndim}")
+    if t is None:
+        return np.zeros(dims, np.float32), None
+    return np.zeros(dims + inner_shape(t), np_dtype(t)), t
+
+
+def _from_data(
+    data: Any, t: T.Type | None, shape: Any, ndim: int | None, copy: bool
+) -> tuple[np.ndarray, T.Type]:
+    want = np_dtype(t) if t is not None else None
+    try:
+        buf = np.array(data, dtype=want, copy=True) if copy else np.asarray(data, dtype=want)
+    except (TypeError, ValueError) as e:
+        raise KdslError(
+            f"cannot make an array of {t or 'inferred dtype'} from the data: {e}"
+        ) from None
+    if t is None:
+        t = scalar_dtype_of_numpy(buf.dtype)
+    inner = inner_shape(t)
+    if shape is not None:
+        dims = normalize_shape(shape)
+        if int(np.prod(dims + inner)) != buf.size:
+            raise KdslError(f"data of {buf.size} values does not fill shape {dims} of {t}")
+        buf = buf.reshape(dims + inner)
+    elif inner and buf.shape[buf.ndim - len(inner) :] != inner:
+        raise KdslError(
+            f"data of shape {buf.shape} cannot hold {t} elements: its last dims must be {inner}"
+        )
+    outer = buf.ndim - len(inner)
+    if ndim is not None and outer != ndim:
+        raise KdslError(f"data has {outer} dimensions but ndim={ndim}")
+    if not 1 <= outer <= 4:
+        raise KdslError(f"arrays have 1 to 4 dimensions; the data gives {outer}")
+    return buf, t

@@ -1,0 +1,93 @@
+"""How the runtime maps user dtypes to IR types and NumPy buffers."""
+
+from __future__ import annotations
+
+import builtins
+from typing import Any
+
+import numpy as np
+
+from kdsl.errors import KdslError
+from kdsl.ir import types as T
+from kdsl.types import class_of, type_of
+
+
+def resolve_dtype(dtype: Any) -> T.Type:
+    """The IR element type of an array dtype (``float`` -> f32, ``vec3`` -> vec<3, f32>)."""
+    try:
+        t = type_of(dtype)
+    except TypeError as e:
+        raise KdslError(f"{dtype!r} is not an array dtype kdsl knows: {e}") from None
+    if not isinstance(t, T.ScalarType | T.VectorType | T.MatrixType):
+        raise KdslError(
+            f"arrays of {t} are not supported yet (use scalar, vector or matrix dtypes)"
+        )
+    return t
+
+
+def np_dtype(t: T.Type) -> np.dtype:
+    """The NumPy dtype of one scalar component of ``t``."""
+    return T.elem_type(t).np_dtype
+
+
+def inner_shape(t: T.Type) -> tuple[int, ...]:
+    """The trailing NumPy dims one element of ``t`` takes (``(3,)`` for vec3)."""
+    return T.value_shape(t)
+
+
+def public_dtype(t: T.Type) -> type:
+    """The class users see as ``array.dtype`` (``kdsl.float32``, ``kdsl.vec3``...)."""
+    return class_of(t)
+
+
+def dtype_of_value(value: Any) -> T.Type:
+    """The dtype ``full`` infers from a fill value, as Warp does."""
+    t = getattr(type(value), "__kdsl_type__", None)
+    if isinstance(t, T.Type):
+        return t
+    if isinstance(value, builtins.bool | np.bool_):
+        return T.BOOL
+    if isinstance(value, builtins.int):
+        return T.I32
+    if isinstance(value, builtins.float):
+        return T.F32
+    if isinstance(value, np.generic):
+        return T.scalar_from_numpy(value.dtype)
+    arr = np.asarray(value)
+    if arr.ndim in (1, 2) and arr.dtype.kind in "iuf":
+        if isinstance(value, np.ndarray):
+            et = T.scalar_from_numpy(arr.dtype)
+        else:  # Python numbers: float -> f32, int -> i32, as for scalars
+            et = T.F32 if arr.dtype.kind == "f" else T.I32
+        if arr.ndim == 1:
+            return T.VectorType(arr.shape[0], et)
+        return T.MatrixType(arr.shape[0], arr.shape[1], et)
+    raise KdslError(f"cannot infer an array dtype from the value {value!r}; pass dtype=")
+
+
+def normalize_shape(shape: Any, what: str = "shape") -> tuple[int, ...]:
+    """An int or a sequence of 1 to 4 non-negative ints, as a tuple."""
+    if isinstance(shape, builtins.int | np.integer) and not isinstance(shape, builtins.bool):
+        dims: tuple = (int(shape),)
+    else:
+        try:
+            dims = tuple(shape)
+        except TypeError:
+            raise KdslError(f"{what} must be an int or a tuple of ints, got {shape!r}") from None
+        for d in dims:
+            if not isinstance(d, builtins.int | np.integer) or isinstance(d, builtins.bool):
+                raise KdslError(f"{what} must be an int or a tuple of ints, got {shape!r}")
+        dims = tuple(int(d) for d in dims)
+    if not 1 <= len(dims) <= 4:
+        raise KdslError(f"{what} must have 1 to 4 dimensions, got {len(dims)}: {shape!r}")
+    if any(d < 0 for d in dims):
+        raise KdslError(f"{what} must not be negative, got {shape!r}")
+    return dims
+
+
+def scalar_dtype_of_numpy(dtype: np.dtype) -> T.ScalarType:
+    """The scalar type of NumPy data when no dtype is given."""
+    try:
+        return T.scalar_from_numpy(dtype)
+    except KeyError:
+        raise KdslError(f"NumPy dtype {dtype} has no kdsl equivalent") from None
