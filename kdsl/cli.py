@@ -89,8 +89,12 @@ def is_kernel(obj: Any) -> bool:
     )
 
 
-def find_kernels(module: Any, name: str | None) -> list[Any]:
-    """The kernels defined in ``module`` (all of them, or the one called ``name``)."""
+def find_kernels(module: Any, name: str | None, path: str | None = None) -> list[Any]:
+    """The kernels defined in ``module`` (all of them, or the one called ``name``).
+
+    ``path`` is the file as the user named it, for messages.
+    """
+    path = path or module.__file__
     kernels: dict[int, Any] = {}
     for attr, obj in vars(module).items():
         if is_kernel(obj) and not attr.startswith("__"):
@@ -98,14 +102,14 @@ def find_kernels(module: Any, name: str | None) -> list[Any]:
     found = list(kernels.values())
     if name is None:
         if not found:
-            raise CliError(f"{module.__file__} defines no @kdsl.kernel")
+            raise CliError(f"{path} defines no @kdsl.kernel")
         return found
     named = [k for k in found if getattr(k, "name", None) == name]
     if not named and is_kernel(getattr(module, name, None)):
         named = [getattr(module, name)]
     if not named:
         known = ", ".join(sorted(str(getattr(k, "name", "?")) for k in found)) or "none"
-        raise CliError(f"{module.__file__} has no kernel named {name!r} (kernels: {known})")
+        raise CliError(f"{path} has no kernel named {name!r} (kernels: {known})")
     return named[:1]
 
 
@@ -150,7 +154,7 @@ def cmd_ir(args: argparse.Namespace) -> int:
     """``kdsl ir``: print a kernel's IR at a stage, its pass dumps, or its features."""
     path, kernel_name = split_target(args.target)
     module = load_user_module(path)
-    kernels = find_kernels(module, kernel_name)
+    kernels = find_kernels(module, kernel_name, path)
     backend = _backend(args.backend) if args.backend or args.stage not in (KIR, KIR_OPT) else None
     if args.stage not in (KIR, KIR_OPT) and args.stage not in backend.stages():
         stages = ", ".join(_stages(backend))

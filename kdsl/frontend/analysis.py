@@ -19,9 +19,7 @@ def _target_names(target: ast.expr, out: set[str]) -> None:
     elif isinstance(target, ast.Tuple | ast.List):
         for elt in target.elts:
             _target_names(elt, out)
-    elif isinstance(target, ast.Subscript | ast.Attribute):
-        _target_names(target.value, out)
-    elif isinstance(target, ast.Starred):
+    elif isinstance(target, ast.Subscript | ast.Attribute | ast.Starred):
         _target_names(target.value, out)
 
 

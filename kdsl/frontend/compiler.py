@@ -171,7 +171,7 @@ def resolve_annotation(target: Any, name: str, ann: Any, node: ast.AST | None) -
         )  # fmt: skip
     if isinstance(ann, str):
         try:
-            ann = eval(ann, {**vars(pybuiltins), **src.fn.__globals__})  # noqa: S307
+            ann = eval(ann, {**vars(pybuiltins), **src.fn.__globals__})
         except Exception:
             raise KdslTypeError(f"cannot resolve the annotation {ann!r} of '{name}'",
                                 src.loc(node), src.name) from None  # fmt: skip

@@ -141,14 +141,15 @@ class ControlFlowLowering(ExpressionLowering):
         else:
             self.vars.pop(BRK, None)
         self.vars.pop(CONT, None)
-        carried = sorted(n for n in assigned_names(body) if n in self.vars and n != target)
+        # Stores into array elements (`out[i] = x`) do not rebind the array name.
+        carried = sorted(
+            n
+            for n in assigned_names(body)
+            if n in self.vars and n != target and self.vars[n].type.is_value
+        )
         for flag in (BRK, RET):
             if flag in self.vars and (flag == BRK or RETURN in level):
                 carried.append(flag)
-        for n in carried:
-            t = self.vars[n].type
-            if not t.is_value:
-                raise self.error(KdslSyntaxError, f"cannot assign to '{n}' (a {t}) in a loop")
         return carried, saved
 
     def loop_body(self, block: Block, carried: list[str], body, target, iv, node):

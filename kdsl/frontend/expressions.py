@@ -281,7 +281,9 @@ class ExpressionLowering(Emitter):
         if hasattr(fn, "__kdsl_overloads__"):
             return self.call_user(fn, args, node)
         if fn is range:
-            raise self.error(KdslSyntaxError, "range() can only be the iterable of a for loop", node)
+            raise self.error(
+                KdslSyntaxError, "range() can only be the iterable of a for loop", node
+            )
         if getattr(fn, "__kdsl_kernel__", False):
             raise self.error(KdslSyntaxError, "a kernel cannot call another kernel", node)
         raise self.error(KdslTypeError, f"{describe(fn)} cannot be called in a kernel", node)
@@ -329,7 +331,7 @@ class ExpressionLowering(Emitter):
         expr = ast.Expression(node.args[0])
         try:
             code = compile(ast.fix_missing_locations(expr), self.src.file, "eval")
-            result = eval(code, dict(self.globals))  # noqa: S307 - static() asks for this
+            result = eval(code, dict(self.globals))
         except KdslError:
             raise
         except Exception as e:  # the user's expression may raise anything
@@ -341,7 +343,7 @@ class ExpressionLowering(Emitter):
         ):
             return result  # only usable as the iterable of a for loop (unrolled)
         ok = is_weak(result) or hasattr(result, "__kdsl_type__")
-        ok = ok or isinstance(result, np.generic) and result.dtype.kind in "biuf"
+        ok = ok or (isinstance(result, np.generic) and result.dtype.kind in "biuf")
         if not ok:
             raise self.error(
                 KdslTypeError,
@@ -353,7 +355,7 @@ class ExpressionLowering(Emitter):
 
 
 def _is_matmul(a: Type, b: Type) -> bool:
-    return isinstance(a, MatrixType) and isinstance(b, MatrixType | VectorType) or (
+    return (isinstance(a, MatrixType) and isinstance(b, MatrixType | VectorType)) or (
         isinstance(a, VectorType) and isinstance(b, MatrixType))  # fmt: skip
 
 

@@ -86,7 +86,7 @@ class Kernel(_Target):
         try:
             func = fc.compile(self.key, _Target.arg_types(self))
         except KdslError as e:
-            raise e.add_context(f"while compiling kernel '{self.name}'")
+            raise e.add_context(f"while compiling kernel '{self.name}'") from None
         # The kernel goes first, then the functions in the order they were compiled.
         unit.module.body.ops.remove(func)
         unit.module.body.ops.insert(0, func)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import ast
+import contextlib
 import inspect
 import textwrap
 from collections.abc import Callable
@@ -53,8 +54,6 @@ class ParsedSource:
         code = self.fn.__code__
         out: dict[str, Any] = {}
         for name, cell in zip(code.co_freevars, self.fn.__closure__ or ()):
-            try:
+            with contextlib.suppress(ValueError):  # an empty cell
                 out[name] = cell.cell_contents
-            except ValueError:
-                pass
         return out

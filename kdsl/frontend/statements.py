@@ -8,7 +8,7 @@ from typing import Any
 from kdsl.errors import KdslNameError, KdslSyntaxError, KdslTypeError
 from kdsl.frontend.analysis import BREAK, CONTINUE, RETURN, always_exits, exits
 from kdsl.frontend.builtins import BUILTINS
-from kdsl.frontend.control import CONT, MAX_UNROLL, RET, BRK, ControlFlowLowering
+from kdsl.frontend.control import BRK, CONT, MAX_UNROLL, RET, ControlFlowLowering
 from kdsl.frontend.expressions import _BINOPS, _COMPONENTS
 from kdsl.frontend.static import static
 from kdsl.frontend.values import ShapeOf, describe, is_weak
@@ -58,11 +58,11 @@ class StatementLowering(ControlFlowLowering):
 
     def rhs(self, value: ast.expr, targets: list[ast.expr]) -> Any:
         # tid() takes its dimension count from the names it is unpacked into.
-        if isinstance(value, ast.Call) and not value.args and not value.keywords:
-            if self.visit(value.func) is BUILTINS["tid"]:
-                t = targets[0]
-                n = len(t.elts) if isinstance(t, ast.Tuple | ast.List) else 1
-                return self.tid(n, value)
+        call = isinstance(value, ast.Call) and not value.args and not value.keywords
+        if call and self.visit(value.func) is BUILTINS["tid"]:
+            t = targets[0]
+            n = len(t.elts) if isinstance(t, ast.Tuple | ast.List) else 1
+            return self.tid(n, value)
         return self.visit(value)
 
     def visit_AnnAssign(self, node: ast.AnnAssign) -> None:
@@ -254,7 +254,9 @@ class StatementLowering(ControlFlowLowering):
             if CONTINUE in level:
                 self.vars[CONT] = self.const(False, BOOL, node)
             self.visit_body(node.body)
-            guard = self.flag_guard(stop_kinds, node) if stop_kinds and k + 1 < len(values) else None
+            guard = (
+                self.flag_guard(stop_kinds, node) if stop_kinds and k + 1 < len(values) else None
+            )
             if guard is not None:
                 self.emit_if(guard, lambda: iteration(k + 1), None, node)
             else:

@@ -7,6 +7,7 @@ import sys
 import textwrap
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from kdsl.cli import _Tally, main, split_target
@@ -175,3 +176,19 @@ def test_traceback_env_shows_traceback():
     assert proc.returncode != 0 and "Traceback" in proc.stderr
     proc = _kdsl("ir", "no/such/file.py")
     assert proc.returncode == 2 and "Traceback" not in proc.stderr
+
+
+def test_conformance_failure_sets_exit_status(capsys):
+    import dataclasses
+
+    from kdsl.testing.cases import memory
+
+    i = next(k for k, c in enumerate(memory.CASES) if c.name == "tid_1d")
+    right = memory.CASES[i]
+    memory.CASES[i] = dataclasses.replace(right, reference=lambda ins: {"out": np.arange(37)})
+    try:
+        code, out, _ = run(capsys, "conformance", "--backend", "interp", "-k", "tid_1d or tid_2d")
+    finally:
+        memory.CASES[i] = right
+    assert code == 1
+    assert out.splitlines()[-1] == "1 passed, 1 failed"

@@ -23,7 +23,7 @@ def expect_error(kernel, cls, fragment: str, where=None):
     ``where`` is the Python function holding the marker (the kernel's by default).
     """
     fn = where if where is not None else kernel.func
-    fn = getattr(fn, "overloads", None) and fn.overloads[0].fn or fn
+    fn = fn.overloads[0].fn if hasattr(fn, "overloads") else fn
     line, text = _marked_line(fn)
     with pytest.raises(cls) as info:
         kernel.build_module()

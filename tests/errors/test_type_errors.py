@@ -1,5 +1,5 @@
 """Typing and naming mistakes: each raises a located KdslTypeError or KdslNameError."""
-# ruff: noqa: F841, F821
+# ruff: noqa: F811, RUF059, E741, F821
 
 import kdsl as wp
 from kdsl.errors import KdslNameError, KdslTypeError

@@ -1,4 +1,5 @@
 """Language features lowered to structured IR (checked on the printed module)."""
+# ruff: noqa: UP018, RUF046
 
 import math
 
@@ -40,7 +41,9 @@ def k_overloads(a: FLOATS, b: INTS):
 
 def test_overloads_and_tuple_returns(build_text, check_ir):
     text = build_text(k_overloads)
-    check_ir(text, """
+    check_ir(
+        text,
+        """
         CHECK: func.call {{.*}} : f32
         CHECK: func.call {{.*}} : i32
         CHECK: %q, %r = func.call {{.*}} : i32, i32
@@ -49,7 +52,8 @@ def test_overloads_and_tuple_returns(build_text, check_ir):
         CHECK: func.func @divmod__{{.*}} -> (i32, i32)
         CHECK: arith.div %a, %b : i32
         CHECK: arith.mod %a, %b : i32
-    """)
+    """,
+    )
     assert k_overloads.options["enable_backward"] is False
 
 
@@ -62,13 +66,16 @@ def k_early_return(a: FLOATS, n: int):
 
 
 def test_early_return_becomes_if_else(build_text, check_ir):
-    check_ir(build_text(k_early_return), """
+    check_ir(
+        build_text(k_early_return),
+        """
         CHECK: arith.cmp %i, %n {pred = "ge"}
         CHECK: scf.if
         CHECK: } {
         CHECK: kd.store
         CHECK: func.return
-    """)
+    """,
+    )
 
 
 @wp.kernel
@@ -79,14 +86,17 @@ def k_short_circuit(a: FLOATS, n: int):
 
 
 def test_and_is_short_circuit(build_text, check_ir):
-    check_ir(build_text(k_short_circuit), """
+    check_ir(
+        build_text(k_short_circuit),
+        """
         CHECK: arith.cmp %i, %n {pred = "lt"}
         CHECK-NEXT: scf.if {{%[0-9]+}} : bool {
         CHECK-NEXT: kd.load %a, %i
         CHECK: scf.yield
         CHECK: } {
         CHECK: arith.constant {value = false}
-    """)
+    """,
+    )
 
 
 @wp.kernel
@@ -103,7 +113,9 @@ def k_break(a: FLOATS, n: int):
 
 
 def test_break_makes_while_and_continue_guards(build_text, check_ir):
-    check_ir(build_text(k_break), """
+    check_ir(
+        build_text(k_break),
+        """
         CHECK-NOT: scf.for
         CHECK: scf.while
         CHECK: scf.condition
@@ -111,7 +123,8 @@ def test_break_makes_while_and_continue_guards(build_text, check_ir):
         CHECK: scf.if
         CHECK: arith.add
         CHECK: kd.store
-    """)
+    """,
+    )
 
 
 @wp.kernel
@@ -126,12 +139,15 @@ def k_while(a: FLOATS):
 
 
 def test_while_carries_values(build_text, check_ir):
-    check_ir(build_text(k_while), """
+    check_ir(
+        build_text(k_while),
+        """
         CHECK: %steps_1, %x_1 = scf.while %steps, %x : i32, f32 {
         CHECK: scf.condition
         CHECK: arith.div {{.*}} : f32
         CHECK: scf.yield
-    """)
+    """,
+    )
 
 
 @wp.kernel
@@ -146,7 +162,9 @@ def k_static_and_closure(a: FLOATS):
 
 def test_static_unroll_and_constants(build_text, check_ir):
     text = build_text(k_static_and_closure)
-    check_ir(text, """
+    check_ir(
+        text,
+        """
         CHECK-NOT: scf.for
         CHECK: arith.constant {value = 2.5} : f32
         CHECK: arith.constant {value = 2.5} : f32
@@ -154,7 +172,8 @@ def test_static_unroll_and_constants(build_text, check_ir):
         CHECK: vec.construct {{.*}} : vec<3, f32>
         CHECK: arith.constant {value = 3.14159{{[0-9]*}}} : f32
         CHECK: arith.constant {value = 6.0} : f32
-    """)
+    """,
+    )
 
 
 @wp.kernel
@@ -176,7 +195,9 @@ def k_vectors(a: wp.array(dtype=wp.vec3), m: wp.array(dtype=wp.mat33)):
 
 
 def test_vectors_and_matrices(build_text, check_ir):
-    check_ir(build_text(k_vectors), """
+    check_ir(
+        build_text(k_vectors),
+        """
         CHECK: %v_1 = vec.insert %v, {{.*}} : vec<3, f32>
         CHECK: vec.insert %mm, {{%[0-9]+}}, {{%[0-9]+}}, {{%[0-9]+}} : mat<3, 3, f32>
         CHECK: vec.extract %mm_1, {{%[0-9]+}} : vec<3, f32>
@@ -189,7 +210,8 @@ def test_vectors_and_matrices(build_text, check_ir):
         CHECK: vec.transpose
         CHECK: vec.matmul {{.*}} : mat<3, 3, f32>
         CHECK: arith.cast {{.*}} : vec<3, f32>
-    """)
+    """,
+    )
 
 
 @wp.kernel
@@ -209,7 +231,9 @@ def k_builtins(a: FLOATS, b: INTS):
 
 
 def test_builtins(build_text, check_ir):
-    check_ir(build_text(k_builtins), """
+    check_ir(
+        build_text(k_builtins),
+        """
         CHECK: arith.max %x
         CHECK-NEXT: arith.min
         CHECK: math.abs %x
@@ -227,7 +251,8 @@ def test_builtins(build_text, check_ir):
         CHECK: math.isnan
         CHECK: scf.if
         CHECK: arith.and
-    """)
+    """,
+    )
 
 
 @wp.kernel
@@ -241,11 +266,14 @@ def k_swap(a: FLOATS):
 
 
 def test_tuple_swap_and_chained(build_text, check_ir):
-    check_ir(build_text(k_swap), """
+    check_ir(
+        build_text(k_swap),
+        """
         CHECK: %x = kd.load %a, %i
         CHECK: %y = kd.load %a, %j
         CHECK: arith.sub %y, %x
-    """)
+    """,
+    )
     assert k_swap.tid_ndim == 2
 
 
@@ -264,3 +292,22 @@ def test_build_module_is_fresh():
 
 def test_python_scope_func_call():
     assert np.isclose(twice(1.5), 3.0)
+
+
+@wp.kernel
+def k_store_in_loop(out: FLOATS, n: int):
+    for k in range(n):
+        if k > 2:
+            return
+        out[k] = float(k)
+
+
+def test_array_store_in_loop_is_not_carried(build_text, check_ir):
+    check_ir(
+        build_text(k_store_in_loop),
+        """
+        CHECK: scf.while
+        CHECK-NOT: array<f32, 1>, bool
+        CHECK: kd.store
+        """,
+    )

@@ -81,20 +81,25 @@ def test_integrate(build_text, check_ir):
 
 
 def test_saxpy(build_text, check_ir):
-    check_ir(build_text(saxpy), """
+    check_ir(
+        build_text(saxpy),
+        """
         CHECK: %i = kd.tid
         CHECK-NEXT: %0 = kd.load %x, %i : f32
         CHECK-NEXT: %1 = arith.mul %a, %0 : f32
         CHECK-NEXT: %2 = kd.load %y, %i : f32
         CHECK-NEXT: %3 = arith.add %1, %2 : f32
         CHECK-NEXT: kd.store %3, %y, %i
-    """)
+    """,
+    )
     assert saxpy.tid_ndim == 1
     assert saxpy.arg_names == ["x", "y", "a"]
 
 
 def test_matmul(build_text, check_ir):
-    check_ir(build_text(matmul), """
+    check_ir(
+        build_text(matmul),
+        """
         CHECK: %i = kd.tid {dim = 0, ndim = 2} : i32
         CHECK-NEXT: %j = kd.tid {dim = 1, ndim = 2} : i32
         CHECK-NEXT: %K = kd.array_shape %a {dim = 0} : i32
@@ -105,23 +110,29 @@ def test_matmul(build_text, check_ir):
         CHECK: kd.load %b, %k, %j : f32
         CHECK: scf.yield %s_3
         CHECK: kd.store %s_1, %c, %i, %j
-    """)
+    """,
+    )
     assert matmul.tid_ndim == 2
 
 
 def test_rosenbrock(build_text, check_ir):
-    check_ir(build_text(eval_rosenbrock), """
+    check_ir(
+        build_text(eval_rosenbrock),
+        """
         CHECK: vec.extract %x
         CHECK: func.call {{.*}} {callee = "rosenbrock_{{.*}}"} : f32
         CHECK: func.func @rosenbrock_{{.*}}(%x: f32, %y: f32) -> (f32) {kind = "func"}
         CHECK: arith.pow
         CHECK: func.return
-    """)
+    """,
+    )
     assert rosenbrock(0.5, 0.25) == pytest.approx(0.25)
 
 
 def test_nbody(build_text, check_ir):
-    check_ir(build_text(nbody), """
+    check_ir(
+        build_text(nbody),
+        """
         CHECK: %acc = vec.splat
         CHECK: kd.array_shape %pos {dim = 0}
         CHECK: scf.for
@@ -132,4 +143,5 @@ def test_nbody(build_text, check_ir):
         CHECK: math.sqrt
         CHECK: scf.yield
         CHECK: kd.store
-    """)
+    """,
+    )

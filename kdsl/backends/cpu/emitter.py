@@ -1,0 +1,172 @@
+"""The state one op lowering works with: builder, value map, intrinsics, libm.
+
+Each entry of the lowering table (``ops.TABLE``) is ``fn(em, op)`` and returns the
+LLVM values of ``op``'s results (a list, one value, or None). It reads operands
+through ``em.get`` and emits through ``em.b``; nested regions go through
+``em.lower_block``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from typing import Any
+
+from llvmlite import ir
+
+from kdsl.backends.cpu import types as LT
+from kdsl.errors import KdslCapabilityError
+from kdsl.ir import types as T
+from kdsl.ir.core import Block, Module, Operation, Value
+
+Lowering = Callable[["Emitter", Operation], Any]
+
+
+class ModuleState:
+    """What the functions of one LLVM module share: declarations and callees."""
+
+    def __init__(self, llmod: ir.Module, module: Module, table: dict[str, Lowering]) -> None:
+        self.llmod = llmod
+        self.module = module
+        self.table = table
+        self.funcs: dict[str, ir.Function] = {}
+        self.pending: list[str] = []  # callees declared but not emitted yet
+        self.libm_used: set[str] = set()
+
+    def declare(self, name: str, fnty: ir.FunctionType) -> ir.Function:
+        """The function ``name`` of the module, declared on first use."""
+        fn = self.llmod.globals.get(name)
+        if fn is None:
+            fn = ir.Function(self.llmod, fnty, name)
+        return fn
+
+
+class Emitter:
+    """Lowers the ops of one function body; see the module docstring."""
+
+    def __init__(self, state: ModuleState, fn: ir.Function, func_name: str) -> None:
+        self.state = state
+        self.fn = fn
+        self.func_name = func_name
+        self.b = ir.IRBuilder()
+        self.values: dict[Value, ir.Value] = {}
+        #: The thread's linear index (i32) and n-d index components (i32), when a kernel.
+        self.linear: ir.Value | None = None
+        self.index: list[ir.Value] = []
+
+    # -- values ---------------------------------------------------------------
+    def get(self, v: Value) -> ir.Value:
+        """The LLVM value bound to IR value ``v``."""
+        return self.values[v]
+
+    def args(self, op: Operation) -> list[ir.Value]:
+        """The LLVM values of all operands of ``op``."""
+        return [self.values[v] for v in op.operands]
+
+    def bind(self, values: Sequence[Value], llvals: Sequence[ir.Value]) -> None:
+        for v, lv in zip(values, llvals):
+            self.values[v] = lv
+
+    def new_block(self, name: str) -> ir.Block:
+        return self.fn.append_basic_block(name)
+
+    # -- lowering -------------------------------------------------------------
+    def lower_op(self, op: Operation) -> None:
+        rule = self.state.table.get(op.name)
+        if rule is None:
+            raise KdslCapabilityError(f"the cpu backend cannot lower {op.name} yet", op.loc)
+        out = rule(self, op)
+        if out is None:
+            out = []
+        elif not isinstance(out, list | tuple):
+            out = [out]
+        self.bind(op.results, out)
+
+    def lower_block(self, block: Block, args: Sequence[ir.Value] = ()) -> list[ir.Value]:
+        """Lower ``block`` with its arguments bound; gives its terminator's operands."""
+        self.bind(block.args, args)
+        term = block.terminator
+        for op in block.ops:
+            if op is term and op.opdef.is_terminator:
+                break
+            self.lower_op(op)
+        return [self.values[v] for v in term.operands] if term is not None else []
+
+    # -- helpers --------------------------------------------------------------
+    def intrinsic(self, name: str, types: Sequence[ir.Type], ret: ir.Type | None = None,
+                  args: Sequence[ir.Type] | None = None) -> ir.Function:
+        """An overloaded LLVM intrinsic such as ``llvm.sqrt`` for ``types``."""
+        full = name + "".join("." + _mangle(t) for t in types)
+        fnty = ir.FunctionType(ret if ret is not None else types[0],
+                               list(args) if args is not None else [types[0]])
+        return self.state.declare(full, fnty)
+
+    def call_intrinsic(self, name: str, *vals: ir.Value) -> ir.Value:
+        """Call ``llvm.<name>`` overloaded on the type of the first value."""
+        t = vals[0].type
+        fn = self.intrinsic(name, [t], t, [v.type for v in vals])
+        return self.b.call(fn, list(vals))
+
+    def libm(self, name: str, *vals: ir.Value) -> ir.Value:
+        """Call the C library function ``name`` (``sin``...) elementwise on float values."""
+        t = vals[0].type
+        if isinstance(t, ir.VectorType):
+            return self.map_lanes(lambda *xs: self.libm(name, *xs), *vals)
+        if isinstance(t, ir.HalfType):
+            wide = [self.b.fpext(v, LT.F32) for v in vals]
+            return self.b.fptrunc(self.libm(name, *wide), t)
+        sym = name + ("f" if isinstance(t, ir.FloatType) else "")
+        self.state.libm_used.add(sym)
+        fn = self.state.declare(sym, ir.FunctionType(t, [t] * len(vals)))
+        return self.b.call(fn, list(vals))
+
+    def map_lanes(self, fn: Callable[..., ir.Value], *vals: ir.Value) -> ir.Value:
+        """Apply a scalar emitter to each lane of vector values."""
+        n = vals[0].type.count
+        out = None
+        for i in range(n):
+            lane = fn(*[self.b.extract_element(v, I32c(i)) for v in vals])
+            if out is None:
+                out = ir.Constant(ir.VectorType(lane.type, n), ir.Undefined)
+            out = self.b.insert_element(out, lane, I32c(i))
+        return out
+
+    def splat(self, value: ir.Value, like: ir.Type) -> ir.Value:
+        """``value`` broadcast to the vector type ``like`` (or unchanged for scalars)."""
+        if not isinstance(like, ir.VectorType) or isinstance(value.type, ir.VectorType):
+            return value
+        vt = ir.VectorType(value.type, like.count)
+        one = self.b.insert_element(ir.Constant(vt, ir.Undefined), value, I32c(0))
+        mask = ir.Constant(ir.VectorType(LT.I32, like.count), [0] * like.count)
+        return self.b.shuffle_vector(one, ir.Constant(vt, ir.Undefined), mask)
+
+    def const(self, t: ir.Type, value: Any) -> ir.Value:
+        """A constant of scalar or vector type ``t`` (vectors get ``value`` in each lane)."""
+        if isinstance(t, ir.VectorType):
+            return ir.Constant(t, [ir.Constant(t.element, value)] * t.count)
+        return ir.Constant(t, value)
+
+
+def I32c(i: int) -> ir.Constant:
+    """An ``i32`` constant."""
+    return ir.Constant(LT.I32, i)
+
+
+def ir_type_of(v: Value) -> T.Type:
+    """The IR type of an IR value (for readability in lowerings)."""
+    return v.type
+
+
+def _mangle(t: ir.Type) -> str:
+    if isinstance(t, ir.VectorType):
+        return f"v{t.count}{_mangle(t.element)}"
+    if isinstance(t, ir.IntType):
+        return f"i{t.width}"
+    if isinstance(t, ir.HalfType):
+        return "f16"
+    if isinstance(t, ir.FloatType):
+        return "f32"
+    if isinstance(t, ir.DoubleType):
+        return "f64"
+    if isinstance(t, ir.PointerType):
+        return "p0"
+    raise TypeError(f"cannot mangle {t}")

@@ -1,0 +1,80 @@
+"""IR types as LLVM types, for registers and for memory.
+
+Registers: bool is ``i1``, integers ``iN`` (signedness lives in the IR type, not
+here), floats ``half``/``float``/``double``. Vectors, quaternions, transforms and
+matrices are LLVM vectors of their scalars (matrices flattened row-major), so
+elementwise ops and intrinsics apply to them whole. Structs are literal structs.
+Arrays are descriptors ``{ptr data, [ndim x i64] shape, [ndim x i64] strides}``
+whose strides count scalar elements (not bytes) so LLVM sees unit strides.
+
+Memory: a bool is one byte (NumPy's layout), everything else as in registers.
+"""
+
+from __future__ import annotations
+
+from llvmlite import ir
+
+from kdsl.errors import KdslCapabilityError
+from kdsl.ir import types as T
+
+PTR = ir.PointerType()
+I1 = ir.IntType(1)
+I8 = ir.IntType(8)
+I32 = ir.IntType(32)
+I64 = ir.IntType(64)
+F32 = ir.FloatType()
+VOID = ir.VoidType()
+
+_FLOATS = {16: ir.HalfType(), 32: ir.FloatType(), 64: ir.DoubleType()}
+
+
+def scalar_type(t: T.ScalarType) -> ir.Type:
+    """The register type of a scalar."""
+    if t.is_bool:
+        return I1
+    if t.is_float:
+        return _FLOATS[t.bits]
+    return ir.IntType(t.bits)
+
+
+def count(t: T.Type) -> int:
+    """Number of scalars in a scalar, vector or matrix value."""
+    if isinstance(t, T.ScalarType):
+        return 1
+    n = 1
+    for d in T.value_shape(t):
+        n *= d
+    return n
+
+
+def descriptor_type(ndim: int) -> ir.LiteralStructType:
+    """The array descriptor struct of an ``ndim``-d array."""
+    dims = ir.ArrayType(I64, ndim)
+    return ir.LiteralStructType([PTR, dims, dims])
+
+
+def llvm_type(t: T.Type) -> ir.Type:
+    """The register type of any IR value type (arrays are descriptor structs)."""
+    if isinstance(t, T.ScalarType):
+        return scalar_type(t)
+    if isinstance(t, T.VectorType | T.MatrixType):
+        return ir.VectorType(scalar_type(t.elem), count(t))
+    if isinstance(t, T.StructType):
+        return ir.LiteralStructType([llvm_type(ft) for _, ft in t.fields])
+    if isinstance(t, T.ArrayType):
+        return descriptor_type(t.ndim)
+    if isinstance(t, T.HandleType):
+        return I64
+    raise KdslCapabilityError(f"the cpu backend cannot represent values of type {t}")
+
+
+def memory_scalar(t: T.ScalarType) -> ir.Type:
+    """The in-memory type of one scalar component (bool is a byte)."""
+    return I8 if t.is_bool else scalar_type(t)
+
+
+def with_lanes(scalar: ir.Type, like: ir.Type) -> ir.Type:
+    """``scalar``, as a vector with as many lanes as ``like`` when that is a vector."""
+    if isinstance(like, ir.VectorType):
+        return ir.VectorType(scalar, like.count)
+    return scalar
