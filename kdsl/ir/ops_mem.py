@@ -173,7 +173,7 @@ def _atomic_rule(ts: Sequence[Type], attrs: dict[str, Any]) -> list[Type]:
 
 
 _ATOMIC_FNS = {
-    "add": np.add, "sub": np.subtract, "min": np.fmin, "max": np.fmax,
+    "add": np.add, "sub": np.subtract, "min": sem.float_min, "max": sem.float_max,
     "and": np.bitwise_and, "or": np.bitwise_or, "xor": np.bitwise_xor,
     "exch": lambda old, new: new,
 }  # fmt: skip

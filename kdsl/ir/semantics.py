@@ -9,6 +9,9 @@ rounding do in kdsl. Every backend must match them (the conformance suite checks
 - Float to integer casts truncate toward zero and saturate; NaN gives 0 (PTX
   ``cvt.rzi.sat``, LLVM ``fptosi.sat``).
 - Shifts by the bit width or more give 0 (``>>`` of a negative signed value: -1).
+- ``min``/``max`` of floats return the other operand when one is NaN and order
+  -0.0 below +0.0 (IEEE 754-2019 ``minimumNumber``/``maximumNumber``), so both are
+  commutative, bit for bit.
 """
 
 from __future__ import annotations
@@ -110,3 +113,27 @@ def round_half_away(x: np.ndarray) -> np.ndarray:
     frac = np.abs(x - t)
     return np.where(frac >= 0.5, t + np.sign(x), t).astype(x.dtype)
 
+
+
+def _signed_zero_fix(a: np.ndarray, b: np.ndarray, r: np.ndarray, negative: np.ndarray) -> np.ndarray:
+    both_zero = (a == 0) & (b == 0)
+    zero = np.where(negative, -0.0, 0.0).astype(r.dtype)
+    return np.where(both_zero, zero, r).astype(r.dtype)
+
+
+def float_min(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Elementwise min: NaN loses, -0.0 < +0.0; integers compare plainly."""
+    a, b = np.asarray(a), np.asarray(b)
+    r = np.asarray(np.fmin(a, b))
+    if r.dtype.kind != "f":
+        return r
+    return _signed_zero_fix(a, b, r, np.signbit(a) | np.signbit(b))
+
+
+def float_max(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Elementwise max: NaN loses, +0.0 > -0.0; integers compare plainly."""
+    a, b = np.asarray(a), np.asarray(b)
+    r = np.asarray(np.fmax(a, b))
+    if r.dtype.kind != "f":
+        return r
+    return _signed_zero_fix(a, b, r, np.signbit(a) & np.signbit(b))

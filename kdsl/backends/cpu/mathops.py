@@ -1,0 +1,97 @@
+"""Lowerings of the ``math`` dialect: LLVM intrinsics where LLVM has an exact one,
+the C math library (through symbols the JIT resolves, see ``jit``) for the rest."""
+
+from __future__ import annotations
+
+from llvmlite import ir
+
+from kdsl.backends.cpu import types as LT
+from kdsl.backends.cpu.arith import widen_half
+from kdsl.backends.cpu.emitter import Emitter, Lowering
+from kdsl.ir import types as T
+from kdsl.ir.core import Operation
+
+#: math op -> LLVM intrinsic (elementwise on vectors, exact IEEE or libm-backed).
+INTRINSICS = {
+    "sqrt": "llvm.sqrt", "exp": "llvm.exp", "exp2": "llvm.exp2", "log": "llvm.log",
+    "log2": "llvm.log2", "log10": "llvm.log10", "sin": "llvm.sin", "cos": "llvm.cos",
+    "floor": "llvm.floor", "ceil": "llvm.ceil", "trunc": "llvm.trunc",
+    "round": "llvm.round", "rint": "llvm.rint",
+}  # fmt: skip
+
+#: math op -> C library function (the ``f`` suffix is added for float32).
+LIBM = ("cbrt", "tan", "asin", "acos", "atan", "sinh", "cosh", "tanh", "erf", "erfc")
+
+
+def _intrinsic(name: str) -> Lowering:
+    def lower(em: Emitter, op: Operation) -> ir.Value:
+        (a,) = em.args(op)
+        et = T.elem_type(op.results[0].type)
+        return widen_half(em, et, lambda x: em.call_intrinsic(name, x), a)
+
+    return lower
+
+
+def _libm(name: str) -> Lowering:
+    def lower(em: Emitter, op: Operation) -> ir.Value:
+        return em.libm(name, *em.args(op))
+
+    return lower
+
+
+def _abs(em: Emitter, op: Operation) -> ir.Value:
+    (a,) = em.args(op)
+    et = T.elem_type(op.results[0].type)
+    if et.is_float:
+        return em.call_intrinsic("llvm.fabs", a)
+    if not et.is_signed:
+        return a
+    poison_min = ir.Constant(LT.I1, 0)  # abs(MIN) wraps to MIN, it is not poison
+    fn = em.intrinsic("llvm.abs", [a.type], a.type, [a.type, LT.I1])
+    return em.b.call(fn, [a, poison_min])
+
+
+def _sign(em: Emitter, op: Operation) -> ir.Value:
+    (a,) = em.args(op)
+    et = T.elem_type(op.results[0].type)
+    if et.is_float:
+        neg = em.b.fcmp_ordered("<", a, em.const(a.type, 0.0))
+        return em.b.select(neg, em.const(a.type, -1.0), em.const(a.type, 1.0))
+    if not et.is_signed:
+        return em.const(a.type, 1)
+    neg = em.b.icmp_signed("<", a, em.const(a.type, 0))
+    return em.b.select(neg, em.const(a.type, -1), em.const(a.type, 1))
+
+
+def _isnan(em: Emitter, op: Operation) -> ir.Value:
+    (a,) = em.args(op)
+    return em.b.fcmp_unordered("uno", a, a)
+
+
+def _isinf(em: Emitter, op: Operation) -> ir.Value:
+    (a,) = em.args(op)
+    mag = em.call_intrinsic("llvm.fabs", a)
+    return em.b.fcmp_ordered("==", mag, em.const(a.type, float("inf")))
+
+
+def _isfinite(em: Emitter, op: Operation) -> ir.Value:
+    (a,) = em.args(op)
+    mag = em.call_intrinsic("llvm.fabs", a)
+    return em.b.fcmp_ordered("<", mag, em.const(a.type, float("inf")))
+
+
+def _copysign(em: Emitter, op: Operation) -> ir.Value:
+    return em.call_intrinsic("llvm.copysign", *em.args(op))
+
+
+TABLE: dict[str, Lowering] = {
+    **{f"math.{k}": _intrinsic(v) for k, v in INTRINSICS.items()},
+    **{f"math.{k}": _libm(k) for k in LIBM},
+    "math.abs": _abs,
+    "math.sign": _sign,
+    "math.isnan": _isnan,
+    "math.isinf": _isinf,
+    "math.isfinite": _isfinite,
+    "math.atan2": _libm("atan2"),
+    "math.copysign": _copysign,
+}

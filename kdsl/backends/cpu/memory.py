@@ -1,0 +1,130 @@
+"""Lowerings of the ``kd`` dialect: thread index, array shape, load, store, atomics.
+
+An array value is its descriptor struct (see ``types``). Element addresses are
+``data + sum(i_k * stride_k)`` in scalar elements. Indices are NOT bounds-checked:
+an out-of-range index reads or writes wild memory. Use the ``interp`` backend
+(which always checks) to find such bugs.
+"""
+
+from __future__ import annotations
+
+from llvmlite import ir
+
+from kdsl.backends.cpu import types as LT
+from kdsl.backends.cpu.emitter import Emitter, I32c, Lowering
+from kdsl.errors import KdslCapabilityError
+from kdsl.ir import types as T
+from kdsl.ir.core import Operation, Value
+
+
+def _tid(em: Emitter, op: Operation) -> ir.Value:
+    dim, ndim = op.attrs["dim"], op.attrs["ndim"]
+    if em.linear is None:
+        raise KdslCapabilityError("tid() is only available inside a kernel on cpu", op.loc)
+    if ndim == 1:
+        return em.linear
+    return em.index[dim]
+
+
+def _array_shape(em: Emitter, op: Operation) -> ir.Value:
+    (a,) = em.args(op)
+    n = em.b.extract_value(a, [1, op.attrs["dim"]])
+    return em.b.trunc(n, LT.I32)
+
+
+def _index64(em: Emitter, v: ir.Value, t: T.ScalarType) -> ir.Value:
+    if t.bits == 64:
+        return v
+    return em.b.sext(v, LT.I64) if t.is_signed else em.b.zext(v, LT.I64)
+
+
+def element_ptr(em: Emitter, arr: ir.Value, at: T.ArrayType, idx: list[Value]) -> ir.Value:
+    """The address of element ``idx`` of the array ``arr`` (no bounds check)."""
+    B = em.b
+    off = None
+    for k, iv in enumerate(idx):
+        i = _index64(em, em.get(iv), iv.type)
+        term = B.mul(i, B.extract_value(arr, [2, k]), flags=["nsw"])
+        off = term if off is None else B.add(off, term, flags=["nsw"])
+    etype = LT.memory_scalar(T.elem_type(at.dtype))
+    return B.gep(B.extract_value(arr, 0), [off], inbounds=True, source_etype=etype)
+
+
+def _mem_type(t: T.Type) -> ir.Type:
+    """The type a value of ``t`` is loaded and stored as."""
+    if isinstance(t, T.StructType):
+        raise KdslCapabilityError(f"arrays of {t} are not supported by the cpu backend yet")
+    s = LT.memory_scalar(T.elem_type(t))
+    n = LT.count(t)
+    return s if isinstance(t, T.ScalarType) else ir.VectorType(s, n)
+
+
+def load_value(em: Emitter, ptr: ir.Value, t: T.Type) -> ir.Value:
+    """Load a value of IR type ``t`` from memory (bools are bytes there)."""
+    et = T.elem_type(t)
+    raw = em.b.load(ptr, typ=_mem_type(t), align=et.np_dtype.itemsize)
+    if et.is_bool:
+        return em.b.icmp_unsigned("!=", raw, em.const(raw.type, 0))
+    return raw
+
+
+def store_value(em: Emitter, value: ir.Value, ptr: ir.Value, t: T.Type) -> None:
+    """Store ``value`` of IR type ``t`` to memory."""
+    et = T.elem_type(t)
+    if et.is_bool:
+        value = em.b.zext(value, _mem_type(t))
+    em.b.store(value, ptr, align=et.np_dtype.itemsize)
+
+
+def _load(em: Emitter, op: Operation) -> ir.Value:
+    at = op.operands[0].type
+    ptr = element_ptr(em, em.get(op.operands[0]), at, op.operands[1:])
+    return load_value(em, ptr, at.dtype)
+
+
+def _store(em: Emitter, op: Operation) -> None:
+    at = op.operands[1].type
+    ptr = element_ptr(em, em.get(op.operands[1]), at, op.operands[2:])
+    store_value(em, em.get(op.operands[0]), ptr, at.dtype)
+
+
+def _rmw_op(kind: str, et: T.ScalarType) -> str:
+    if kind == "exch":
+        return "xchg"
+    if et.is_float:
+        return {"add": "fadd", "sub": "fsub", "min": "fmin", "max": "fmax"}[kind]
+    if kind in ("min", "max") and not et.is_signed:
+        return "u" + kind
+    return kind
+
+
+def _atomic(em: Emitter, op: Operation) -> ir.Value:
+    at = op.operands[1].type
+    et = T.elem_type(at.dtype)
+    ptr = element_ptr(em, em.get(op.operands[1]), at, op.operands[2:])
+    value = em.get(op.operands[0])
+    rmw = _rmw_op(op.attrs["kind"], et)
+    if et.is_bool:  # bytes in memory; the rmw works on the byte
+        value = em.b.zext(value, LT.with_lanes(LT.I8, value.type))
+    if isinstance(value.type, ir.VectorType):  # componentwise, one atomic per lane
+        mt = value.type.element
+        out = ir.Constant(value.type, ir.Undefined)
+        for j in range(value.type.count):
+            lane_ptr = em.b.gep(ptr, [ir.Constant(LT.I64, j)], inbounds=True, source_etype=mt)
+            old = em.b.atomic_rmw(rmw, lane_ptr, em.b.extract_element(value, I32c(j)),
+                                  "monotonic")
+            out = em.b.insert_element(out, old, I32c(j))
+    else:
+        out = em.b.atomic_rmw(rmw, ptr, value, "monotonic")
+    if et.is_bool:
+        return em.b.icmp_unsigned("!=", out, em.const(out.type, 0))
+    return out
+
+
+TABLE: dict[str, Lowering] = {
+    "kd.tid": _tid,
+    "kd.array_shape": _array_shape,
+    "kd.load": _load,
+    "kd.store": _store,
+    "kd.atomic_rmw": _atomic,
+}
