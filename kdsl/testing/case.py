@@ -10,7 +10,7 @@ them; ``requires`` lists the backend capabilities the case needs.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -43,8 +43,8 @@ class Case:
     requires: tuple[str, ...] = ()
     #: Overrides of the dtype tolerance: (rtol, atol).
     tol: tuple[float, float] | None = None
+    #: Seed of the generator passed to ``make_inputs``.
     seed: int = 1234
-    tags: tuple[str, ...] = field(default=())
 
     def tolerance(self, dtype: np.dtype) -> tuple[float, float] | None:
         """(rtol, atol) for an output of ``dtype``; None means compare exactly."""

@@ -1,0 +1,123 @@
+"""llvmlite's binding layer: host target, optimization pipeline, one MCJIT engine.
+
+The engine is created once per process and every compiled kernel module is added
+to it. C math functions the generated code calls (``tanf``, ``erf``...) are
+resolved from the C math library through ``llvm.add_symbol``, so nothing depends
+on what the Python executable happens to export.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import ctypes.util
+import threading
+from functools import cache
+
+import llvmlite
+import llvmlite.binding as llvm
+
+_LOCK = threading.Lock()
+_ENGINE: llvm.ExecutionEngine | None = None
+
+#: C math functions that generated code or LLVM's own lowering of intrinsics may call.
+_LIBM_NAMES = (
+    "sin", "cos", "tan", "asin", "acos", "atan", "atan2", "sinh", "cosh", "tanh",
+    "exp", "exp2", "log", "log2", "log10", "pow", "cbrt", "erf", "erfc", "fmod",
+    "floor", "ceil", "trunc", "round", "rint", "nearbyint", "fmin", "fmax", "sqrt",
+)  # fmt: skip
+
+
+def llvm_version() -> str:
+    """The LLVM version llvmlite was built with, e.g. ``"22.1.0"``."""
+    return ".".join(map(str, llvm.llvm_version_info))
+
+
+def version_tag() -> str:
+    """llvmlite and LLVM versions, for kernel cache keys."""
+    return f"llvmlite-{llvmlite.__version__}-llvm-{llvm_version()}"
+
+
+@cache
+def _init() -> None:
+    llvm.initialize_native_target()
+    llvm.initialize_native_asmprinter()
+    _register_libm()
+
+
+def _register_libm() -> None:
+    path = ctypes.util.find_library("m") or "libm.so.6"
+    libm = ctypes.CDLL(path)
+    for base in _LIBM_NAMES:
+        for name in (base, base + "f"):
+            fn = getattr(libm, name, None)
+            if fn is not None:
+                llvm.add_symbol(name, ctypes.cast(fn, ctypes.c_void_p).value)
+    # float16 conversions LLVM may call (double -> half has no instruction on x86).
+    for lib in ("libgcc_s.so.1",):
+        try:
+            gcc = ctypes.CDLL(lib)
+        except OSError:
+            continue
+        for name in ("__truncdfhf2", "__truncsfhf2", "__extendhfsf2"):
+            fn = getattr(gcc, name, None)
+            if fn is not None:
+                llvm.add_symbol(name, ctypes.cast(fn, ctypes.c_void_p).value)
+
+
+@cache
+def target_machine() -> llvm.TargetMachine:
+    """A target machine for this host's CPU and features, optimizing at -O3."""
+    _init()
+    target = llvm.Target.from_default_triple()
+    return target.create_target_machine(
+        cpu=llvm.get_host_cpu_name(),
+        features=llvm.get_host_cpu_features().flatten(),
+        opt=3,
+        codemodel="jitdefault",
+        jit=True,
+    )
+
+
+def parse(text: str) -> llvm.ModuleRef:
+    """Parse and verify LLVM IR text, with this host's triple and data layout."""
+    tm = target_machine()
+    mod = llvm.parse_assembly(text)
+    mod.triple = tm.triple
+    mod.data_layout = str(tm.target_data)
+    mod.verify()
+    return mod
+
+
+def optimize(mod: llvm.ModuleRef, level: int = 3) -> llvm.ModuleRef:
+    """Run LLVM's standard -O``level`` pipeline (vectorizers on) over ``mod`` in place."""
+    tm = target_machine()
+    pto = llvm.PipelineTuningOptions(speed_level=level)
+    pto.loop_vectorization = True
+    pto.slp_vectorization = True
+    pb = llvm.create_pass_builder(tm, pto)
+    pm = pb.getModulePassManager()
+    pm.run(mod, pb)
+    return mod
+
+
+def assembly(mod: llvm.ModuleRef) -> str:
+    """The host assembly of an (optimized) module."""
+    return target_machine().emit_assembly(mod)
+
+
+def _engine() -> llvm.ExecutionEngine:
+    global _ENGINE
+    if _ENGINE is None:
+        backing = llvm.parse_assembly("")
+        _ENGINE = llvm.create_mcjit_compiler(backing, target_machine())
+    return _ENGINE
+
+
+def add_module(mod: llvm.ModuleRef, symbols: list[str]) -> dict[str, int]:
+    """JIT ``mod`` into the process engine; gives the address of each of ``symbols``."""
+    with _LOCK:
+        engine = _engine()
+        engine.add_module(mod)
+        engine.finalize_object()
+        engine.run_static_constructors()
+        return {s: engine.get_function_address(s) for s in symbols}
