@@ -88,8 +88,7 @@ def int_floordiv(em: Emitter, et: T.ScalarType, a: ir.Value, b: ir.Value) -> ir.
         r = B.srem(a, safe)
         zero = em.const(a.type, 0)
         # Round down when the remainder is nonzero and its sign differs from b's.
-        adjust = B.and_(B.icmp_signed("!=", r, zero),
-                        B.icmp_signed("<", B.xor(r, safe), zero))
+        adjust = B.and_(B.icmp_signed("!=", r, zero), B.icmp_signed("<", B.xor(r, safe), zero))
         q = B.sub(q, B.zext(adjust, a.type))
         q = B.select(is_m1, B.neg(a), q)
     else:
@@ -112,11 +111,10 @@ def float_floordiv(em: Emitter, et: T.ScalarType, a: ir.Value, b: ir.Value) -> i
     return em.call_intrinsic("llvm.floor", q)
 
 
-def _shift_amount(em: Emitter, et: T.ScalarType, s: ir.Value):
-    """(s clamped into range, s out of range [negative or >= width])."""
-    B = em.b
-    big = B.icmp_unsigned(">=", s, em.const(s.type, et.bits))  # negatives are huge unsigned
-    return big
+def _shift_amount(em: Emitter, et: T.ScalarType, s: ir.Value) -> ir.Value:
+    """True where the shift amount is out of range (negative or at least the width)."""
+    # Compared unsigned, a negative amount is huge, so one compare covers both.
+    return em.b.icmp_unsigned(">=", s, em.const(s.type, et.bits))
 
 
 def shl(em: Emitter, et: T.ScalarType, a: ir.Value, s: ir.Value) -> ir.Value:
@@ -233,28 +231,25 @@ def _select(em: Emitter, op: Operation) -> ir.Value:
     return em.b.select(c, a, b)
 
 
-def _fbin(method: str) -> Callable:
-    return lambda em, et, a, b: getattr(em.b, method)(a, b)
-
-
-def _ibin(method: str) -> Callable:
-    return lambda em, et, a, b: getattr(em.b, method)(a, b)
+def _method(name: str) -> Callable:
+    """An emitter ``fn(em, et, a, b)`` calling the IRBuilder method ``name``."""
+    return lambda em, et, a, b: getattr(em.b, name)(a, b)
 
 
 TABLE: dict[str, Lowering] = {
     "arith.constant": _constant,
-    "arith.add": binary(_ibin("add"), _fbin("fadd")),
-    "arith.sub": binary(_ibin("sub"), _fbin("fsub")),
-    "arith.mul": binary(_ibin("mul"), _fbin("fmul")),
-    "arith.div": binary(int_div, _fbin("fdiv")),
+    "arith.add": binary(_method("add"), _method("fadd")),
+    "arith.sub": binary(_method("sub"), _method("fsub")),
+    "arith.mul": binary(_method("mul"), _method("fmul")),
+    "arith.div": binary(int_div, _method("fdiv")),
     "arith.floordiv": binary(int_floordiv, float_floordiv),
-    "arith.mod": binary(int_mod, _fbin("frem")),
+    "arith.mod": binary(int_mod, _method("frem")),
     "arith.pow": binary(None, lambda em, et, a, b: em.call_intrinsic("llvm.pow", a, b)),
-    "arith.min": _minmax("llvm.smin", "llvm.umin", "llvm.minnum"),
-    "arith.max": _minmax("llvm.smax", "llvm.umax", "llvm.maxnum"),
-    "arith.and": binary(_ibin("and_"), None),
-    "arith.or": binary(_ibin("or_"), None),
-    "arith.xor": binary(_ibin("xor"), None),
+    "arith.min": _minmax("llvm.smin", "llvm.umin", "llvm.minimumnum"),
+    "arith.max": _minmax("llvm.smax", "llvm.umax", "llvm.maximumnum"),
+    "arith.and": binary(_method("and_"), None),
+    "arith.or": binary(_method("or_"), None),
+    "arith.xor": binary(_method("xor"), None),
     "arith.shl": binary(shl, None),
     "arith.shr": binary(shr, None),
     "arith.neg": _neg,

@@ -26,8 +26,11 @@ def _phis(em: Emitter, values: list[ir.Value], pred: ir.Block, name: str) -> lis
 
 def _if(em: Emitter, op: Operation) -> list[ir.Value]:
     B = em.b
-    then_bb, else_bb, merge_bb = em.new_block("if.then"), em.new_block("if.else"), \
-        em.new_block("if.end")
+    then_bb, else_bb, merge_bb = (
+        em.new_block("if.then"),
+        em.new_block("if.else"),
+        em.new_block("if.end"),
+    )
     B.cbranch(em.get(op.operands[0]), then_bb, else_bb)
     incoming = []
     for bb, region in ((then_bb, op.regions[0]), (else_bb, op.regions[1])):
@@ -78,8 +81,11 @@ def _for(em: Emitter, op: Operation) -> list[ir.Value]:
 def _while(em: Emitter, op: Operation) -> list[ir.Value]:
     B = em.b
     entry = B.block
-    head, after, done = em.new_block("while.head"), em.new_block("while.body"), \
-        em.new_block("while.end")
+    head, after, done = (
+        em.new_block("while.head"),
+        em.new_block("while.body"),
+        em.new_block("while.end"),
+    )
     B.branch(head)
     B.position_at_end(head)
     carried = _phis(em, em.args(op), entry, "while.val")

@@ -15,7 +15,6 @@ from llvmlite import ir
 
 from kdsl.backends.cpu import types as LT
 from kdsl.errors import KdslCapabilityError
-from kdsl.ir import types as T
 from kdsl.ir.core import Block, Module, Operation, Value
 
 Lowering = Callable[["Emitter", Operation], Any]
@@ -92,12 +91,18 @@ class Emitter:
         return [self.values[v] for v in term.operands] if term is not None else []
 
     # -- helpers --------------------------------------------------------------
-    def intrinsic(self, name: str, types: Sequence[ir.Type], ret: ir.Type | None = None,
-                  args: Sequence[ir.Type] | None = None) -> ir.Function:
+    def intrinsic(
+        self,
+        name: str,
+        types: Sequence[ir.Type],
+        ret: ir.Type | None = None,
+        args: Sequence[ir.Type] | None = None,
+    ) -> ir.Function:
         """An overloaded LLVM intrinsic such as ``llvm.sqrt`` for ``types``."""
         full = name + "".join("." + _mangle(t) for t in types)
-        fnty = ir.FunctionType(ret if ret is not None else types[0],
-                               list(args) if args is not None else [types[0]])
+        fnty = ir.FunctionType(
+            ret if ret is not None else types[0], list(args) if args is not None else [types[0]]
+        )
         return self.state.declare(full, fnty)
 
     def call_intrinsic(self, name: str, *vals: ir.Value) -> ir.Value:
@@ -149,11 +154,6 @@ class Emitter:
 def I32c(i: int) -> ir.Constant:
     """An ``i32`` constant."""
     return ir.Constant(LT.I32, i)
-
-
-def ir_type_of(v: Value) -> T.Type:
-    """The IR type of an IR value (for readability in lowerings)."""
-    return v.type
 
 
 def _mangle(t: ir.Type) -> str:

@@ -142,8 +142,9 @@ def declare_func(state: ModuleState, name: str) -> ir.Function:
     return fn
 
 
-def lower_kernels(module: Module, kernels: list[str], names: dict[str, str] | None = None
-                  ) -> ModuleState:
+def lower_kernels(
+    module: Module, kernels: list[str], names: dict[str, str] | None = None
+) -> ModuleState:
     """An LLVM module holding the range functions of ``kernels`` (and their callees).
 
     ``names`` maps a kernel symbol to its LLVM name (default ``kernel_symbol``).

@@ -98,6 +98,44 @@ def _rmw_op(kind: str, et: T.ScalarType) -> str:
     return kind
 
 
+def _rmw(em: Emitter, rmw: str, ptr: ir.Value, value: ir.Value) -> ir.Value:
+    """One atomic update of a scalar; gives the old value."""
+    if rmw in ("fmin", "fmax"):
+        return _cas_minmax(em, rmw, ptr, value)
+    return em.b.atomic_rmw(rmw, ptr, value, "monotonic")
+
+
+def _cas_minmax(em: Emitter, rmw: str, ptr: ir.Value, value: ir.Value) -> ir.Value:
+    """Float atomic min/max as a compare-and-swap loop on the bits.
+
+    ``atomicrmw fmin`` follows ``minnum``, which may pick either zero for -0.0 vs
+    +0.0; kdsl's min/max order the zeros (``minimumnum``), so the loop applies the
+    same rule as ``arith.min``/``arith.max``. Comparing bits (not floats) makes a
+    NaN in memory compare equal to itself, so the loop ends.
+    """
+    B = em.b
+    bits = ir.IntType(_width(value.type))
+    entry = B.block
+    loop, done = em.new_block("cas.loop"), em.new_block("cas.done")
+    first = B.load(ptr, typ=value.type, align=_width(value.type) // 8)
+    B.branch(loop)
+    B.position_at_end(loop)
+    old = B.phi(value.type, name="cas.old")
+    old.add_incoming(first, entry)
+    name = "llvm.minimumnum" if rmw == "fmin" else "llvm.maximumnum"
+    new = em.call_intrinsic(name, old, value)
+    pair = B.cmpxchg(ptr, B.bitcast(old, bits), B.bitcast(new, bits), "monotonic", "monotonic")
+    seen = B.bitcast(B.extract_value(pair, 0), value.type)
+    old.add_incoming(seen, B.block)
+    B.cbranch(B.extract_value(pair, 1), done, loop)
+    B.position_at_end(done)
+    return old
+
+
+def _width(t: ir.Type) -> int:
+    return {ir.HalfType: 16, ir.FloatType: 32, ir.DoubleType: 64}[type(t)]
+
+
 def _atomic(em: Emitter, op: Operation) -> ir.Value:
     at = op.operands[1].type
     et = T.elem_type(at.dtype)
@@ -111,11 +149,10 @@ def _atomic(em: Emitter, op: Operation) -> ir.Value:
         out = ir.Constant(value.type, ir.Undefined)
         for j in range(value.type.count):
             lane_ptr = em.b.gep(ptr, [ir.Constant(LT.I64, j)], inbounds=True, source_etype=mt)
-            old = em.b.atomic_rmw(rmw, lane_ptr, em.b.extract_element(value, I32c(j)),
-                                  "monotonic")
+            old = _rmw(em, rmw, lane_ptr, em.b.extract_element(value, I32c(j)))
             out = em.b.insert_element(out, old, I32c(j))
     else:
-        out = em.b.atomic_rmw(rmw, ptr, value, "monotonic")
+        out = _rmw(em, rmw, ptr, value)
     if et.is_bool:
         return em.b.icmp_unsigned("!=", out, em.const(out.type, 0))
     return out

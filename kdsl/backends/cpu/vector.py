@@ -156,8 +156,9 @@ def _matmul(em, et, op, a, b):
     out = []
     for i in range(rows):
         for j in range(cols):
-            out.append(_sum(em, et, [mul(la[i * inner + k], lb[k * cols + j])
-                                     for k in range(inner)]))
+            out.append(
+                _sum(em, et, [mul(la[i * inner + k], lb[k * cols + j]) for k in range(inner)])
+            )
     rt = LT.llvm_type(op.results[0].type)
     return build(em, ir.VectorType(la[0].type, rt.count), out)
 
