@@ -48,7 +48,7 @@ def zeros(
     device: Any = None,
     requires_grad: bool = False,
     length: int | None = None,
-    **_: Any,
+    pinned: bool = False,
 ) -> array:
     """A zero-filled array; ``shape`` is an int or tuple (``length=`` also accepted)."""
     return _make(shape, length, dtype, device, requires_grad, 0)
@@ -60,7 +60,7 @@ def empty(
     device: Any = None,
     requires_grad: bool = False,
     length: int | None = None,
-    **_: Any,
+    pinned: bool = False,
 ) -> array:
     """An array whose contents are unspecified (``length=`` also accepted)."""
     return _make(shape, length, dtype, device, requires_grad, None)
@@ -73,7 +73,7 @@ def full(
     device: Any = None,
     requires_grad: bool = False,
     length: int | None = None,
-    **_: Any,
+    pinned: bool = False,
 ) -> array:
     """An array with every element ``value``; the dtype is inferred from it if not given."""
     if dtype is Any or dtype is None:
@@ -87,7 +87,7 @@ def ones(
     device: Any = None,
     requires_grad: bool = False,
     length: int | None = None,
-    **_: Any,
+    pinned: bool = False,
 ) -> array:
     """An array of ones."""
     return _make(shape, length, dtype, device, requires_grad, 1)

@@ -43,7 +43,11 @@ class array:
         copy: bool = True,
         ndim: int | None = None,
         length: int | None = None,
-        **_warp_only: Any,  # pinned=, owner=, ...: meaningless on the CPU
+        # Warp's allocation hints; meaningless for CPU NumPy buffers, accepted so
+        # Warp code ports. Unknown keywords still raise TypeError.
+        pinned: bool = False,
+        owner: bool = False,
+        deleter: Any = None,
     ) -> None:
         dev = _check_device(device)
         if isinstance(data, array):
