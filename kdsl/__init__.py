@@ -5,7 +5,7 @@ Each subsystem lists its public names in its own ``api`` module; this file only
 gathers them. Importing kdsl imports no GPU, torch or jax package.
 """
 
-from kdsl import errors
+from kdsl import config, errors
 from kdsl.errors import (
     KdslCapabilityError,
     KdslError,

@@ -7,6 +7,7 @@ Commands::
     kdsl backends
     kdsl pipeline [BACKEND]
     kdsl conformance --backend NAME [-k EXPR] [-x]
+    kdsl cache info|clear
 
 A user mistake (a missing file, a kernel that does not compile, a bad pipeline, an
 unknown stage or backend) prints kdsl's message, with the file, line and a caret,
@@ -273,6 +274,29 @@ def cmd_conformance(args: argparse.Namespace) -> int:
     return 0 if clean and tally.failed == 0 else 1
 
 
+def cmd_cache(args: argparse.Namespace) -> int:
+    """``kdsl cache info|clear``: show or empty the kernel cache directory."""
+    from kdsl.runtime.cache import DiskCache, cache_dir, check_directory, disk_cache_enabled
+
+    directory = cache_dir()
+    # An unsafe directory (not ours, or writable by others) is never emptied.
+    unsafe = check_directory(directory, create=False) if directory.exists() else None
+    disk = DiskCache(directory)
+    if args.action == "clear":
+        if unsafe is not None:
+            raise CliError(f"refusing to clear the kernel cache: {unsafe}")
+        count, size = disk.clear()
+        print(f"removed {count} entries ({size} bytes) from {directory}")
+        return 0
+    info = disk.info()
+    print(f"directory: {info.directory}")
+    print(f"entries:   {info.entries}")
+    print(f"size:      {info.total_bytes} bytes")
+    if unsafe is not None or not disk_cache_enabled():
+        print(f"disabled:  {unsafe or 'KDSL_CACHE is off'}")
+    return 0
+
+
 # --------------------------------------------------------------------------- parser
 
 
@@ -315,6 +339,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-k", metavar="EXPR", help="only cases matching this pytest -k expression")
     p.add_argument("-x", "--exitfirst", action="store_true", help="stop at the first failure")
     p.set_defaults(run=cmd_conformance)
+
+    p = sub.add_parser("cache", help="show (info) or empty (clear) the kernel cache")
+    p.add_argument("action", choices=["info", "clear"])
+    p.set_defaults(run=cmd_cache)
     return parser
 
 

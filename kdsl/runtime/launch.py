@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from kdsl import config
 from kdsl.backends.base import Backend, CompiledKernel
 from kdsl.backends.registry import get_backend, is_registered
 from kdsl.errors import KdslError, KdslLaunchError
@@ -87,7 +88,8 @@ def _compiled(kernel: Any, backend: Backend) -> CompiledKernel:
     if cache is None:
         cache = {}
         setattr(kernel, _CACHE_ATTR, cache)
-    options = dict(getattr(kernel, "options", None) or {})
+    # Process-wide debug settings (kdsl.config) resolve into the options, so they key the cache.
+    options = config.compile_options(getattr(kernel, "options", None) or {})
     key = (backend.name, backend.version, repr(sorted(options.items())))
     compiled = cache.get(key)
     if compiled is None:

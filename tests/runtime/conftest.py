@@ -56,6 +56,13 @@ GRID = """func.func @grid(%out: array<i32, 2>) -> () {kind = "kernel"} {
 """
 
 
+@pytest.fixture(autouse=True)
+def _private_kernel_cache(tmp_path_factory, monkeypatch):
+    """Every runtime test gets its own kernel cache dir, never the user's real one."""
+    monkeypatch.setenv("KDSL_CACHE_DIR", str(tmp_path_factory.mktemp("kdsl-cache")))
+    monkeypatch.delenv("KDSL_CACHE", raising=False)
+
+
 @pytest.fixture
 def saxpy():
     return IRKernel(SAXPY, "saxpy")

@@ -21,9 +21,13 @@ from kdsl.ir import types as T
 class Packed:
     """The ``args`` pointer array of one launch and everything it points into."""
 
-    def __init__(self, types: Sequence[T.Type], values: Sequence[Any]) -> None:
+    def __init__(
+        self, types: Sequence[T.Type], values: Sequence[Any], extra: Sequence[int] = ()
+    ) -> None:
+        """Pack ``values``; ``extra`` raw pointers follow them (a debug build's error record)."""
         self.keep: list[Any] = []
         ptrs = [self._pack(t, v, i) for i, (t, v) in enumerate(zip(types, values))]
+        ptrs += list(extra)
         self.array = (ctypes.c_void_p * max(1, len(ptrs)))(*ptrs)
         self.address = ctypes.addressof(self.array)
 

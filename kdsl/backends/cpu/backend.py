@@ -3,25 +3,37 @@
 from __future__ import annotations
 
 import ctypes
-import itertools
-import threading
+import functools
+import hashlib
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 from kdsl.backends.base import Backend, CompiledKernel, optimize
-from kdsl.backends.cpu import jit, pool
+from kdsl.backends.cpu import checks, jit, pool
 from kdsl.backends.cpu.abi import Packed
 from kdsl.backends.cpu.lower import kernel_names, kernel_symbol, lower_kernels, tid_ndims
+from kdsl.config import check_pipeline
 from kdsl.errors import KdslError, KdslLaunchError
 from kdsl.ir.core import Module
+from kdsl.ir.ops_debug import debug_sites
 from kdsl.ir.printer import print_module
+from kdsl.runtime import cache as kernel_cache
 
 #: The C type of every range function: (start, end, args, dims).
 RANGE_FN = ctypes.CFUNCTYPE(None, ctypes.c_int64, ctypes.c_int64, ctypes.c_void_p, ctypes.c_void_p)
-_serial = itertools.count()
-_serial_lock = threading.Lock()
 
 _MAX_THREADS = 2**31 - 1  # tid() is an i32
+
+
+@functools.cache
+def _code_version(version: str) -> str:
+    """``version`` plus a digest of this backend's sources, so edited codegen never
+    reuses stale cache entries (a developer rarely remembers to bump ``version``)."""
+    h = hashlib.sha256(version.encode())
+    for path in sorted(Path(__file__).parent.glob("*.py")):
+        h.update(path.name.encode() + b"\0" + path.read_bytes())
+    return f"{version}+{h.hexdigest()[:16]}"
 
 
 class CpuKernel:
@@ -32,13 +44,16 @@ class CpuKernel:
         self.arg_types = arg_types
         self.tid_ndims = tid_ndims
         self.llvm_name = llvm_name
+        #: Debug builds: the check sites (``kdsl.ir.ops_debug``); None in release builds.
+        self.sites: dict | None = None
 
 
 class CpuBackend(Backend):
     """Compiles kernels for the host CPU with LLVM and runs them over a thread pool.
 
-    Array indices are not bounds-checked (release mode); run on ``interp`` to
-    find out-of-range accesses.
+    Array indices are not bounds-checked in release mode. With the ``debug`` (or
+    ``verify_fp``) option the module goes through ``bounds-check`` (``fp-check``)
+    after optimization and the launch reports the first failed check (``checks``).
     """
 
     name = "cpu"
@@ -74,19 +89,35 @@ class CpuBackend(Backend):
         opts = dict(options or {})
         if opts.get("optimize", True):
             module = optimize(module, self.pipeline)
-        with _serial_lock:
-            llname = f"{kernel_symbol(kernel_symbol_)}_{next(_serial)}"
-        state = lower_kernels(module, [kernel_symbol_], {kernel_symbol_: llname})
-        mod = jit.parse(str(state.llmod))
-        jit.optimize(mod, 3 if opts.get("optimize", True) else 0)
-        addr = jit.add_module(mod, [llname])[llname]
+        checked = check_pipeline(opts)
+        module = optimize(module, checked)
+        # The LLVM name derives from the cache key: equal keys are equal code, and the
+        # kernel cache loads each key once per process, so names never clash.
+        key = kernel_cache.kernel_key(
+            print_module(module, debuginfo=True), self.name, _code_version(self.version),
+            {**opts, "kernel": kernel_symbol_}, jit.target_id(),
+        )  # fmt: skip
+        llname = f"{kernel_symbol(kernel_symbol_)}_{key[:24]}"
+
+        def build() -> bytes:
+            state = lower_kernels(
+                module, [kernel_symbol_], {kernel_symbol_: llname}, debug=bool(checked)
+            )
+            mod = jit.parse(str(state.llmod))
+            jit.optimize(mod, 3 if opts.get("optimize", True) else 0)
+            return jit.emit_object(mod)
+
+        addr = kernel_cache.get_or_build(
+            key, build, lambda obj: jit.add_object(obj, [llname])[llname]
+        )
         func = module.get_func(kernel_symbol_)
         payload = CpuKernel(
             RANGE_FN(addr), [a.type for a in func.regions[0].block.args], tid_ndims(func), llname
         )
-        return CompiledKernel(
-            self.name, kernel_symbol_, module, payload, {"tid_ndims": sorted(payload.tid_ndims)}
-        )
+        if checked:
+            payload.sites = debug_sites(module)
+        meta = {"tid_ndims": sorted(payload.tid_ndims), "cache_key": key}
+        return CompiledKernel(self.name, kernel_symbol_, module, payload, meta)
 
     def launch(
         self,
@@ -114,8 +145,11 @@ class CpuBackend(Backend):
             )
         if total == 0:
             return
-        packed = Packed(k.arg_types, args)
+        record = checks.new_record() if k.sites is not None else None
+        packed = Packed(k.arg_types, args, () if record is None else (record.ctypes.data,))
         extents = (ctypes.c_int64 * len(dims))(*dims)
         argp, dimp = packed.address, ctypes.addressof(extents)
         fn = k.fn
         pool.run(lambda s, e: fn(s, e, argp, dimp), total)
+        if record is not None:
+            checks.raise_for_record(record, k.sites, name, compiled.symbol, dims)

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from llvmlite import ir
 
+from kdsl.backends.cpu import checks
 from kdsl.backends.cpu import types as LT
 from kdsl.backends.cpu.emitter import Emitter, Lowering
 from kdsl.ir import types as T
@@ -104,7 +105,11 @@ def _call(em: Emitter, op: Operation) -> list[ir.Value]:
     from kdsl.backends.cpu.lower import declare_func  # lower imports the table
 
     fn = declare_func(em.state, op.attrs["callee"])
-    out = em.b.call(fn, em.args(op))
+    args = em.args(op)
+    if em.error_record is not None:  # debug build: pass the record on, stop if it failed
+        args.append(em.error_record)
+    out = em.b.call(fn, args)
+    checks.stop_if_failed(em)
     if not op.results:
         return []
     if len(op.results) == 1:

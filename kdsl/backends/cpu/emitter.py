@@ -30,6 +30,8 @@ class ModuleState:
         self.funcs: dict[str, ir.Function] = {}
         self.pending: list[str] = []  # callees declared but not emitted yet
         self.libm_used: set[str] = set()
+        #: Debug build: kernels and functions take a pointer to an error record (``checks``).
+        self.debug = False
 
     def declare(self, name: str, fnty: ir.FunctionType) -> ir.Function:
         """The function ``name`` of the module, declared on first use."""
@@ -51,6 +53,10 @@ class Emitter:
         #: The thread's linear index (i32) and n-d index components (i32), when a kernel.
         self.linear: ir.Value | None = None
         self.index: list[ir.Value] = []
+        #: Debug builds: the error record (i64*) and, in a kernel, the block that
+        #: ends the current thread after a failed check (see ``checks``).
+        self.error_record: ir.Value | None = None
+        self.abort_block: ir.Block | None = None
 
     # -- values ---------------------------------------------------------------
     def get(self, v: Value) -> ir.Value:

@@ -113,6 +113,42 @@ def _engine() -> llvm.ExecutionEngine:
     return _ENGINE
 
 
+def target_id() -> str:
+    """The target code is compiled for (triple, CPU name, CPU features), for cache keys."""
+    tm = target_machine()
+    return f"{tm.triple};{llvm.get_host_cpu_name()};{llvm.get_host_cpu_features().flatten()}"
+
+
+def emit_object(mod: llvm.ModuleRef) -> bytes:
+    """The host object code of an (optimized) module: what the kernel cache stores."""
+    return target_machine().emit_object(mod)
+
+
+@cache
+def _object_magic() -> bytes:
+    """The first bytes of every object file this host's target machine emits."""
+    return emit_object(parse(""))[:4]
+
+
+def add_object(data: bytes, symbols: list[str]) -> dict[str, int]:
+    """Load object code ``data`` into the process engine; gives the address of each symbol.
+
+    Raises ``ValueError`` when ``data`` is not an object file of this host's format
+    (LLVM would crash on it) or lacks a symbol.
+    """
+    if not data.startswith(_object_magic()):
+        raise ValueError("not an object file of this host's format")
+    with _LOCK:
+        engine = _engine()
+        engine.add_object_file(llvm.ObjectFileRef.from_data(data))
+        engine.finalize_object()
+        out = {s: engine.get_function_address(s) for s in symbols}
+    missing = [s for s, a in out.items() if not a]
+    if missing:
+        raise ValueError(f"object code lacks {missing}")
+    return out
+
+
 def add_module(mod: llvm.ModuleRef, symbols: list[str]) -> dict[str, int]:
     """JIT ``mod`` into the process engine; gives the address of each of ``symbols``."""
     with _LOCK:

@@ -7,6 +7,10 @@ struct, an array of pointers to its fields (in the same scheme). ``dims`` holds 
 launch grid (i64 per dimension), used to split the linear index when the kernel
 asks for an n-d ``tid``. Parameters are loaded once before the thread loop, so the
 loop body sees loop-invariant values and simple kernels vectorize.
+
+Debug builds (``lower_kernels(..., debug=True)``) read one more entry,
+``args[nparams]``: the error record of ``checks``; internal functions then take
+it as an extra last parameter.
 """
 
 from __future__ import annotations
@@ -71,6 +75,9 @@ def emit_kernel(state: ModuleState, func: Operation, llname: str) -> ir.Function
     for k, a in enumerate(body_block.args):
         slot = B.gep(args, [ir.Constant(LT.I64, k)], inbounds=True, source_etype=LT.PTR)
         params.append(_load_param(em, B.load(slot, typ=LT.PTR, align=8), a.type))
+    if state.debug:
+        slot = B.gep(args, [ir.Constant(LT.I64, len(params))], inbounds=True, source_etype=LT.PTR)
+        em.error_record = B.load(slot, typ=LT.PTR, align=8)
     nds = sorted(n for n in tid_ndims(func) if n > 1)
     if len(nds) > 1:
         raise KdslCapabilityError(f"kernel uses tid() with {nds} dimensions at once", func.loc)
@@ -90,9 +97,15 @@ def emit_kernel(state: ModuleState, func: Operation, llname: str) -> ir.Function
     B.position_at_end(body)
     em.linear = i
     em.index = _split_index(em, i, extents)
+    if state.debug:  # a failed check ends its thread by branching here
+        em.abort_block = fn.append_basic_block("thread.abort")
     em.lower_block(body_block, params)
     i.add_incoming(B.add(i, ir.Constant(LT.I32, 1), flags=["nsw"]), B.block)
     B.branch(head)
+    if em.abort_block is not None:
+        B.position_at_end(em.abort_block)
+        i.add_incoming(B.add(i, ir.Constant(LT.I32, 1), flags=["nsw"]), em.abort_block)
+        B.branch(head)
     B.position_at_end(done)
     B.ret_void()
     return fn
@@ -123,13 +136,16 @@ def declare_func(state: ModuleState, name: str) -> ir.Function:
     body = func.regions[0].block
     res = [LT.llvm_type(t) for t in func.attrs.get("res_types", [])]
     ret = LT.VOID if not res else res[0] if len(res) == 1 else ir.LiteralStructType(res)
-    fnty = ir.FunctionType(ret, [LT.llvm_type(a.type) for a in body.args])
+    params = [LT.llvm_type(a.type) for a in body.args]
+    fnty = ir.FunctionType(ret, params + [LT.PTR] if state.debug else params)
     fn = ir.Function(state.llmod, fnty, f"kdsl_func_{name}")
     fn.linkage = "internal"
     state.funcs[name] = fn
     em = Emitter(state, fn, name)
     em.b.position_at_end(fn.append_basic_block("entry"))
-    out = em.lower_block(body, list(fn.args))
+    if state.debug:
+        em.error_record = fn.args[-1]
+    out = em.lower_block(body, list(fn.args)[: len(params)])
     if not res:
         em.b.ret_void()
     elif len(res) == 1:
@@ -143,13 +159,15 @@ def declare_func(state: ModuleState, name: str) -> ir.Function:
 
 
 def lower_kernels(
-    module: Module, kernels: list[str], names: dict[str, str] | None = None
+    module: Module, kernels: list[str], names: dict[str, str] | None = None, debug: bool = False
 ) -> ModuleState:
     """An LLVM module holding the range functions of ``kernels`` (and their callees).
 
     ``names`` maps a kernel symbol to its LLVM name (default ``kernel_symbol``).
+    ``debug`` builds take an error record (``checks``) and can lower the check ops.
     """
     state = new_module(module)
+    state.debug = debug
     for k in kernels:
         func = module.get_func(k)
         emit_kernel(state, func, (names or {}).get(k) or kernel_symbol(k))

@@ -12,6 +12,7 @@ from typing import Any
 
 from kdsl.backends.base import Backend, CompiledKernel, optimize
 from kdsl.backends.interp.program import Program, run_kernel
+from kdsl.config import check_pipeline
 from kdsl.errors import KdslError
 from kdsl.ir.core import Module
 from kdsl.ir.printer import print_module
@@ -45,6 +46,7 @@ class InterpBackend(Backend):
         opts = dict(options or {})
         if opts.get("optimize", True):
             module = optimize(module, self.pipeline)
+        module = optimize(module, check_pipeline(opts))  # debug / verify_fp checks
         program = Program(module)
         fn = program.function(kernel_symbol)  # compile the kernel now, callees on use
         return CompiledKernel(

@@ -1,0 +1,213 @@
+"""Lowerings of the debug checks (``kd.check_bounds``, ``kd.check_finite``) and their record.
+
+A kernel compiled in debug mode (or with ``verify_fp``) takes one more entry in
+its ``args`` array: a pointer to an error record of ``RECORD_LEN`` i64 words,
+zeroed by the launch. Internal functions get the same pointer as an extra last
+parameter. The layout:
+
+=========  ==========================================================
+word       meaning
+=========  ==========================================================
+0          site + 1 of the first failed bounds check (0: none failed)
+1          its thread's linear index (-1 inside a called function)
+2..5       its indices (sign-extended), 6..9 the array's shape
+10         site + 1 of the first failed finite check (0: none failed)
+11         its thread's linear index
+12         1 for NaN, 2 for Inf
+=========  ==========================================================
+
+A failing check claims its slot with a compare-and-swap from 0, so only the
+first failure (in time) writes the rest; a launch running on one thread (small
+launches do) reports the first failure in thread order. A failed bounds check
+then ends the thread: it branches to the kernel's next thread (or returns from a
+called function, whose caller tests word 0 after the call and stops too), so the
+bad access never runs. Every other thread runs to completion. A failed finite
+check only records; the thread goes on. ``raise_for_record`` turns a record into
+a ``KdslRuntimeError`` after the launch.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+from llvmlite import ir
+
+from kdsl.backends.cpu import types as LT
+from kdsl.backends.cpu.emitter import Emitter, Lowering
+from kdsl.errors import KdslCapabilityError, KdslRuntimeError
+from kdsl.ir import types as T
+from kdsl.ir.core import Operation
+from kdsl.ir.ops_debug import Site, bounds_message, fp_message
+
+RECORD_LEN = 16
+_BOUNDS, _BOUNDS_TID, _BOUNDS_IDX, _BOUNDS_SHAPE = 0, 1, 2, 6
+_FP, _FP_TID, _FP_KIND = 10, 11, 12
+_MAX_NDIM = 4
+
+
+def new_record() -> np.ndarray:
+    """A zeroed error record for one launch."""
+    return np.zeros(RECORD_LEN, dtype=np.int64)
+
+
+def _i64(v: int) -> ir.Constant:
+    return ir.Constant(LT.I64, v)
+
+
+def _slot(em: Emitter, word: int) -> ir.Value:
+    return em.b.gep(em.error_record, [_i64(word)], inbounds=True, source_etype=LT.I64)
+
+
+def _put(em: Emitter, word: int, value: ir.Value) -> None:
+    em.b.store(value, _slot(em, word), align=8)
+
+
+def _record(em: Emitter, op: Operation) -> None:
+    if em.error_record is None:
+        raise KdslCapabilityError(
+            f"{op.name} needs a debug build (compile with debug=True or verify_fp=True)", op.loc
+        )
+
+
+def _tid64(em: Emitter) -> ir.Value:
+    return em.b.sext(em.linear, LT.I64) if em.linear is not None else _i64(-1)
+
+
+def _claim(em: Emitter, word: int, site: int) -> ir.Value:
+    """Atomically set ``word`` from 0 to site + 1; i1 true when this thread won."""
+    pair = em.b.cmpxchg(_slot(em, word), _i64(0), _i64(site + 1), "monotonic", "monotonic")
+    return em.b.extract_value(pair, 1)
+
+
+def abort_thread(em: Emitter) -> None:
+    """End the current thread: next thread in a kernel, return (undef) in a function."""
+    if em.abort_block is not None:
+        em.b.branch(em.abort_block)
+        return
+    ret = em.fn.function_type.return_type
+    if isinstance(ret, ir.VoidType):
+        em.b.ret_void()
+    else:
+        em.b.ret(ir.Constant(ret, ir.Undefined))
+
+
+def stop_if_failed(em: Emitter) -> None:
+    """After a call in a debug build: end this thread too if a bounds check failed."""
+    if em.error_record is None:
+        return
+    B = em.b
+    failed = B.icmp_unsigned("!=", B.load(_slot(em, _BOUNDS), typ=LT.I64, align=8), _i64(0))
+    stop, cont = em.new_block("call.failed"), em.new_block("call.ok")
+    B.cbranch(failed, stop, cont).set_weights([1, 1000])
+    B.position_at_end(stop)
+    abort_thread(em)
+    B.position_at_end(cont)
+
+
+def _index64(em: Emitter, v: ir.Value, t: T.ScalarType) -> ir.Value:
+    if t.bits == 64:
+        return v
+    return em.b.sext(v, LT.I64) if t.is_signed else em.b.zext(v, LT.I64)
+
+
+def _check_bounds(em: Emitter, op: Operation) -> None:
+    _record(em, op)
+    B = em.b
+    arr = em.get(op.operands[0])
+    idx, shape, ok = [], [], None
+    for k, iv in enumerate(op.operands[1:]):
+        i = _index64(em, em.get(iv), iv.type)
+        n = B.extract_value(arr, [1, k])
+        # Unsigned: a negative index is a huge one, so one compare checks both ends.
+        inside = B.icmp_unsigned("<", i, n)
+        ok = inside if ok is None else B.and_(ok, inside)
+        idx.append(i)
+        shape.append(n)
+    fail, write, stop, cont = (
+        em.new_block(n) for n in ("bounds.fail", "bounds.write", "bounds.stop", "bounds.ok")
+    )
+    B.cbranch(ok, cont, fail).set_weights([1000, 1])
+    B.position_at_end(fail)
+    B.cbranch(_claim(em, _BOUNDS, op.attrs["site"]), write, stop)
+    B.position_at_end(write)
+    _put(em, _BOUNDS_TID, _tid64(em))
+    for k in range(min(len(idx), _MAX_NDIM)):
+        _put(em, _BOUNDS_IDX + k, idx[k])
+        _put(em, _BOUNDS_SHAPE + k, shape[k])
+    B.branch(stop)
+    B.position_at_end(stop)
+    abort_thread(em)
+    B.position_at_end(cont)
+
+
+def _any_lane(em: Emitter, v: ir.Value) -> ir.Value:
+    if not isinstance(v.type, ir.VectorType):
+        return v
+    out = em.b.extract_element(v, ir.Constant(LT.I32, 0))
+    for j in range(1, v.type.count):
+        out = em.b.or_(out, em.b.extract_element(v, ir.Constant(LT.I32, j)))
+    return out
+
+
+def _check_finite(em: Emitter, op: Operation) -> None:
+    _record(em, op)
+    B = em.b
+    v = em.get(op.operands[0])
+    nan = _any_lane(em, B.fcmp_unordered("uno", v, v))
+    inf = _any_lane(
+        em, B.fcmp_ordered("==", em.call_intrinsic("llvm.fabs", v), em.const(v.type, float("inf")))
+    )
+    fail, write, cont = (em.new_block(n) for n in ("finite.fail", "finite.write", "finite.ok"))
+    B.cbranch(B.or_(nan, inf), fail, cont).set_weights([1, 1000])
+    B.position_at_end(fail)
+    B.cbranch(_claim(em, _FP, op.attrs["site"]), write, cont)
+    B.position_at_end(write)
+    _put(em, _FP_TID, _tid64(em))
+    _put(em, _FP_KIND, B.select(nan, _i64(1), _i64(2)))
+    B.branch(cont)
+    B.position_at_end(cont)
+
+
+TABLE: dict[str, Lowering] = {
+    "kd.check_bounds": _check_bounds,
+    "kd.check_finite": _check_finite,
+}
+
+
+def raise_for_record(
+    record: np.ndarray,
+    sites: Mapping[int, Site],
+    kernel: str,
+    symbol: str = "",
+    dims: tuple[int, ...] = (),
+) -> None:
+    """Raise the ``KdslRuntimeError`` a launch's error record describes, if any.
+
+    ``kernel`` is the name for messages, ``symbol`` the kernel's IR symbol (to tell
+    checks inside called functions apart), ``dims`` the launch grid (to print an
+    n-d thread index). A failed bounds check wins over a NaN/Inf: it is the likelier
+    cause of both.
+    """
+    if record[_BOUNDS]:
+        site = sites.get(int(record[_BOUNDS]) - 1)
+        nd = max(1, site.ndim) if site is not None else 1
+        idx = [int(x) for x in record[_BOUNDS_IDX : _BOUNDS_IDX + nd]]
+        shape = [int(x) for x in record[_BOUNDS_SHAPE : _BOUNDS_SHAPE + nd]]
+        arg = site.arg if site is not None else "array"
+        msg = bounds_message(kernel, arg, idx, shape)
+        tid = int(record[_BOUNDS_TID])
+    elif record[_FP]:
+        site = sites.get(int(record[_FP]) - 1)
+        kind = "NaN" if record[_FP_KIND] == 1 else "Inf"
+        msg = fp_message(kernel, kind, site.arg if site else "", site.loc if site else None)
+        tid = int(record[_FP_TID])
+    else:
+        return
+    err = KdslRuntimeError(msg, site.loc if site is not None else None, kernel)
+    if site is not None and symbol and site.func != symbol:
+        err.add_context(f"in function '{site.func}'")
+    if tid >= 0:
+        where = tid if len(dims) <= 1 else tuple(int(i) for i in np.unravel_index(tid, dims))
+        err.add_context(f"in thread {where} of kernel '{kernel}'")
+    raise err

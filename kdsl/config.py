@@ -1,0 +1,67 @@
+"""Process-wide settings, in the style of ``warp.config``: ``kdsl.config.mode = "debug"``.
+
+``mode`` is ``"release"`` (default) or ``"debug"``: debug mode compiles kernels
+with a bounds check before every array access. ``verify_fp = True`` adds a check
+that no NaN or Inf is stored to memory. A kernel's own options win over these:
+``@kdsl.kernel(debug=True)``, ``@kdsl.kernel(mode="release")``,
+``@kdsl.kernel(verify_fp=True)``. Settings are read at each launch, and they are
+part of the compile options, so debug and release builds are cached apart.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+from kdsl.errors import KdslError
+
+#: "release" or "debug"; see the module docstring.
+mode: str = "release"
+#: Check that kernels store no NaN or Inf (reported with the source line).
+verify_fp: bool = False
+
+_MODES = ("release", "debug")
+#: Kernel options that ``compile_options`` resolves into ``debug`` / ``verify_fp``.
+_DEBUG_KEYS = ("debug", "mode", "verify_fp")
+
+
+def _check_mode(value: Any, where: str) -> str:
+    if value not in _MODES:
+        raise KdslError(f"{where} must be 'release' or 'debug', not {value!r}")
+    return value
+
+
+def compile_options(options: Mapping[str, Any]) -> dict[str, Any]:
+    """A kernel's options with debug settings resolved against this module's settings.
+
+    The result holds ``debug=True`` and ``verify_fp=True`` only when they are on
+    (and never ``mode``), so release builds keep the options they always had.
+    """
+    out = {k: v for k, v in options.items() if k not in _DEBUG_KEYS}
+    debug = options.get("debug")
+    if debug is None:
+        m = options.get("mode")
+        m = (
+            _check_mode(m, "kernel option 'mode'")
+            if m is not None
+            else _check_mode(mode, "kdsl.config.mode")
+        )
+        debug = m == "debug"
+    fp = options.get("verify_fp")
+    if fp is None:
+        fp = verify_fp
+    if debug:
+        out["debug"] = True
+    if fp:
+        out["verify_fp"] = True
+    return out
+
+
+def check_pipeline(options: Mapping[str, Any]) -> str:
+    """The passes that instrument a module compiled with (resolved) ``options``."""
+    passes = []
+    if options.get("debug"):
+        passes.append("bounds-check")
+    if options.get("verify_fp"):
+        passes.append("fp-check")
+    return ",".join(passes)

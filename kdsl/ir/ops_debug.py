@@ -1,0 +1,157 @@
+"""The debug dialect: run-time checks that debug mode inserts (``bounds-check``, ``fp-check``).
+
+``kd.check_bounds %arr, %i... {arg, site}`` fails when an index is outside the
+array's shape; it is placed right before the access it guards. ``kd.check_finite
+%value {arg, site}`` fails when a float value (any lane of a vector or matrix)
+is NaN or infinite; it is placed before the store that writes the value.
+
+``site`` numbers the checks of a module; ``debug_sites`` maps each number to the
+kernel or function holding the check, the array's name and the source location,
+so a backend that only reports "site 3 failed" can name the source line. The
+ops carry the WRITES trait (a failed check stops a thread, an effect) so no pass
+removes, merges or reorders them.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from kdsl.errors import KdslRuntimeError
+from kdsl.ir.catalog import CATALOG, WRITES
+from kdsl.ir.core import Loc, Module, Operation
+from kdsl.ir.ops_mem import element_index
+from kdsl.ir.types import ArrayType, ScalarType, Type, elem_type
+
+#: The ops that hold a ``site`` attribute.
+CHECK_OPS = ("kd.check_bounds", "kd.check_finite")
+
+
+def _bounds_rule(ts: Sequence[Type], attrs: dict[str, Any]) -> list[Type]:
+    a, idx = ts[0], ts[1:]
+    if not isinstance(a, ArrayType):
+        raise TypeError(f"kd.check_bounds checks an array, not {a}")
+    if len(idx) != a.ndim:
+        raise TypeError(f"a {a.ndim}-d array needs {a.ndim} indices, got {len(idx)}")
+    for t in idx:
+        if not (isinstance(t, ScalarType) and t.is_int):
+            raise TypeError(f"an array index must be an integer, not {t}")
+    return []
+
+
+def _verify_site(op: Operation) -> None:
+    site = op.attrs["site"]
+    if not isinstance(site, int) or isinstance(site, bool) or site < 0:
+        raise TypeError(f"{op.name} needs a non-negative integer site, not {site!r}")
+    if not isinstance(op.attrs.get("arg", ""), str):
+        raise TypeError(f"{op.name}: arg must be a string")
+
+
+def _bounds_interp(ctx, op, a, *idx):
+    element_index(ctx, op, a, 0, idx)  # raises the same error a load would
+
+
+CATALOG.define(
+    "kd.check_bounds",
+    "Debug mode: stop with an error when an index is outside the array's shape. "
+    "``arg`` names the array (for messages); ``site`` numbers the check in its module.",
+    traits=frozenset({WRITES}),
+    type_rule=_bounds_rule,
+    verifier=_verify_site,
+    interp=_bounds_interp,
+    required_attrs=("arg", "site"),
+    example='kd.check_bounds %0, %1 {arg = "y", site = 0}',
+    group="debug",
+)
+
+
+def _finite_rule(ts: Sequence[Type], attrs: dict[str, Any]) -> list[Type]:
+    (v,) = ts
+    try:
+        et = elem_type(v)
+    except (TypeError, AttributeError):
+        et = None
+    if not (isinstance(et, ScalarType) and et.is_float):
+        raise TypeError(f"kd.check_finite checks float values, not {v}")
+    return []
+
+
+def nonfinite_kind(value: Any) -> str | None:
+    """``"NaN"`` or ``"Inf"`` when any component of ``value`` is one, else None."""
+    arr = np.asarray(value)
+    if np.isnan(arr).any():
+        return "NaN"
+    if np.isinf(arr).any():
+        return "Inf"
+    return None
+
+
+def _finite_interp(ctx, op, v):
+    kind = nonfinite_kind(v)
+    if kind is not None:
+        kernel = getattr(ctx, "kernel_name", "?")
+        msg = fp_message(kernel, kind, op.attrs.get("arg", ""), op.loc)
+        raise KdslRuntimeError(msg, op.loc, kernel)
+
+
+CATALOG.define(
+    "kd.check_finite",
+    "Debug mode (``verify_fp``): stop with an error when a float value (any lane) is NaN "
+    "or infinite. ``arg`` names the array the value is stored into; ``site`` numbers "
+    "the check in its module.",
+    traits=frozenset({WRITES}),
+    type_rule=_finite_rule,
+    verifier=_verify_site,
+    interp=_finite_interp,
+    required_attrs=("arg", "site"),
+    example='kd.check_finite %3 {arg = "y", site = 1}',
+    group="debug",
+)
+
+
+@dataclass(frozen=True)
+class Site:
+    """Where one check is: its op, the function holding it, the array's name, the source."""
+
+    op: str
+    func: str
+    arg: str
+    loc: Loc
+    #: Number of indices of a bounds check (0 for a finite check).
+    ndim: int = 0
+
+
+def debug_sites(module: Module) -> dict[int, Site]:
+    """Every check of ``module`` by site number."""
+    out: dict[int, Site] = {}
+    for func in module.funcs:
+        for op in func.walk():
+            if op.name in CHECK_OPS:
+                ndim = len(op.operands) - 1 if op.name == "kd.check_bounds" else 0
+                out[op.attrs["site"]] = Site(
+                    op.name, func.attrs["sym_name"], op.attrs.get("arg", ""), op.loc, ndim
+                )
+    return out
+
+
+def next_site(module: Module) -> int:
+    """The first site number no check of ``module`` uses."""
+    return max(debug_sites(module), default=-1) + 1
+
+
+def bounds_message(kernel: str, arg: str, index: Sequence[int], shape: Sequence[int]) -> str:
+    """The message of a failed bounds check (the same on every backend)."""
+    return (
+        f"index {list(index)} is out of bounds for array '{arg or 'array'}' of shape "
+        f"{tuple(shape)} in kernel '{kernel}'"
+    )
+
+
+def fp_message(kernel: str, kind: str, arg: str, loc: Loc | None = None) -> str:
+    """The message of a failed ``kd.check_finite``."""
+    where = f" at line {loc.line}" if loc is not None and loc.line > 0 else ""
+    into = f" (a value stored into array '{arg}')" if arg else ""
+    return f"kernel '{kernel}' produced {kind}{where}{into}"

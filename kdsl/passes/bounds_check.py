@@ -1,0 +1,60 @@
+"""Debug mode: a ``kd.check_bounds`` before every array access.
+
+Every ``kd.load``, ``kd.store`` and ``kd.atomic_rmw`` gets a ``kd.check_bounds`` of
+its array and indices right before it, with the access's location, the array's
+name (``arg``) and a fresh ``site`` number (see ``kdsl.ir.ops_debug``). A backend
+stops the failing thread at the check, so the access never touches memory.
+
+Run it after optimization: the checks then guard exactly the accesses that
+remain, and nothing after it can remove them (they carry the WRITES trait). An
+access the optimizer deleted (an unused load) is not checked: it never happens.
+Accesses that already have their check right before them are skipped, so the
+pass is idempotent. No options.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+from kdsl.ir import Module, Operation
+from kdsl.ir.builder import create_op
+from kdsl.ir.ops_debug import next_site
+from kdsl.passes.manager import ModulePass
+
+#: Access op -> position of its array operand (indices follow it).
+ACCESSES = {"kd.load": 0, "kd.store": 1, "kd.atomic_rmw": 1}
+
+
+def _already_checked(op: Operation, operands: list) -> bool:
+    block = op.parent
+    pos = block.ops.index(op)
+    prev = block.ops[pos - 1] if pos > 0 else None
+    return prev is not None and prev.name == "kd.check_bounds" and list(prev.operands) == operands
+
+
+@dataclass(frozen=True)
+class BoundsCheckPass(ModulePass):
+    """Insert ``kd.check_bounds`` before array accesses (see the module docstring)."""
+
+    name: ClassVar[str] = "bounds-check"
+
+    def apply(self, module: Module) -> bool:
+        site = next_site(module)
+        changed = False
+        for func in module.funcs:
+            for op in list(func.walk()):
+                at = ACCESSES.get(op.name)
+                if at is None:
+                    continue
+                operands = list(op.operands[at:])
+                if _already_checked(op, operands):
+                    continue
+                arg = operands[0].name_hint or "array"
+                check = create_op(
+                    "kd.check_bounds", operands, [], {"arg": arg, "site": site}, loc=op.loc
+                )
+                op.parent.insert_before(op, check)
+                site += 1
+                changed = True
+        return changed

@@ -1,0 +1,75 @@
+"""Debug mode (``verify_fp``): a ``kd.check_finite`` before every store of a float value.
+
+Each ``kd.store`` and ``kd.atomic_rmw`` whose value is a float (or a vector or
+matrix of floats) gets a ``kd.check_finite`` of that value right before it, with
+the store's location, the array's name and a fresh ``site`` number, so the first
+NaN or Inf that reaches memory names the source line that wrote it. Values that
+stay in registers are not checked (an Inf in an intermediate may be intended).
+Idempotent like ``bounds-check``; run it after optimization. No options.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import ClassVar
+
+from kdsl.ir import Module, Operation
+from kdsl.ir.builder import create_op
+from kdsl.ir.ops_debug import next_site
+from kdsl.ir.types import MatrixType, ScalarType, Type, VectorType
+from kdsl.passes.manager import ModulePass
+
+STORES = ("kd.store", "kd.atomic_rmw")
+
+
+def is_float_value(t: Type) -> bool:
+    """True for float scalars and vectors or matrices of floats."""
+    if isinstance(t, VectorType | MatrixType):
+        t = t.elem
+    return isinstance(t, ScalarType) and t.is_float
+
+
+def _already_checked(op: Operation) -> bool:
+    block = op.parent
+    pos = block.ops.index(op)
+    # A bounds check may sit between the value's check and the store.
+    for prev in reversed(block.ops[max(0, pos - 2) : pos]):
+        if prev.name == "kd.check_finite" and prev.operands[0] is op.operands[0]:
+            return True
+        if prev.name != "kd.check_bounds":
+            return False
+    return False
+
+
+@dataclass(frozen=True)
+class FpCheckPass(ModulePass):
+    """Insert ``kd.check_finite`` before float stores (see the module docstring)."""
+
+    name: ClassVar[str] = "fp-check"
+
+    def apply(self, module: Module) -> bool:
+        site = next_site(module)
+        changed = False
+        for func in module.funcs:
+            for op in list(func.walk()):
+                if op.name not in STORES or not is_float_value(op.operands[0].type):
+                    continue
+                if _already_checked(op):
+                    continue
+                arg = op.operands[1].name_hint or "array"
+                check = create_op(
+                    "kd.check_finite",
+                    [op.operands[0]],
+                    [],
+                    {"arg": arg, "site": site},
+                    loc=op.loc,
+                )
+                anchor = op
+                # Keep the bounds check right before its access (its idempotence test).
+                pos = op.parent.ops.index(op)
+                if pos > 0 and op.parent.ops[pos - 1].name == "kd.check_bounds":
+                    anchor = op.parent.ops[pos - 1]
+                op.parent.insert_before(anchor, check)
+                site += 1
+                changed = True
+        return changed

@@ -1,0 +1,379 @@
+"""The kernel cache: compiled kernels kept on disk, so a warm start compiles nothing.
+
+Two layers, looked up in order by ``get_or_build``:
+
+1. memory: what this process already loaded, by key. A key is loaded at most once
+   per process (loading the same object code twice into one JIT would define its
+   symbols twice).
+2. disk: one file per key under ``cache_dir()``. Entries are written to a temporary
+   file in the same directory and published with ``os.replace`` (an atomic rename),
+   so readers see a whole entry or none, and concurrent writers of one key are
+   harmless (they write the same bytes; the last rename wins). Each entry has a
+   header (magic, format version, key, payload length, sha256 of the payload) that
+   is checked on load; a bad entry is deleted and rebuilt.
+
+The key (``kernel_key``) is a sha256 over the optimized IR printed with debug info
+(every captured constant at full precision and width), the backend's name and
+version, the compile options, the target (host CPU name and features) and
+``FORMAT_VERSION``. See docs/cache.md.
+
+Environment: ``KDSL_CACHE_DIR`` (the directory; default ``$XDG_CACHE_HOME/kdsl`` or
+``~/.cache/kdsl``), ``KDSL_CACHE=0`` (no disk layer; the memory layer stays).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import json
+import os
+import stat
+import struct
+import tempfile
+import threading
+import warnings
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, TypeVar
+
+#: Bump when the entry layout or the key recipe changes.
+FORMAT_VERSION = 1
+MAGIC = b"KDSLKC\x00\x01"
+#: magic, format version, key digest, payload length, payload sha256.
+_HEADER = struct.Struct("<8sI32sQ32s")
+SUFFIX = ".kobj"
+_TMP_SUFFIX = ".tmp"
+
+T = TypeVar("T")
+
+
+class CacheWarning(UserWarning):
+    """The disk cache was disabled or could not write; kernels still compile."""
+
+
+# --------------------------------------------------------------------------- key
+
+
+def kernel_key(
+    ir_text: str,
+    backend: str,
+    backend_version: str,
+    options: Mapping[str, Any] | None,
+    target: str,
+) -> str:
+    """The cache key (64 hex digits) of one compiled kernel.
+
+    ``ir_text`` must be the optimized module printed with debug info; ``target``
+    names what the code is compiled for (CPU name and features, GPU arch...).
+    """
+    doc = {
+        "format": FORMAT_VERSION,
+        "backend": backend,
+        "backend_version": backend_version,
+        "options": _canonical(dict(options or {})),
+        "target": target,
+    }
+    h = hashlib.sha256()
+    h.update(json.dumps(doc, sort_keys=True).encode())
+    h.update(b"\0")
+    h.update(ir_text.encode())
+    return h.hexdigest()
+
+
+def _canonical(x: Any) -> Any:
+    """``x`` as JSON-able data that keeps types apart (1, 1.0 and True differ)."""
+    if isinstance(x, Mapping):
+        return {str(k): _canonical(v) for k, v in sorted(x.items(), key=lambda kv: str(kv[0]))}
+    if isinstance(x, list | tuple):
+        return [_canonical(v) for v in x]
+    if x is None or isinstance(x, str):
+        return x
+    return f"{type(x).__name__}:{x!r}"
+
+
+# --------------------------------------------------------------------------- location
+
+
+def cache_dir() -> Path:
+    """The cache directory: ``$KDSL_CACHE_DIR``, else ``$XDG_CACHE_HOME/kdsl``, else
+    ``~/.cache/kdsl``."""
+    explicit = os.environ.get("KDSL_CACHE_DIR")
+    if explicit:
+        return Path(explicit).expanduser()
+    xdg = os.environ.get("XDG_CACHE_HOME")
+    base = Path(xdg).expanduser() if xdg and Path(xdg).is_absolute() else Path.home() / ".cache"
+    return base / "kdsl"
+
+
+def disk_cache_enabled() -> bool:
+    """False when ``KDSL_CACHE`` is 0/off/false/no."""
+    return os.environ.get("KDSL_CACHE", "1").strip().lower() not in ("0", "off", "false", "no")
+
+
+def _current_uid() -> int | None:
+    """This process's user id (None where the OS has none, e.g. Windows)."""
+    getuid = getattr(os, "getuid", None)
+    return None if getuid is None else getuid()
+
+
+def _owned_by_me(st: os.stat_result) -> bool:
+    uid = _current_uid()
+    return uid is None or st.st_uid == uid
+
+
+def check_directory(path: Path, create: bool = True) -> str | None:
+    """None when ``path`` is safe to use as a cache directory, else why not.
+
+    Safe: a directory owned by this user that group and others cannot write. It is
+    created (mode 0700) when missing and ``create`` is set.
+    """
+    try:
+        if create and not path.exists():
+            path.mkdir(mode=0o700, parents=True, exist_ok=True)
+        st = os.stat(path)
+    except OSError as e:
+        return f"cannot use {path}: {e.strerror or e}"
+    if not stat.S_ISDIR(st.st_mode):
+        return f"{path} is not a directory"
+    if not _owned_by_me(st):
+        return f"{path} is not owned by the current user"
+    if os.name == "posix" and st.st_mode & (stat.S_IWGRP | stat.S_IWOTH):
+        return f"{path} is writable by group or others (chmod 700 it)"
+    return None
+
+
+# --------------------------------------------------------------------------- disk layer
+
+
+@dataclass
+class CacheInfo:
+    """What ``DiskCache.info`` reports."""
+
+    directory: Path
+    entries: int
+    total_bytes: int
+    problem: str | None = None
+
+
+class DiskCache:
+    """Entries of one cache directory. Never raises on a bad entry or an I/O error."""
+
+    def __init__(self, directory: Path) -> None:
+        self.directory = Path(directory)
+
+    def path(self, key: str) -> Path:
+        """The file of entry ``key``."""
+        return self.directory / f"{key}{SUFFIX}"
+
+    def load(self, key: str) -> bytes | None:
+        """The payload of ``key``, or None (missing, foreign, or bad: then deleted)."""
+        path = self.path(key)
+        flags = os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_BINARY", 0)
+        try:
+            fd = os.open(path, flags)
+        except OSError:
+            return None  # missing (the common case), or a symlink: not ours to read
+        try:
+            st = os.fstat(fd)
+            if not stat.S_ISREG(st.st_mode) or not _owned_by_me(st):
+                return None  # someone else's file: leave it unread
+            with os.fdopen(fd, "rb") as f:
+                fd = -1
+                data = f.read()
+        except OSError:
+            return None
+        finally:
+            if fd >= 0:
+                os.close(fd)
+        payload = _decode(key, data)
+        if payload is None:
+            self.discard(key)
+        return payload
+
+    def store(self, key: str, payload: bytes) -> bool:
+        """Publish ``payload`` as entry ``key`` atomically; False when it could not."""
+        data = _encode(key, payload)
+        try:
+            fd, tmp = tempfile.mkstemp(prefix=f".{key[:16]}.", suffix=_TMP_SUFFIX,
+                                       dir=self.directory)  # fmt: skip
+        except OSError:
+            return False
+        try:
+            with os.fdopen(fd, "wb") as f:
+                f.write(data)
+                f.flush()
+                os.fsync(f.fileno())
+            os.replace(tmp, self.path(key))
+            return True
+        except OSError:
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
+            return False
+
+    def discard(self, key: str) -> None:
+        """Delete entry ``key`` if it is there."""
+        with contextlib.suppress(OSError):
+            os.unlink(self.path(key))
+
+    def entries(self) -> list[Path]:
+        """The entry files (not temporaries)."""
+        try:
+            return sorted(p for p in self.directory.iterdir() if p.name.endswith(SUFFIX))
+        except OSError:
+            return []
+
+    def info(self) -> CacheInfo:
+        """Directory, number of entries and their total size."""
+        files = self.entries()
+        total = 0
+        for p in files:
+            with contextlib.suppress(OSError):
+                total += p.stat().st_size
+        return CacheInfo(self.directory, len(files), total)
+
+    def clear(self) -> tuple[int, int]:
+        """Delete every entry and leftover temporary file; gives (entries, bytes) removed."""
+        count = size = 0
+        try:
+            names = list(self.directory.iterdir())
+        except OSError:
+            return 0, 0
+        for p in names:
+            if not (p.name.endswith(SUFFIX) or p.name.endswith(_TMP_SUFFIX)):
+                continue  # never delete files the cache did not write
+            try:
+                n = p.stat().st_size
+                p.unlink()
+            except OSError:
+                continue
+            if p.name.endswith(SUFFIX):
+                count += 1
+                size += n
+        return count, size
+
+
+def _encode(key: str, payload: bytes) -> bytes:
+    digest = hashlib.sha256(payload).digest()
+    return _HEADER.pack(MAGIC, FORMAT_VERSION, bytes.fromhex(key), len(payload), digest) + payload
+
+
+def _decode(key: str, data: bytes) -> bytes | None:
+    """The payload of an entry's bytes, or None when they are not a valid entry of ``key``."""
+    if len(data) < _HEADER.size:
+        return None
+    magic, version, kdigest, length, digest = _HEADER.unpack_from(data)
+    payload = data[_HEADER.size :]
+    if magic != MAGIC or version != FORMAT_VERSION or kdigest != bytes.fromhex(key):
+        return None
+    if length != len(payload) or hashlib.sha256(payload).digest() != digest:
+        return None
+    return payload
+
+
+_disabled: dict[Path, str] = {}
+_state_lock = threading.Lock()
+
+
+def default_cache() -> DiskCache | None:
+    """The disk cache of the current environment, or None when it is off or unsafe.
+
+    An unsafe directory (not ours, group/world-writable, not creatable) disables the
+    disk layer for this process with one ``CacheWarning``.
+    """
+    if not disk_cache_enabled():
+        return None
+    directory = cache_dir()
+    with _state_lock:
+        if directory in _disabled:
+            return None
+        problem = check_directory(directory)
+        if problem is not None:
+            _disabled[directory] = problem
+            warnings.warn(f"kdsl kernel cache disabled: {problem}", CacheWarning, stacklevel=3)
+            return None
+    return DiskCache(directory)
+
+
+# --------------------------------------------------------------------------- memory layer
+
+
+class MemoryCache:
+    """What this process loaded, by key; each key is built or loaded at most once."""
+
+    def __init__(self) -> None:
+        self._values: dict[str, Any] = {}
+        self._locks: dict[str, threading.Lock] = {}
+        self._lock = threading.Lock()
+
+    def __contains__(self, key: str) -> bool:
+        return key in self._values
+
+    def __len__(self) -> int:
+        return len(self._values)
+
+    def get(self, key: str) -> Any:
+        """The value of ``key``, or None."""
+        return self._values.get(key)
+
+    def lock(self, key: str) -> threading.Lock:
+        """The lock that serializes building ``key`` in this process."""
+        with self._lock:
+            return self._locks.setdefault(key, threading.Lock())
+
+    def put(self, key: str, value: Any) -> None:
+        """Remember ``value`` for ``key``."""
+        self._values[key] = value
+
+
+MEMORY = MemoryCache()
+
+
+@dataclass
+class Stats:
+    """Counters of this process's lookups, for tests and ``kdsl cache info``."""
+
+    memory_hits: int = 0
+    disk_hits: int = 0
+    builds: int = 0
+    discarded: int = 0
+
+
+STATS = Stats()
+
+
+def get_or_build(key: str, build: Callable[[], bytes], load: Callable[[bytes], T]) -> T:
+    """The loaded value of ``key``: from memory, else from disk, else built and stored.
+
+    ``build()`` makes the payload (object code); ``load(payload)`` turns it into the
+    value kept in memory (e.g. a function address). A disk payload that ``load``
+    rejects by raising is discarded and rebuilt.
+    """
+    value = MEMORY.get(key)
+    if value is not None:
+        STATS.memory_hits += 1
+        return value
+    with MEMORY.lock(key):
+        value = MEMORY.get(key)
+        if value is not None:
+            STATS.memory_hits += 1
+            return value
+        disk = default_cache()
+        payload = disk.load(key) if disk is not None else None
+        if payload is not None:
+            try:
+                value = load(payload)
+                STATS.disk_hits += 1
+            except Exception:
+                STATS.discarded += 1
+                disk.discard(key)  # type: ignore[union-attr]
+                value = None
+        if value is None:
+            payload = build()
+            STATS.builds += 1
+            if disk is not None and not disk.store(key, payload):
+                warnings.warn(f"kdsl kernel cache: could not write to {disk.directory}",
+                              CacheWarning, stacklevel=2)  # fmt: skip
+            value = load(payload)
+        MEMORY.put(key, value)
+        return value
