@@ -1,12 +1,16 @@
 """Repository-wide test settings.
 
-Under CI (``CI`` set) Hypothesis runs derandomized, so a landing is decided by the
+Tests use a private kernel cache directory. Under CI (``CI`` set) Hypothesis runs derandomized, so a landing is decided by the
 code and not by the luck of a random search; locally it searches freshly each run.
 """
 
 import os
+import tempfile
 
 from hypothesis import settings
+
+# Kernels compiled by the tests never touch the user's real kernel cache.
+os.environ.setdefault("KDSL_CACHE_DIR", tempfile.mkdtemp(prefix="kdsl-test-cache-"))
 
 settings.register_profile("ci", derandomize=True, deadline=None, print_blob=True)
 settings.register_profile("dev", deadline=None)

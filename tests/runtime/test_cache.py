@@ -377,3 +377,9 @@ def test_same_kernel_twice_in_one_process_is_a_memory_hit(saxpy):
     y = wp.array(np.ones(4, dtype=np.float32))
     wp.launch(saxpy, 4, inputs=[x, y, 2.0], backend=BACKEND)
     np.testing.assert_allclose(y.numpy(), 2 * np.arange(4) + 1)
+
+
+def test_debug_and_release_builds_are_cached_apart(saxpy):
+    release = BACKEND.compile(saxpy.build_module(), "saxpy", {})
+    debug = BACKEND.compile(saxpy.build_module(), "saxpy", {"debug": True})
+    assert release.metadata["cache_key"] != debug.metadata["cache_key"]
