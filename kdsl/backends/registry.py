@@ -22,6 +22,14 @@ from kdsl.errors import KdslError
 
 GROUP = "kdsl.backends"
 
+#: kdsl's own backends, as pyproject.toml declares them. Used only for names the
+#: entry points lack: running from a source checkout that was never pip-installed
+#: (``PYTHONPATH=.``) has no entry-point metadata, and must still find them.
+BUILTIN_BACKENDS = {
+    "cpu": "kdsl.backends.cpu:BACKEND",
+    "interp": "kdsl.backends.interp:BACKEND",
+}
+
 
 class BackendRegistryError(KdslError):
     """Two backends claim one name, or a name is not a registered backend."""
@@ -56,6 +64,10 @@ class _Registry:
                 )
             self.sources[ep.name] = source
             self.pending[ep.name] = ep
+        for name, value in BUILTIN_BACKENDS.items():
+            if name not in self.sources:
+                self.sources[name] = f"built-in {value} (kdsl is not pip-installed)"
+                self.pending[name] = importlib.metadata.EntryPoint(name, value, GROUP)
 
     def reset_pending(self) -> None:
         self.pending.clear()

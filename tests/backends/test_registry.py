@@ -52,6 +52,8 @@ def entry_points(monkeypatch):
         return list(eps)
 
     monkeypatch.setattr(importlib.metadata, "entry_points", fake)
+    # The source-checkout fallback would add cpu/interp; these tests own the list.
+    monkeypatch.setattr(registry, "BUILTIN_BACKENDS", {})
     registry.reset_registry()
     yield eps
     registry.reset_registry()
@@ -155,3 +157,19 @@ def test_default_pipeline_is_the_standard_one():
     from kdsl import passes
 
     assert FakeBackend().pipeline == passes.DEFAULT_PIPELINE
+
+
+def test_builtins_found_without_installed_metadata(monkeypatch):
+    """A source checkout on PYTHONPATH has no entry points; built-ins still load."""
+    import importlib.metadata
+
+    from kdsl.backends import registry
+
+    monkeypatch.setattr(importlib.metadata, "entry_points", lambda group=None: [])
+    registry.reset_registry()
+    try:
+        assert {"cpu", "interp"} <= set(registry.available_backends())
+        assert registry.get_backend("interp").name == "interp"
+    finally:
+        monkeypatch.undo()
+        registry.reset_registry()
