@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import ast
 import builtins as pybuiltins
+import inspect
 from typing import TYPE_CHECKING, Any
 
 from kdsl.errors import KdslError, KdslSyntaxError, KdslTypeError
@@ -171,7 +172,10 @@ def resolve_annotation(target: Any, name: str, ann: Any, node: ast.AST | None) -
         )  # fmt: skip
     if isinstance(ann, str):
         try:
-            ann = eval(ann, {**vars(pybuiltins), **src.fn.__globals__})
+            # Closure variables count too: a kernel factory's dtype lives there.
+            scope = {**vars(pybuiltins), **src.fn.__globals__,
+                     **inspect.getclosurevars(src.fn).nonlocals}  # fmt: skip
+            ann = eval(ann, scope)
         except Exception:
             raise KdslTypeError(f"cannot resolve the annotation {ann!r} of '{name}'",
                                 src.loc(node), src.name) from None  # fmt: skip
