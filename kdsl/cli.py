@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
+import os
 import sys
 import traceback
 from collections.abc import Sequence
@@ -356,6 +357,12 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise
         print(f"kdsl: error: {e}", file=sys.stderr)
         return EXIT_USAGE
+    except BrokenPipeError:
+        # The reader went away (`kdsl backends | head`): not an error of ours. Point
+        # stdout at /dev/null so the interpreter's final flush does not fail again.
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 0
     except Exception as e:
         if full_tracebacks():
             raise
@@ -363,3 +370,7 @@ def main(argv: Sequence[str] | None = None) -> int:
               "  (this is a kdsl bug; set KDSL_TRACEBACK=full for the traceback)",
               file=sys.stderr)  # fmt: skip
         return EXIT_INTERNAL
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -14,7 +14,7 @@ structs as tuples of field values.
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -87,6 +87,21 @@ class Backend(ABC):
         stream: Any = None,
     ) -> None:
         """Run ``compiled`` over the launch grid ``dims`` with converted ``args``."""
+
+    def prepare(
+        self,
+        compiled: CompiledKernel,
+        dims: tuple[int, ...],
+        args: Sequence[Any],
+        stream: Any = None,
+    ) -> Callable[[], None]:
+        """A zero-argument callable that runs this launch; called again and again.
+
+        ``kdsl.Launch`` (``record_cmd=True``) relaunches through it. Override to pack
+        arguments once; the default simply calls ``launch``.
+        """
+        args = list(args)
+        return lambda: self.launch(compiled, dims, args, stream)
 
     def __repr__(self) -> str:
         return f"<kdsl backend {self.name!r} v{self.version}>"

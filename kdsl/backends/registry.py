@@ -27,6 +27,7 @@ GROUP = "kdsl.backends"
 #: (``PYTHONPATH=.``) has no entry-point metadata, and must still find them.
 BUILTIN_BACKENDS = {
     "cpu": "kdsl.backends.cpu:BACKEND",
+    "cuda": "kdsl.backends.cuda:BACKEND",
     "interp": "kdsl.backends.interp:BACKEND",
 }
 

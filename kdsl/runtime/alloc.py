@@ -1,4 +1,8 @@
-"""Array constructors in Warp's spellings: zeros, empty, full, ones, *_like, copy."""
+"""Array constructors in Warp's spellings: zeros, empty, full, ones, *_like, copy.
+
+Every constructor takes ``device="cpu"``, ``"cuda"`` or ``"cuda:N"``; CUDA buffers
+come from CuPy's memory pool and are filled on the device's current stream.
+"""
 
 from __future__ import annotations
 
@@ -7,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from kdsl.errors import KdslError
+from kdsl.runtime import cuda_memory as mem
 from kdsl.runtime.array import array
 from kdsl.runtime.device import get_device
 from kdsl.runtime.dtypes import (
@@ -16,6 +21,7 @@ from kdsl.runtime.dtypes import (
     np_dtype,
     resolve_dtype,
 )
+from kdsl.runtime.stream import Stream, get_stream
 
 
 def _dims(shape: Any, length: Any) -> tuple[int, ...]:
@@ -31,14 +37,17 @@ def _make(
     t = resolve_dtype(dtype)
     dims = _dims(shape, length)
     dev = get_device(device)
-    if not dev.is_cpu:
-        raise KdslError(f"arrays on device '{dev}' are not supported yet; use device='cpu'")
-    buf = np.empty(dims + inner_shape(t), np_dtype(t))
+    buf = mem.empty(dims + inner_shape(t), np_dtype(t), dev)
     if init is not None:
         try:
-            buf[...] = np.asarray(init, dtype=buf.dtype)
+            value = np.asarray(init, dtype=buf.dtype)
         except ValueError as e:
             raise KdslError(f"cannot fill an array of {t} with {init!r}: {e}") from None
+        with mem.scope(dev):
+            try:
+                buf[...] = mem.cupy().asarray(value) if dev.is_cuda else value
+            except ValueError as e:
+                raise KdslError(f"cannot fill an array of {t} with {init!r}: {e}") from None
     return array._wrap(buf, t, dev, requires_grad)
 
 
@@ -122,9 +131,11 @@ def full_like(
 
 
 def clone(src: array, device: Any = None, requires_grad: bool | None = None) -> array:
-    """A copy of ``src`` (same shape and dtype; contiguous)."""
+    """A contiguous copy of ``src`` (same shape and dtype), on ``device`` or ``src``'s."""
     out = _like(src, device, requires_grad, None)
-    out._buf[...] = src._buf
+    copy(out, src)
+    if out.device.is_cpu and src.device.is_cuda:
+        get_stream(src.device).synchronize()  # a new host array is ready when returned
     return out
 
 
@@ -147,13 +158,27 @@ def from_numpy(
 
 
 def copy(
-    dest: array, src: array, dest_offset: int = 0, src_offset: int = 0, count: int = 0
+    dest: array,
+    src: array,
+    dest_offset: int = 0,
+    src_offset: int = 0,
+    count: int = 0,
+    stream: Stream | None = None,
 ) -> None:
-    """Copy ``count`` elements (all of ``src`` when 0) between arrays, in row-major order."""
+    """Copy ``count`` elements (all of ``src`` when 0) between arrays on any devices.
+
+    Elements are taken in row-major order. With a GPU side the copy is enqueued
+    on ``stream`` (default: the destination's current stream when it is a GPU,
+    else the source's) and ordered with the work of both devices' current
+    streams. Copies to the CPU are asynchronous, as in Warp: call
+    ``kdsl.synchronize()`` before reading the destination with ``numpy()``.
+    """
     if not isinstance(dest, array) or not isinstance(src, array):
         raise KdslError("copy() takes two kdsl arrays")
     if dest._t != src._t:
         raise KdslError(f"copy() needs arrays of one dtype, got {dest._t} and {src._t}")
+    if stream is not None and not isinstance(stream, Stream):
+        raise KdslError(f"copy(): stream must be a kdsl.Stream, not {type(stream).__name__}")
     n = count or src.size - src_offset
     if (
         src_offset + n > src.size
@@ -164,9 +189,7 @@ def copy(
             f"copy() of {n} elements from offset {src_offset} of {src.size} to offset "
             f"{dest_offset} of {dest.size} is out of range"
         )
-    inner = dest._inner
-    flat_src = src._buf.reshape(-1, *inner)
-    flat_dest = dest._buf.reshape(-1, *inner)
-    flat_dest[dest_offset : dest_offset + n] = flat_src[src_offset : src_offset + n]
-    if not np.shares_memory(flat_dest, dest._buf):  # strided dest: reshape made a copy
-        dest._buf[...] = flat_dest.reshape(dest._buf.shape)
+    mem.copy_elements(
+        dest._buf, dest.device, dest_offset, src._buf, src.device, src_offset, n, dest._inner,
+        stream,
+    )  # fmt: skip

@@ -1,7 +1,9 @@
 """Launch argument checking and conversion.
 
 Each argument is checked against its parameter's IR type and turned into what
-backends take: arrays as NumPy buffers with element dims appended, scalars as
+backends take: arrays as their buffers with element dims appended (NumPy on the
+CPU, ``cupy.ndarray`` on a CUDA device, where any ``__cuda_array_interface__``
+object on that device is also taken zero-copy), scalars as
 NumPy scalars of the exact type, vectors/matrices as NumPy arrays, structs as
 tuples. Python numbers get Warp's leniency (an int for a float parameter is
 fine); NumPy data must match exactly, so a float64 array or scalar is never
@@ -17,6 +19,7 @@ import numpy as np
 
 from kdsl.errors import KdslLaunchError
 from kdsl.ir import types as T
+from kdsl.runtime import cuda_memory as mem
 from kdsl.runtime.array import array
 from kdsl.runtime.device import Device
 
@@ -29,6 +32,12 @@ def describe(value: Any) -> str:
     """A short description of a launch argument for error messages."""
     if isinstance(value, array):
         return f"array of {value._t} with {value.ndim} dims on '{value.device}'"
+    if mem.is_cuda_buffer(value):
+        face = value.__cuda_array_interface__
+        return (
+            f"CUDA {type(value).__name__} of {np.dtype(face['typestr'])} and shape "
+            f"{tuple(face['shape'])}"
+        )
     if isinstance(value, np.ndarray):
         return f"NumPy {value.dtype} array of shape {value.shape}"
     t = getattr(type(value), "__kdsl_type__", None)
@@ -56,8 +65,7 @@ def convert(t: T.Type, value: Any, device: Device) -> Any:
     raise ArgError(f"parameters of type {t} are not supported by launch")
 
 
-def _array(t: T.ArrayType, value: Any, device: Device) -> np.ndarray:
-    inner = T.value_shape(t.dtype)
+def _array(t: T.ArrayType, value: Any, device: Device) -> Any:
     if isinstance(value, array):
         if value.device != device:
             raise ArgError(f"expected an array on device '{device}', got one on '{value.device}'")
@@ -66,24 +74,47 @@ def _array(t: T.ArrayType, value: Any, device: Device) -> np.ndarray:
         if value.ndim != t.ndim:
             raise ArgError(f"expected a {t.ndim}-d array, got a {value.ndim}-d array")
         return value._buf
+    if mem.is_cuda_buffer(value):
+        if device.is_cpu:
+            raise ArgError(
+                f"expected an array on device 'cpu', got a CUDA {type(value).__name__} "
+                f"(device memory)"
+            )
+        buf, where = mem.wrap_cuda(value)
+        if where != device:
+            raise ArgError(
+                f"expected an array on device '{device}', got a CUDA {type(value).__name__} "
+                f"on '{where}'"
+            )
+        _check_foreign(t, buf.dtype, buf.shape, f"CUDA {type(value).__name__}")
+        return buf
     if isinstance(value, np.ndarray):
         if not device.is_cpu:
-            raise ArgError(f"a NumPy array lives on the cpu, but the launch is on '{device}'")
-        want = T.elem_type(t.dtype).np_dtype
-        if value.dtype != want:
             raise ArgError(
-                f"expected an array of {t.dtype} (NumPy {want}), got a NumPy {value.dtype} "
-                f"array; convert it with .astype(np.{want})"
+                f"a NumPy array lives on the cpu, but the launch is on '{device}'; "
+                f"move it with kdsl.array(data, device='{device}')"
             )
-        outer = value.ndim - len(inner)
-        if outer != t.ndim or value.shape[outer:] != inner:
-            want_shape = ("n",) * t.ndim + inner
-            raise ArgError(
-                f"expected a {t.ndim}-d array of {t.dtype} (NumPy shape like "
-                f"{want_shape}), got shape {value.shape}".replace("'", "")
-            )
+        _check_foreign(t, value.dtype, value.shape, "NumPy")
         return value
     raise ArgError(f"expected an array of {t.dtype}, got {describe(value)}")
+
+
+def _check_foreign(t: T.ArrayType, dtype: np.dtype, shape: tuple, what: str) -> None:
+    """Check a NumPy or CUDA-interface array: exact dtype, array dims + element dims."""
+    inner = T.value_shape(t.dtype)
+    want = T.elem_type(t.dtype).np_dtype
+    if dtype != want:
+        raise ArgError(
+            f"expected an array of {t.dtype} (NumPy {want}), got a {what} {dtype} "
+            f"array; convert it with .astype(np.{want})"
+        )
+    outer = len(shape) - len(inner)
+    if outer != t.ndim or tuple(shape[outer:]) != inner:
+        want_shape = ("n",) * t.ndim + inner
+        raise ArgError(
+            f"expected a {t.ndim}-d array of {t.dtype} ({what} shape like "
+            f"{want_shape}), got shape {tuple(shape)}".replace("'", "")
+        )
 
 
 def _scalar(t: T.ScalarType, value: Any) -> Any:

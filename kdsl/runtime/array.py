@@ -1,9 +1,13 @@
-"""``kdsl.array``: a typed, strided array on one device, backed by a NumPy buffer.
+"""``kdsl.array``: a typed, strided array on one device.
 
-The buffer holds the element shape after the array's own dims: a ``vec3`` array
-of shape ``(n,)`` wraps an ``(n, 3)`` float32 buffer. ``array(dtype=X, ndim=k)``
-with no data and no shape is also how kernels annotate array parameters; every
-array exposes ``__kdsl_type__`` (``ArrayType(dtype, ndim)``) for the frontend.
+Its buffer ``_buf`` is a NumPy array on the CPU and a ``cupy.ndarray`` on a CUDA
+device (see ``cuda_memory``); it holds the element shape after the array's own
+dims: a ``vec3`` array of shape ``(n,)`` wraps an ``(n, 3)`` float32 buffer.
+CuPy work on a CUDA array runs on its device's current kdsl stream; methods that
+bring data to the host (``numpy``, ``list``, one element, ``repr``) wait for it.
+``array(dtype=X, ndim=k)`` with no data and no shape is also how kernels annotate
+array parameters; every array exposes ``__kdsl_type__`` (``ArrayType(dtype, ndim)``)
+for the frontend.
 """
 
 from __future__ import annotations
@@ -15,6 +19,7 @@ import numpy as np
 
 from kdsl.errors import KdslError
 from kdsl.ir import types as T
+from kdsl.runtime import cuda_memory as mem
 from kdsl.runtime.device import Device, get_device
 from kdsl.runtime.dtypes import (
     inner_shape,
@@ -43,25 +48,41 @@ class array:
         copy: bool = True,
         ndim: int | None = None,
         length: int | None = None,
-        # Warp's allocation hints; meaningless for CPU NumPy buffers, accepted so
+        # Warp's allocation hints; CuPy's pool and NumPy decide these, accepted so
         # Warp code ports. Unknown keywords still raise TypeError.
         pinned: bool = False,
         owner: bool = False,
         deleter: Any = None,
     ) -> None:
-        dev = _check_device(device)
-        if isinstance(data, array):
-            if _is_any(dtype):
-                dtype = data._t
-            data = data._buf
         t = None if _is_any(dtype) else resolve_dtype(dtype)
-        if data is None:
-            buf, t = _alloc(t, shape if shape is not None else length, ndim)
+        if isinstance(data, array):
+            t = data._t if t is None else t
+            data, src_dev = data._buf, data._device
+        elif mem.is_cuda_buffer(data):
+            data, src_dev = mem.wrap_cuda(data)
         else:
-            buf, t = _from_data(data, t, shape if shape is not None else length, ndim, copy)
+            src_dev = get_device("cpu")
+        # Data already on a GPU stays there unless a device is named.
+        dev = get_device(device if device is not None or src_dev.is_cpu else src_dev)
+        dims = shape if shape is not None else length
+        if data is None:
+            buf, t = _alloc(t, dims, ndim, dev)
+        elif src_dev == dev:
+            with mem.scope(dev):
+                buf, t = _from_data(mem.xp(dev), data, t, dims, ndim, copy)
+        elif dev.is_cpu or src_dev.is_cpu:
+            # Check and convert on the host, where errors are cheap, then move once.
+            host = mem.to_host(data, src_dev) if src_dev.is_cuda else data
+            buf, t = _from_data(np, host, t, dims, ndim, copy=False)
+            if dev.is_cuda:
+                buf = mem.from_host(buf, dev)
+        else:  # GPU to GPU: copy over, then convert there
+            moved = mem.transfer(data, src_dev, dev)
+            with mem.scope(dev):
+                buf, t = _from_data(mem.xp(dev), moved, t, dims, ndim, copy=False)
         self._init(buf, t, dev, requires_grad)
 
-    def _init(self, buf: np.ndarray, t: T.Type | None, dev: Device, requires_grad: bool) -> None:
+    def _init(self, buf: Any, t: T.Type | None, dev: Device, requires_grad: bool) -> None:
         self._buf = buf
         self._t = t
         self._inner = inner_shape(t) if t is not None else ()
@@ -71,9 +92,7 @@ class array:
         self.requires_grad = requires_grad
 
     @classmethod
-    def _wrap(
-        cls, buf: np.ndarray, t: T.Type, device: Device, requires_grad: bool = False
-    ) -> array:
+    def _wrap(cls, buf: Any, t: T.Type, device: Device, requires_grad: bool = False) -> array:
         """An array over ``buf`` without copying (views, constructors)."""
         out = array.__new__(array)
         out._init(buf, t, device, requires_grad)
@@ -114,7 +133,9 @@ class array:
 
     @property
     def ptr(self) -> int:
-        """Address of the first element."""
+        """Address of the first element (a device address for CUDA arrays)."""
+        if self._device.is_cuda:
+            return int(self._buf.data.ptr)
         return int(self._buf.__array_interface__["data"][0])
 
     @property
@@ -129,7 +150,7 @@ class array:
     def requires_grad(self, value: bool) -> None:
         self._requires_grad = builtins.bool(value)
         if self._requires_grad and self._grad is None and self._t is not None:
-            self._grad = array._wrap(np.zeros_like(self._buf), self._t, self._device)
+            self._grad = array._wrap(mem.zeros_like(self._buf, self._device), self._t, self._device)
 
     @property
     def grad(self) -> array | None:
@@ -142,25 +163,53 @@ class array:
 
     # --- data ----------------------------------------------------------------
     def numpy(self) -> np.ndarray:
-        """A zero-copy NumPy view (element dims appended for vector dtypes)."""
+        """The data as NumPy (element dims appended for vector dtypes).
+
+        Zero-copy on the CPU. For a CUDA array, a host copy made after the work
+        enqueued on the device's stream has finished (so no ``synchronize()`` is needed).
+        """
+        if self._device.is_cuda:
+            return mem.to_host(self._buf, self._device)
         return self._buf.view()
 
     @property
     def __array_interface__(self) -> dict:
+        if self._device.is_cuda:  # so NumPy never mistakes device memory for host memory
+            raise AttributeError("a CUDA array has no __array_interface__; use .numpy()")
         return self._buf.__array_interface__
+
+    @property
+    def __cuda_array_interface__(self) -> dict:
+        """Version 3 of the CUDA array interface; ``stream`` is the device's kdsl stream."""
+        if not self._device.is_cuda:
+            raise AttributeError("a CPU array has no __cuda_array_interface__")
+        from kdsl.runtime.stream import get_stream
+
+        face = dict(self._buf.__cuda_array_interface__)
+        face["version"] = 3
+        # Consumers wait on this stream before touching the data (0 is reserved).
+        face["stream"] = get_stream(self._device).cuda_stream or 1
+        return face
 
     def list(self) -> list:
         """The elements as a flat Python list (vector classes for vector dtypes)."""
-        flat = np.ascontiguousarray(self._buf).reshape(-1, *self._inner)
+        flat = np.ascontiguousarray(self.numpy()).reshape(-1, *self._inner)
         if not self._inner:
             return list(flat)
         cls = self.dtype
         return [cls(x) for x in flat]
 
+    def _device_value(self, value: Any) -> Any:
+        # A fill/setitem value checked on the host, then placed on this array's device
+        # (inside mem.scope, so the upload is on the device's stream).
+        host = np.asarray(value, dtype=self._buf.dtype)
+        return mem.cupy().asarray(host) if self._device.is_cuda else host
+
     def fill_(self, value: Any) -> array:
         """Set every element to ``value`` (a scalar, or a vector for vector dtypes)."""
         try:
-            self._buf[...] = np.asarray(value, dtype=self._buf.dtype)
+            with mem.scope(self._device):
+                self._buf[...] = self._device_value(value)
         except ValueError as e:
             raise KdslError(f"cannot fill an array of {self._t} with {value!r}: {e}") from None
         return self
@@ -169,39 +218,57 @@ class array:
 
     def zero_(self) -> array:
         """Set every element to zero."""
-        self._buf[...] = 0
+        with mem.scope(self._device):
+            self._buf.fill(0)
         return self
 
     def assign(self, src: Any) -> array:
-        """Copy ``src`` (an array, NumPy array or list of the same shape) into this one."""
-        data = src._buf if isinstance(src, array) else np.asarray(src, dtype=self._buf.dtype)
-        if data.size == self._buf.size and data.shape != self._buf.shape:
-            data = data.reshape(self._buf.shape)
-        try:
-            np.copyto(self._buf, data, casting="unsafe")
-        except ValueError as e:
-            raise KdslError(
-                f"cannot assign a {data.shape} array to a {self.shape} array: {e}"
-            ) from None
+        """Copy ``src`` (an array on any device, a NumPy/CuPy array or a list) into this one."""
+        if isinstance(src, array):
+            data = src._buf if src._device == self._device else src.to(self._device)._buf
+        elif mem.is_cuda_buffer(src):
+            data, where = mem.wrap_cuda(src)
+            if where != self._device:
+                data = mem.transfer(data, where, self._device)
+        else:
+            data = src if isinstance(src, np.ndarray) else np.asarray(src, dtype=self._buf.dtype)
+            if self._device.is_cuda:
+                with mem.scope(self._device):
+                    data = mem.cupy().asarray(np.ascontiguousarray(data))
+        xp = mem.xp(self._device)
+        with mem.scope(self._device):
+            if data.size == self._buf.size and data.shape != self._buf.shape:
+                data = data.reshape(self._buf.shape)
+            try:
+                xp.copyto(self._buf, data, casting="unsafe")
+            except ValueError as e:
+                raise KdslError(
+                    f"cannot assign a {data.shape} array to a {self.shape} array: {e}"
+                ) from None
         return self
 
     def to(self, device: Any) -> array:
         """This array on ``device`` (itself when it already lives there)."""
-        dev = _check_device(device)
-        return self if dev == self._device else array(self, device=dev)
+        dev = get_device(device)
+        if dev == self._device:
+            return self
+        buf = mem.transfer(self._buf, self._device, dev)
+        return array._wrap(buf, self._t, dev, self._requires_grad)
 
     def copy(self) -> array:
-        """A new contiguous array with a copy of the data."""
-        return array._wrap(
-            np.array(self._buf, copy=True), self._t, self._device, self._requires_grad
-        )
+        """A new contiguous array on the same device with a copy of the data."""
+        with mem.scope(self._device):
+            buf = mem.xp(self._device).array(self._buf, copy=True, order="C")
+        return array._wrap(buf, self._t, self._device, self._requires_grad)
 
     def reshape(self, shape: Any) -> array:
         """A view (or copy, when strides forbid a view) with a new shape."""
         dims = normalize_shape(shape)
         if -1 not in dims and int(np.prod(dims)) != self.size:
             raise KdslError(f"cannot reshape an array of shape {self.shape} to {dims}")
-        return array._wrap(self._buf.reshape(dims + self._inner), self._t, self._device)
+        with mem.scope(self._device):
+            buf = self._buf.reshape(dims + self._inner)
+        return array._wrap(buf, self._t, self._device)
 
     def flatten(self) -> array:
         """A 1-d view (or copy) of the elements."""
@@ -230,24 +297,27 @@ class array:
     def __getitem__(self, key: Any) -> Any:
         view = self._buf[self._key(key)]
         if view.ndim == len(self._inner):  # one element
+            if self._device.is_cuda:
+                view = mem.to_host(view, self._device)  # waits for the stream
             if not self._inner:
                 return view[()]
             return self.dtype(view)
         return array._wrap(view, self._t, self._device)
 
     def __setitem__(self, key: Any, value: Any) -> None:
-        self._buf[self._key(key)] = np.asarray(value, dtype=self._buf.dtype)
+        with mem.scope(self._device):
+            self._buf[self._key(key)] = self._device_value(value)
 
     def __len__(self) -> int:
         return self._buf.shape[0]
 
     def __repr__(self) -> str:
         name = getattr(self.dtype, "__name__", str(self.dtype))
-        body = np.array2string(self._buf, separator=", ", prefix="array(")
+        body = np.array2string(self.numpy(), separator=", ", prefix="array(")
         return f"array({body}, dtype={name}, device='{self._device}')"
 
     def __str__(self) -> str:
-        return str(self._buf)
+        return str(self.numpy())
 
 
 def _subclass(ndim: int) -> type:
@@ -262,14 +332,9 @@ def _subclass(ndim: int) -> type:
 array1d, array2d, array3d, array4d = (_subclass(n) for n in (1, 2, 3, 4))
 
 
-def _check_device(device: Any) -> Device:
-    dev = get_device(device)
-    if not dev.is_cpu:
-        raise KdslError(f"arrays on device '{dev}' are not supported yet; use device='cpu'")
-    return dev
-
-
-def _alloc(t: T.Type | None, shape: Any, ndim: int | None) -> tuple[np.ndarray, T.Type | None]:
+def _alloc(
+    t: T.Type | None, shape: Any, ndim: int | None, dev: Device
+) -> tuple[Any, T.Type | None]:
     if shape is None:  # an annotation, or an empty array
         dims = (0,) * (ndim or 1)
     else:
@@ -277,16 +342,22 @@ def _alloc(t: T.Type | None, shape: Any, ndim: int | None) -> tuple[np.ndarray, 
         if ndim is not None and len(dims) != ndim:
             raise KdslError(f"shape {dims} has {len(dims)} dimensions but ndim={ndim}")
     if t is None:
-        return np.zeros(dims, np.float32), None
-    return np.zeros(dims + inner_shape(t), np_dtype(t)), t
+        full, dtype = dims, np.dtype(np.float32)
+    else:
+        full, dtype = dims + inner_shape(t), np_dtype(t)
+    buf = mem.empty(full, dtype, dev)
+    with mem.scope(dev):
+        buf.fill(0)
+    return buf, t
 
 
 def _from_data(
-    data: Any, t: T.Type | None, shape: Any, ndim: int | None, copy: bool
-) -> tuple[np.ndarray, T.Type]:
+    xp: Any, data: Any, t: T.Type | None, shape: Any, ndim: int | None, copy: bool
+) -> tuple[Any, T.Type]:
+    """``data`` as a buffer of ``xp`` (NumPy or CuPy, on the current device), checked."""
     want = np_dtype(t) if t is not None else None
     try:
-        buf = np.array(data, dtype=want, copy=True) if copy else np.asarray(data, dtype=want)
+        buf = xp.array(data, dtype=want, copy=True) if copy else xp.asarray(data, dtype=want)
     except (TypeError, ValueError) as e:
         raise KdslError(
             f"cannot make an array of {t or 'inferred dtype'} from the data: {e}"

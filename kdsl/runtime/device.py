@@ -1,16 +1,22 @@
 """Devices: where arrays live and kernels run.
 
-A device is named like PyTorch's: ``"cpu"``, ``"cuda"`` (the current CUDA device)
-or ``"cuda:N"``. Only ``cpu`` holds arrays today; the ``Device`` object is what
-CUDA support will extend. CUDA detection imports CuPy lazily, inside
-``is_cuda_available`` only.
+A device is named like PyTorch's: ``"cpu"``, ``"cuda"`` (the *current* CUDA
+device: ``cuda:0`` unless ``set_device``/``ScopedDevice`` chose another) or
+``"cuda:N"``. CuPy is imported lazily, the first time a CUDA device is asked
+for, so ``import kdsl`` never loads it. The default device of constructors and
+launches stays ``cpu`` until ``set_device`` changes it.
 """
 
 from __future__ import annotations
 
+import os
+import sys
+from types import TracebackType
 from typing import Any
 
 from kdsl.errors import KdslError
+
+_SPELLINGS = "'cpu', 'cuda' (the current CUDA device) or 'cuda:N' (N = 0, 1, ...)"
 
 
 class Device:
@@ -24,11 +30,69 @@ class Device:
 
     @property
     def is_cpu(self) -> bool:
+        """True for the host."""
         return self.kind == "cpu"
 
     @property
     def is_cuda(self) -> bool:
+        """True for a CUDA GPU."""
         return self.kind == "cuda"
+
+    def _props(self) -> dict:
+        return _cupy().cuda.runtime.getDeviceProperties(self.ordinal)
+
+    @property
+    def name(self) -> str:
+        """The GPU's product name (``"NVIDIA H100 80GB HBM3"``), or ``"CPU"``."""
+        if self.is_cpu:
+            return "CPU"
+        raw = self._props()["name"]
+        return raw.decode() if isinstance(raw, bytes) else str(raw)
+
+    @property
+    def arch(self) -> int:
+        """Compute capability as an int (90 for sm_90); 0 on the CPU."""
+        if self.is_cpu:
+            return 0
+        p = self._props()
+        return int(p["major"]) * 10 + int(p["minor"])
+
+    @property
+    def total_memory(self) -> int:
+        """Bytes of memory on the device (physical RAM for the CPU)."""
+        if self.is_cpu:
+            return _host_pages("SC_PHYS_PAGES")
+        with _cupy().cuda.Device(self.ordinal) as d:
+            return int(d.mem_info[1])
+
+    @property
+    def free_memory(self) -> int:
+        """Bytes the driver reports free now (CuPy's pool holds some it does not count)."""
+        if self.is_cpu:
+            return _host_pages("SC_AVPHYS_PAGES")
+        with _cupy().cuda.Device(self.ordinal) as d:
+            return int(d.mem_info[0])
+
+    @property
+    def stream(self) -> Any:
+        """The device's current ``Stream`` (a ``KdslError`` on the CPU)."""
+        from kdsl.runtime.stream import get_stream
+
+        return get_stream(self)
+
+    def can_access(self, other: Any) -> bool:
+        """True when kernels on this device can read ``other``'s memory directly."""
+        o = get_device(other)
+        if o == self:
+            return True
+        if self.is_cpu or o.is_cpu:
+            return False
+        return bool(_cupy().cuda.runtime.deviceCanAccessPeer(self.ordinal, o.ordinal))
+
+    def make_current(self) -> None:
+        """Make this the current CUDA device of the calling thread (no-op on the CPU)."""
+        if self.is_cuda:
+            _cupy().cuda.Device(self.ordinal).use()
 
     def __str__(self) -> str:
         return self.alias
@@ -50,9 +114,23 @@ class Device:
         return hash(self.alias)
 
 
+def _host_pages(name: str) -> int:
+    try:
+        return int(os.sysconf(name) * os.sysconf("SC_PAGE_SIZE"))
+    except (ValueError, OSError, AttributeError):  # not every OS names these
+        return 0
+
+
+def _cupy() -> Any:
+    import cupy
+
+    return cupy
+
+
 _CPU = Device("cpu")
 _DEVICES: dict[str, Device] = {"cpu": _CPU}
 _default: Device = _CPU
+_current_cuda = 0  # the ordinal "cuda" means
 _cuda_count: int | None = None
 
 
@@ -61,17 +139,25 @@ def cuda_device_count() -> int:
     global _cuda_count
     if _cuda_count is None:
         try:
-            import cupy
-
-            _cuda_count = int(cupy.cuda.runtime.getDeviceCount())
+            _cuda_count = int(_cupy().cuda.runtime.getDeviceCount())
         except Exception:  # no cupy, no driver, no device: all mean "no CUDA"
             _cuda_count = 0
     return _cuda_count
 
 
+def cuda_initialized() -> bool:
+    """True once CuPy is loaded and sees a GPU: only then can CUDA work be pending."""
+    return "cupy" in sys.modules and cuda_device_count() > 0
+
+
 def is_cuda_available() -> bool:
     """True when CuPy imports and sees at least one CUDA device."""
     return cuda_device_count() > 0
+
+
+def get_cuda_device_count() -> int:
+    """Number of CUDA devices (Warp's name)."""
+    return cuda_device_count()
 
 
 def get_device(name: Any = None) -> Device:
@@ -81,40 +167,64 @@ def get_device(name: Any = None) -> Device:
     if isinstance(name, Device):
         return name
     if not isinstance(name, str):
-        raise KdslError(f"a device is named by a string such as 'cpu', not {name!r}")
-    alias = "cuda:0" if name == "cuda" else name
-    dev = _DEVICES.get(alias)
+        raise KdslError(f"a device is named by a string ({_SPELLINGS}), not {name!r}")
+    dev = _DEVICES.get(name)
     if dev is not None:
         return dev
-    kind, _, ordinal = alias.partition(":")
-    if kind != "cuda" or not ordinal.isdigit():
-        raise KdslError(f"unknown device {name!r}: use 'cpu', 'cuda' or 'cuda:N'")
-    if int(ordinal) >= cuda_device_count():
-        raise KdslError(f"device {name!r} is not available ({cuda_device_count()} CUDA devices)")
-    dev = _DEVICES[alias] = Device(alias)
+    kind, colon, ordinal = name.partition(":")
+    if kind != "cuda" or (colon and not ordinal.isdigit()):
+        raise KdslError(f"unknown device {name!r}: use {_SPELLINGS}")
+    n = cuda_device_count()
+    index = int(ordinal) if colon else _current_cuda
+    if index >= n:
+        have = "no CUDA devices" if n == 0 else f"CUDA devices cuda:0 to cuda:{n - 1}"
+        raise KdslError(f"device {name!r} is not available: this machine has {have}")
+    alias = f"cuda:{index}"
+    dev = _DEVICES.get(alias)
+    if dev is None:
+        dev = _DEVICES[alias] = Device(alias)
     return dev
 
 
+def get_cuda_devices() -> list[Device]:
+    """Every CUDA device, ``cuda:0`` first (empty without CUDA)."""
+    return [get_device(f"cuda:{i}") for i in range(cuda_device_count())]
+
+
 def set_device(name: Any) -> None:
-    """Make ``name`` the default device of array constructors and launches."""
-    global _default
-    _default = get_device(name)
+    """Make ``name`` the default device; a CUDA device also becomes the current one."""
+    global _default, _current_cuda
+    dev = get_device(name)
+    _default = dev
+    if dev.is_cuda:
+        _current_cuda = dev.ordinal
+        dev.make_current()
 
 
 def get_preferred_device() -> Device:
-    """The device kdsl uses when none is named (cpu until CUDA arrays land)."""
-    return _default
+    """The current CUDA device when there is one, else the CPU (Warp's preference)."""
+    return get_device("cuda") if is_cuda_available() else _CPU
 
 
-def get_cuda_device_count() -> int:
-    """Number of CUDA devices (Warp's name)."""
-    return cuda_device_count()
+class ScopedDevice:
+    """``with ScopedDevice("cuda:1"):`` makes a device the default (and current) for a block."""
 
+    def __init__(self, device: Any) -> None:
+        self.device = get_device(device)
 
-def synchronize() -> None:
-    """Wait for all outstanding work on every device (CPU work is synchronous)."""
+    def __enter__(self) -> Device:
+        self._saved = (_default, _current_cuda)
+        self._saved_cupy = _cupy().cuda.runtime.getDevice() if self.device.is_cuda else None
+        set_device(self.device)
+        return self.device
 
-
-def synchronize_device(device: Any = None) -> None:
-    """Wait for outstanding work on ``device`` (CPU work is synchronous)."""
-    get_device(device)
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        global _default, _current_cuda
+        _default, _current_cuda = self._saved
+        if self._saved_cupy is not None:
+            _cupy().cuda.runtime.setDevice(self._saved_cupy)

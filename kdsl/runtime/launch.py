@@ -17,7 +17,9 @@ from kdsl import config
 from kdsl.backends.base import Backend, CompiledKernel
 from kdsl.backends.registry import get_backend, is_registered
 from kdsl.errors import KdslError, KdslLaunchError
+from kdsl.ir import types as T
 from kdsl.runtime.args import ArgError, convert, launch_error
+from kdsl.runtime.array import array
 from kdsl.runtime.device import Device, get_device
 
 _CACHE_ATTR = "_kdsl_compiled"
@@ -83,13 +85,11 @@ def _check_tid(kernel: Any, dims: tuple[int, ...]) -> None:
         )
 
 
-def _compiled(kernel: Any, backend: Backend) -> CompiledKernel:
+def _compiled(kernel: Any, backend: Backend, options: dict[str, Any]) -> CompiledKernel:
     cache = getattr(kernel, _CACHE_ATTR, None)
     if cache is None:
         cache = {}
         setattr(kernel, _CACHE_ATTR, cache)
-    # Process-wide debug settings (kdsl.config) resolve into the options, so they key the cache.
-    options = config.compile_options(getattr(kernel, "options", None) or {})
     key = (backend.name, backend.version, repr(sorted(options.items())))
     compiled = cache.get(key)
     if compiled is None:
@@ -99,8 +99,119 @@ def _compiled(kernel: Any, backend: Backend) -> CompiledKernel:
     return compiled
 
 
+def _resolve_stream(device: Device, stream: Any) -> Any:
+    """The stream a launch on ``device`` runs on: the user's, else the device's current one."""
+    if stream is not None or device.is_cpu:
+        return stream
+    from kdsl.runtime.stream import get_stream
+
+    return get_stream(device)
+
+
+class _Plan:
+    """What a kernel's launches on one device and backend share (see ``_plan``)."""
+
+    __slots__ = ("backend", "compiled", "converters", "device", "options", "settings")
+
+    def __init__(self, kernel: Any, device: Device, backend: Backend, settings: tuple) -> None:
+        self.device = device
+        self.backend = backend
+        self.settings = settings
+        self.options = dict(getattr(kernel, "options", None) or {})
+        # Process-wide debug settings (kdsl.config) resolve into the options: they key the cache.
+        self.compiled = _compiled(kernel, backend, config.compile_options(self.options))
+        self.converters = [
+            _converter(kernel, i, n, t, device)
+            for i, (n, t) in enumerate(zip(kernel.arg_names, kernel.arg_types))
+        ]
+
+
+_PLAN_ATTR = "_kdsl_plans"
+
+
+def _plan(kernel: Any, device: Any, backend: Any) -> _Plan:
+    """The cached plan for ``kernel`` on ``device`` with ``backend``.
+
+    Plans are looked up by device, backend and the debug settings of ``kdsl.config``,
+    and dropped when the kernel's options change, so a hit costs a dict lookup.
+    """
+    dev = get_device(device)
+    settings = (config.mode, config.verify_fp)
+    key = (dev.alias, backend if isinstance(backend, str | None) else id(backend))
+    plans = getattr(kernel, _PLAN_ATTR, None)
+    if plans is None:
+        plans = {}
+        setattr(kernel, _PLAN_ATTR, plans)
+    plan = plans.get(key)
+    if (
+        plan is None
+        or plan.settings != settings
+        or plan.options != (getattr(kernel, "options", None) or {})
+    ):
+        plan = plans[key] = _Plan(kernel, dev, _resolve_backend(backend, dev), settings)
+    return plan
+
+
+def _converter(kernel: Any, index: int, name: str, t: Any, device: Device) -> Any:
+    """A function converting one argument, with a fast path for the common case.
+
+    The fast path takes a kdsl array of exactly the parameter's type on the launch
+    device, or a Python/NumPy scalar of the parameter's own kind; everything else
+    goes through ``convert`` (which also produces every error message).
+    """
+
+    def slow(v: Any) -> Any:
+        return _convert_one(kernel, index, name, t, v, device)
+
+    if isinstance(t, T.ArrayType):
+        dtype, ndim = t.dtype, t.ndim
+
+        def conv_array(v: Any) -> Any:
+            if (
+                isinstance(v, array)
+                and v._device == device
+                and v._ndim == ndim
+                and (v._t is dtype or v._t == dtype)
+            ):
+                return v._buf
+            return slow(v)
+
+        return conv_array
+    if isinstance(t, T.ScalarType) and not t.is_bool:
+        np_type = t.np_dtype.type
+        if t.is_float:
+
+            def conv_float(v: Any) -> Any:
+                tv = type(v)
+                if tv is np_type:
+                    return v
+                if tv is float or tv is int:
+                    return np_type(v)
+                return slow(v)
+
+            return conv_float
+        info = np.iinfo(t.np_dtype)
+        lo, hi = int(info.min), int(info.max)
+
+        def conv_int(v: Any) -> Any:
+            tv = type(v)
+            if tv is np_type:
+                return v
+            if tv is int and lo <= v <= hi:
+                return np_type(v)
+            return slow(v)
+
+        return conv_int
+    return slow
+
+
 class Launch:
-    """A recorded launch (``record_cmd=True``) that relaunches with little Python work."""
+    """A recorded launch (``record_cmd=True``) that relaunches with little Python work.
+
+    The arguments are converted and packed once, when recorded and when a parameter
+    or the grid changes; ``launch()`` then goes straight to the backend's prepared
+    call (``Backend.prepare``).
+    """
 
     def __init__(
         self,
@@ -119,6 +230,7 @@ class Launch:
         self.params = args
         self.device = device
         self.stream = stream
+        self._run: Any = None
 
     def set_param_at_index(self, index: int, value: Any) -> None:
         """Replace argument ``index`` (checked like ``launch`` checks it)."""
@@ -131,6 +243,7 @@ class Launch:
         self.params[index] = _convert_one(
             self.kernel, index, names[index], types[index], value, self.device
         )
+        self._run = None
 
     def set_param_by_name(self, name: str, value: Any) -> None:
         """Replace the argument of parameter ``name``."""
@@ -139,17 +252,29 @@ class Launch:
             raise KdslLaunchError(f"kernel '{_kernel_name(self.kernel)}' has no parameter '{name}'")
         self.set_param_at_index(names.index(name), value)
 
+    def set_params(self, values: Sequence[Any]) -> None:
+        """Replace every argument at once (in parameter order)."""
+        for i, v in enumerate(values):
+            self.set_param_at_index(i, v)
+
     def set_dim(self, dim: Any) -> None:
         """Change the launch grid."""
         dims = normalize_dim(dim, _kernel_name(self.kernel))
         _check_tid(self.kernel, dims)
         self.dims = dims
+        self._run = None
 
     def launch(self, stream: Any = None) -> None:
-        """Run the recorded launch."""
-        self.backend.launch(
-            self.compiled, self.dims, self.params, stream if stream is not None else self.stream
-        )
+        """Run the recorded launch (on ``stream`` when given, else the recorded one)."""
+        if stream is not None and stream is not self.stream:
+            self.backend.launch(self.compiled, self.dims, self.params, stream)
+            return
+        run = self._run
+        if run is None:
+            run = self._run = self.backend.prepare(
+                self.compiled, self.dims, self.params, self.stream
+            )
+        run()
 
 
 def _convert_one(kernel: Any, index: int, name: str, t: Any, value: Any, device: Device) -> Any:
@@ -180,25 +305,27 @@ def launch(
     kernel's parameters (count, dtype, ndim, device). With ``record_cmd=True`` the
     launch is not run but returned as a ``Launch`` to run (and rerun) later.
     """
-    name = _kernel_name(kernel)
     if adjoint:
-        raise KdslError(f"kernel '{name}': adjoint launches are not supported yet")
-    dims = normalize_dim(dim, name)
-    dev = get_device(device)
-    args = [*inputs, *outputs]
-    names, types = list(kernel.arg_names), list(kernel.arg_types)
-    if len(args) != len(types):
+        raise KdslError(f"kernel '{_kernel_name(kernel)}': adjoint launches are not supported yet")
+    if type(dim) is int and dim >= 0:
+        dims: tuple[int, ...] = (dim,)
+    else:
+        dims = normalize_dim(dim, _kernel_name(kernel))
+    args = [*inputs, *outputs] if outputs else inputs
+    plan = _plan(kernel, device, backend)
+    convs = plan.converters
+    if len(args) != len(convs):
+        names = list(kernel.arg_names)
         raise KdslLaunchError(
-            f"kernel '{name}' takes {len(types)} arguments ({', '.join(names)}) but "
-            f"{len(args)} were given ({len(inputs)} inputs, {len(outputs)} outputs)"
+            f"kernel '{_kernel_name(kernel)}' takes {len(convs)} arguments ({', '.join(names)}) "
+            f"but {len(args)} were given ({len(inputs)} inputs, {len(outputs)} outputs)"
         )
-    converted = [
-        _convert_one(kernel, i, n, t, v, dev) for i, (n, t, v) in enumerate(zip(names, types, args))
-    ]
-    _check_tid(kernel, dims)
-    b = _resolve_backend(backend, dev)
-    cmd = Launch(kernel, b, _compiled(kernel, b), dims, converted, dev, stream)
+    converted = [conv(v) for conv, v in zip(convs, args)]
+    if len(dims) > 1 or (getattr(kernel, "tid_ndim", 0) or 0) > 1:
+        _check_tid(kernel, dims)
+    dev = plan.device
+    stream = _resolve_stream(dev, stream)
     if record_cmd:
-        return cmd
-    cmd.launch()
+        return Launch(kernel, plan.backend, plan.compiled, dims, converted, dev, stream)
+    plan.backend.launch(plan.compiled, dims, converted, stream)
     return None

@@ -192,3 +192,21 @@ def test_conformance_failure_sets_exit_status(capsys):
         memory.CASES[i] = right
     assert code == 1
     assert out.splitlines()[-1] == "1 passed, 1 failed"
+
+
+def test_closed_pipe_is_not_an_internal_error(tmp_path: Path):
+    # `kdsl ir file.py | head -1`: the reader exits early; kdsl must exit quietly.
+    many = tmp_path / "many.py"
+    kernel = "@wp.kernel\ndef k{n}(a: wp.array(dtype=float)):\n    a[wp.tid()] = {n}.0\n\n"
+    many.write_text("import kdsl as wp\n\n" + "".join(kernel.format(n=n) for n in range(400)))
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.Popen(  # far more output than a pipe buffers
+        [sys.executable, "-m", "kdsl.cli", "ir", str(many), "--stage", "kir"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env, cwd=tmp_path,
+    )  # fmt: skip
+    proc.stdout.readline()
+    proc.stdout.close()  # the pipe's reader goes away with output still to come
+    err = proc.stderr.read().decode()
+    proc.wait(timeout=60)
+    assert "internal error" not in err and "Traceback" not in err
+    assert proc.returncode == 0

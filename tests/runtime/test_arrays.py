@@ -180,7 +180,9 @@ def test_assign_copy_and_offsets():
 
 def test_devices():
     assert wp.get_device().is_cpu and wp.get_device("cpu") == "cpu"
-    assert wp.get_preferred_device() == wp.get_device("cpu")
+    # Warp's rule: the first GPU when there is one, else the cpu.
+    preferred = "cuda:0" if wp.is_cuda_available() else "cpu"
+    assert wp.get_preferred_device() == wp.get_device(preferred)
     a = wp.zeros(2)
     assert a.to("cpu") is a
     with pytest.raises(KdslError, match="unknown device"):

@@ -323,7 +323,11 @@ def program(tmp_path) -> Path:
 
 
 def _start(program: Path, at: float) -> subprocess.Popen:
-    env = {**os.environ, "PYTHONPATH": str(program)}
+    # Keep the parent's path too: kdsl may be importable only through it (a checkout
+    # run with PYTHONPATH=., as on the GPU machine).
+    paths = [str(program), *filter(None, os.environ.get("PYTHONPATH", "").split(os.pathsep))]
+    paths.append(str(Path(wp.__file__).resolve().parents[1]))
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(paths)}
     return subprocess.Popen([sys.executable, str(program / "run.py"), str(at)], cwd=program,
                             env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
 

@@ -9,6 +9,9 @@ the whole launch; ``Packed`` holds them.
 from __future__ import annotations
 
 import ctypes
+import struct
+import threading
+import weakref
 from collections.abc import Sequence
 from typing import Any
 
@@ -74,3 +77,140 @@ def descriptor(t: T.ArrayType, buf: np.ndarray, index: int = 0) -> np.ndarray:
     out[1 : 1 + nd] = buf.shape[:nd]
     out[1 + nd :] = [s // item for s in strides]
     return out
+
+
+# --- the fast path: one struct.pack_into per launch -----------------------------------
+
+_STRUCT_CODE = {
+    ("bool", 8): "?", ("int", 8): "b", ("uint", 8): "B", ("int", 16): "h", ("uint", 16): "H",
+    ("int", 32): "i", ("uint", 32): "I", ("int", 64): "q", ("uint", 64): "Q",
+    ("float", 16): "e", ("float", 32): "f", ("float", 64): "d",
+}  # fmt: skip
+
+#: Array descriptors by ``id`` of their NumPy buffer, checked through a weak reference:
+#: reading a buffer's address from NumPy costs about a microsecond, so a kernel
+#: launched again and again on the same arrays computes each descriptor once.
+_descriptors: dict[int, tuple[weakref.ref, tuple[int, ...]]] = {}
+
+
+def _scalar_code(t: T.ScalarType) -> str:
+    return _STRUCT_CODE[("bool", 8) if t.is_bool else (t.kind, t.bits)]
+
+
+def _cached_descriptor(t: T.ArrayType, buf: np.ndarray, index: int) -> tuple[int, ...]:
+    hit = _descriptors.get(id(buf))
+    if hit is not None and hit[0]() is buf:
+        return hit[1]
+    words = tuple(int(w) for w in descriptor(t, buf, index))
+    key = id(buf)
+    try:
+        ref = weakref.ref(buf, lambda _r, key=key: _descriptors.pop(key, None))
+    except TypeError:  # not weak-referenceable: never cache
+        return words
+    _descriptors[key] = (ref, words)
+    return words
+
+
+class ArgPacker:
+    """Packs the arguments of one kernel signature into a reusable buffer.
+
+    The layout is fixed per signature: the pointer table (one slot per argument,
+    plus ``extra`` raw-pointer slots) followed by each argument's bytes at a
+    16-byte-aligned offset. The table is written once per buffer, so a launch is
+    one ``struct.pack_into`` of the argument values. Signatures with struct
+    parameters fall back to ``Packed`` (``supported`` is False).
+    """
+
+    def __init__(self, types: Sequence[T.Type], extra: int = 0) -> None:
+        self.types = list(types)
+        self.extra = extra
+        self.supported = not any(isinstance(t, T.StructType) for t in self.types)
+        nslots = max(1, len(self.types) + extra)
+        # The values start after the table; ``struct`` writes its pad bytes, so the
+        # format covers only the values and is packed at ``self.start``.
+        self.start = offset = _align(8 * nslots)
+        fmt, self.offsets, self._kinds = ["<"], [], []
+        pos = offset
+        for t in self.types if self.supported else ():
+            pad = offset - pos
+            if pad:
+                fmt.append(f"{pad}x")
+            self.offsets.append(offset)
+            size, code, kind = _layout(t)
+            fmt.append(code)
+            self._kinds.append(kind)
+            pos = offset + size
+            offset = _align(pos)
+        for _ in range(extra):  # extra pointers live in their own slots after the args
+            pad = offset - pos
+            if pad:
+                fmt.append(f"{pad}x")
+            self.offsets.append(offset)
+            fmt.append("Q")
+            pos = offset + 8
+            offset = _align(pos)
+        self.struct = struct.Struct("".join(fmt))
+        self.size = self.start + self.struct.size
+        self._local = threading.local()
+
+    def new_buffer(self) -> Any:
+        """A fresh argument buffer with its pointer table filled in."""
+        buf = ctypes.create_string_buffer(self.size)
+        base = ctypes.addressof(buf)
+        table = (ctypes.c_uint64 * len(self.offsets)).from_buffer(buf)
+        for k, off in enumerate(self.offsets):
+            table[k] = base + off
+        return buf
+
+    def thread_buffer(self) -> Any:
+        """This thread's buffer: launches are synchronous, so a thread can reuse one."""
+        buf = getattr(self._local, "buf", None)
+        if buf is None:
+            buf = self._local.buf = self.new_buffer()
+        return buf
+
+    def flatten(self, values: Sequence[Any]) -> list:
+        """The argument values as the flat list ``struct`` packs."""
+        out: list = []
+        for k, (t, kind, v) in enumerate(zip(self.types, self._kinds, values)):
+            if kind == "array":
+                out.extend(_cached_descriptor(t, v, k))
+            elif kind == "scalar":
+                out.append(v)
+            elif kind == "handle":
+                out.append(int(v))
+            else:
+                out.extend(np.asarray(v).reshape(-1).tolist())
+        return out
+
+    def pack_into(self, buf: Any, values: Sequence[Any], extra: Sequence[int] = ()) -> int:
+        """Write ``values`` (and ``extra`` pointers) into ``buf``; returns its address."""
+        flat = self.flatten(values)
+        flat.extend(extra)
+        self.struct.pack_into(buf, self.start, *flat)
+        return ctypes.addressof(buf)
+
+
+def _align(n: int, to: int = 16) -> int:
+    return (n + to - 1) // to * to
+
+
+def _layout(t: T.Type) -> tuple[int, str, str]:
+    """(size in bytes, struct code, kind) of one argument's bytes."""
+    if isinstance(t, T.ArrayType):
+        n = 1 + 2 * t.ndim
+        return 8 * n, "q" * n, "array"
+    if isinstance(t, T.HandleType):
+        return 8, "Q", "handle"
+    et = T.elem_type(t)
+    code = _scalar_code(et)
+    n = 1 if isinstance(t, T.ScalarType) else _component_count(t)
+    size = n * et.np_dtype.itemsize
+    return size, code * n, "scalar" if n == 1 and isinstance(t, T.ScalarType) else "vector"
+
+
+def _component_count(t: T.Type) -> int:
+    n = 1
+    for d in T.value_shape(t):
+        n *= d
+    return n

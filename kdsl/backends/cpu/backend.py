@@ -5,13 +5,13 @@ from __future__ import annotations
 import ctypes
 import functools
 import hashlib
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
 from kdsl.backends.base import Backend, CompiledKernel, optimize
 from kdsl.backends.cpu import checks, jit, pool
-from kdsl.backends.cpu.abi import Packed
+from kdsl.backends.cpu.abi import ArgPacker, Packed
 from kdsl.backends.cpu.lower import kernel_names, kernel_symbol, lower_kernels, tid_ndims
 from kdsl.config import check_pipeline
 from kdsl.errors import KdslError, KdslLaunchError
@@ -46,6 +46,7 @@ class CpuKernel:
         self.llvm_name = llvm_name
         #: Debug builds: the check sites (``kdsl.ir.ops_debug``); None in release builds.
         self.sites: dict | None = None
+        self.packer = ArgPacker(arg_types)
 
 
 class CpuBackend(Backend):
@@ -68,8 +69,12 @@ class CpuBackend(Backend):
     def stages(self) -> list[str]:
         return ["kir", "kir-opt", "llvm-ir-unopt", "llvm-ir", "asm"]
 
-    def lower(self, module: Module, stage: str) -> str:
-        """The module at ``stage``; "llvm-ir" is after LLVM's -O3, "llvm-ir-unopt" before."""
+    def lower(self, module: Module, stage: str, options: dict[str, Any] | None = None) -> str:
+        """The module at ``stage``; "llvm-ir" is after LLVM's -O3, "llvm-ir-unopt" before.
+
+        ``options`` are kernel options as ``compile`` takes them; ``fast_math`` changes
+        the LLVM stages.
+        """
         if stage not in self.stages():
             raise KdslError(f"the cpu backend has no stage {stage!r} (stages: {self.stages()})")
         if stage == "kir":
@@ -77,7 +82,8 @@ class CpuBackend(Backend):
         module = optimize(module, self.pipeline)
         if stage == "kir-opt":
             return print_module(module)
-        text = str(lower_kernels(module, kernel_names(module)).llmod)
+        fast = bool((options or {}).get("fast_math", False))
+        text = str(lower_kernels(module, kernel_names(module), fast_math=fast).llmod)
         if stage == "llvm-ir-unopt":
             return text
         mod = jit.optimize(jit.parse(text))
@@ -101,8 +107,9 @@ class CpuBackend(Backend):
 
         def build() -> bytes:
             state = lower_kernels(
-                module, [kernel_symbol_], {kernel_symbol_: llname}, debug=bool(checked)
-            )
+                module, [kernel_symbol_], {kernel_symbol_: llname}, debug=bool(checked),
+                fast_math=bool(opts.get("fast_math", False)),
+            )  # fmt: skip
             mod = jit.parse(str(state.llmod))
             jit.optimize(mod, 3 if opts.get("optimize", True) else 0)
             return jit.emit_object(mod)
@@ -127,8 +134,58 @@ class CpuBackend(Backend):
         stream: Any = None,
     ) -> None:
         k: CpuKernel = compiled.payload
+        total = self._check_dims(compiled, dims)
+        if total == 0:
+            return
+        if k.sites is not None:
+            self._launch_checked(compiled, dims, args, total)
+            return
+        packer = k.packer
+        if packer.supported:
+            argp = packer.pack_into(packer.thread_buffer(), args)
+            keep = None
+        else:
+            keep = Packed(k.arg_types, args)
+            argp = keep.address
+        extents = (ctypes.c_int64 * len(dims))(*dims)
+        pool.run_range(k.fn, total, argp, ctypes.addressof(extents))
+
+    def prepare(
+        self,
+        compiled: CompiledKernel,
+        dims: tuple[int, ...],
+        args: Sequence[Any],
+        stream: Any = None,
+    ) -> Callable[[], None]:
+        """A launch with its arguments packed once: calling it only enters native code."""
+        k: CpuKernel = compiled.payload
+        total = self._check_dims(compiled, dims)
+        if total == 0:
+            return _nothing
+        if k.sites is not None:
+            args = list(args)
+            return lambda: self._launch_checked(compiled, dims, args, total)
+        if k.packer.supported:
+            buf = k.packer.new_buffer()
+            argp = k.packer.pack_into(buf, args)
+            keep: Any = (buf, list(args))  # the buffers the descriptors point into
+        else:
+            keep = Packed(k.arg_types, args)
+            argp = keep.address
+        extents = (ctypes.c_int64 * len(dims))(*dims)
+        dimp = ctypes.addressof(extents)
+        fn, run_range = k.fn, pool.run_range
+
+        def run() -> None:
+            run_range(fn, total, argp, dimp)
+
+        run.keep = (keep, extents)  # type: ignore[attr-defined]
+        return run
+
+    def _check_dims(self, compiled: CompiledKernel, dims: tuple[int, ...]) -> int:
+        """The number of threads of ``dims``, checked against the kernel's tid()."""
+        k: CpuKernel = compiled.payload
         name = compiled.metadata.get("name") or compiled.symbol
-        dims = tuple(int(d) for d in dims)
         for nd in k.tid_ndims:
             if nd != 1 and nd != len(dims):
                 raise KdslLaunchError(
@@ -143,13 +200,20 @@ class CpuBackend(Backend):
                 f"kernel '{name}': {total} threads is more than the "
                 f"cpu backend's limit of {_MAX_THREADS}"
             )
-        if total == 0:
-            return
-        record = checks.new_record() if k.sites is not None else None
-        packed = Packed(k.arg_types, args, () if record is None else (record.ctypes.data,))
+        return total
+
+    def _launch_checked(
+        self, compiled: CompiledKernel, dims: tuple[int, ...], args: Sequence[Any], total: int
+    ) -> None:
+        """A debug build's launch: a fresh error record, raised from after the run."""
+        k: CpuKernel = compiled.payload
+        record = checks.new_record()
+        packed = Packed(k.arg_types, args, (record.ctypes.data,))
         extents = (ctypes.c_int64 * len(dims))(*dims)
-        argp, dimp = packed.address, ctypes.addressof(extents)
-        fn = k.fn
-        pool.run(lambda s, e: fn(s, e, argp, dimp), total)
-        if record is not None:
-            checks.raise_for_record(record, k.sites, name, compiled.symbol, dims)
+        pool.run_range(k.fn, total, packed.address, ctypes.addressof(extents))
+        name = compiled.metadata.get("name") or compiled.symbol
+        checks.raise_for_record(record, k.sites, name, compiled.symbol, dims)
+
+
+def _nothing() -> None:
+    """The prepared form of a launch over zero threads."""

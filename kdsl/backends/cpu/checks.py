@@ -22,33 +22,37 @@ launches do) reports the first failure in thread order. A failed bounds check
 then ends the thread: it branches to the kernel's next thread (or returns from a
 called function, whose caller tests word 0 after the call and stops too), so the
 bad access never runs. Every other thread runs to completion. A failed finite
-check only records; the thread goes on. ``raise_for_record`` turns a record into
-a ``KdslRuntimeError`` after the launch.
+check only records; the thread goes on. ``raise_for_record`` (shared with the other
+backends, in ``kdsl.backends.checks_common``) turns a record into a
+``KdslRuntimeError`` after the launch.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-
-import numpy as np
 from llvmlite import ir
 
+from kdsl.backends.checks_common import (  # noqa: F401 - re-exported for the cpu backend
+    BOUNDS,
+    BOUNDS_IDX,
+    BOUNDS_SHAPE,
+    BOUNDS_TID,
+    FP,
+    FP_KIND,
+    FP_TID,
+    MAX_NDIM,
+    RECORD_LEN,
+    new_record,
+    raise_for_record,
+)
 from kdsl.backends.cpu import types as LT
 from kdsl.backends.cpu.emitter import Emitter, Lowering
-from kdsl.errors import KdslCapabilityError, KdslRuntimeError
+from kdsl.errors import KdslCapabilityError
 from kdsl.ir import types as T
 from kdsl.ir.core import Operation
-from kdsl.ir.ops_debug import Site, bounds_message, fp_message
 
-RECORD_LEN = 16
-_BOUNDS, _BOUNDS_TID, _BOUNDS_IDX, _BOUNDS_SHAPE = 0, 1, 2, 6
-_FP, _FP_TID, _FP_KIND = 10, 11, 12
-_MAX_NDIM = 4
-
-
-def new_record() -> np.ndarray:
-    """A zeroed error record for one launch."""
-    return np.zeros(RECORD_LEN, dtype=np.int64)
+_BOUNDS, _BOUNDS_TID, _BOUNDS_IDX, _BOUNDS_SHAPE = BOUNDS, BOUNDS_TID, BOUNDS_IDX, BOUNDS_SHAPE
+_FP, _FP_TID, _FP_KIND = FP, FP_TID, FP_KIND
+_MAX_NDIM = MAX_NDIM
 
 
 def _i64(v: int) -> ir.Constant:
@@ -173,41 +177,3 @@ TABLE: dict[str, Lowering] = {
     "kd.check_bounds": _check_bounds,
     "kd.check_finite": _check_finite,
 }
-
-
-def raise_for_record(
-    record: np.ndarray,
-    sites: Mapping[int, Site],
-    kernel: str,
-    symbol: str = "",
-    dims: tuple[int, ...] = (),
-) -> None:
-    """Raise the ``KdslRuntimeError`` a launch's error record describes, if any.
-
-    ``kernel`` is the name for messages, ``symbol`` the kernel's IR symbol (to tell
-    checks inside called functions apart), ``dims`` the launch grid (to print an
-    n-d thread index). A failed bounds check wins over a NaN/Inf: it is the likelier
-    cause of both.
-    """
-    if record[_BOUNDS]:
-        site = sites.get(int(record[_BOUNDS]) - 1)
-        nd = max(1, site.ndim) if site is not None else 1
-        idx = [int(x) for x in record[_BOUNDS_IDX : _BOUNDS_IDX + nd]]
-        shape = [int(x) for x in record[_BOUNDS_SHAPE : _BOUNDS_SHAPE + nd]]
-        arg = site.arg if site is not None else "array"
-        msg = bounds_message(kernel, arg, idx, shape)
-        tid = int(record[_BOUNDS_TID])
-    elif record[_FP]:
-        site = sites.get(int(record[_FP]) - 1)
-        kind = "NaN" if record[_FP_KIND] == 1 else "Inf"
-        msg = fp_message(kernel, kind, site.arg if site else "", site.loc if site else None)
-        tid = int(record[_FP_TID])
-    else:
-        return
-    err = KdslRuntimeError(msg, site.loc if site is not None else None, kernel)
-    if site is not None and symbol and site.func != symbol:
-        err.add_context(f"in function '{site.func}'")
-    if tid >= 0:
-        where = tid if len(dims) <= 1 else tuple(int(i) for i in np.unravel_index(tid, dims))
-        err.add_context(f"in thread {where} of kernel '{kernel}'")
-    raise err

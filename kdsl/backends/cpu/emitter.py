@@ -19,6 +19,89 @@ from kdsl.ir.core import Block, Module, Operation, Value
 
 Lowering = Callable[["Emitter", Operation], Any]
 
+#: The LLVM fast-math flags of a ``fast_math=True`` kernel. ``reassoc`` lets the loop
+#: vectorizer split float reductions (the n-body sum over j) into lanes, ``contract``
+#: fuses multiply-adds into FMA, ``afn`` and ``arcp`` allow approximate math and
+#: reciprocals (``1/sqrt(x)`` becomes a hardware estimate plus a Newton step), ``nsz``
+#: ignores the sign of zero. ``nnan`` and ``ninf`` are left out on purpose: with them
+#: LLVM may fold away ``isnan``/``isinf`` tests and turn NaN/Inf inputs into poison, so
+#: NaN still propagates and the fp checks keep working.
+FAST_MATH_FLAGS = ("reassoc", "contract", "afn", "arcp", "nsz")
+
+#: String attributes a fast-math kernel's functions carry for LLVM's code generator
+#: (llvmlite's ``FunctionAttributes`` only knows enum attributes, see ``_FastMathAttrs``).
+FAST_MATH_FN_ATTRS = (
+    ("unsafe-fp-math", "true"),
+    ("no-signed-zeros-fp-math", "true"),
+    ("approx-func-fp-math", "true"),
+)
+
+
+class FastMathBuilder(ir.IRBuilder):
+    """An ``IRBuilder`` that puts fast-math flags on every float instruction it emits.
+
+    Only float arithmetic, float compares and calls returning floats get them (LLVM
+    rejects the flags elsewhere), so the lowering tables need no fast-math branches.
+    """
+
+    def __init__(self, flags: Sequence[str] = FAST_MATH_FLAGS) -> None:
+        super().__init__()
+        self.fm_flags = tuple(flags)
+
+    def fadd(self, lhs, rhs, name="", flags=()):
+        return super().fadd(lhs, rhs, name, flags or self.fm_flags)
+
+    def fsub(self, lhs, rhs, name="", flags=()):
+        return super().fsub(lhs, rhs, name, flags or self.fm_flags)
+
+    def fmul(self, lhs, rhs, name="", flags=()):
+        return super().fmul(lhs, rhs, name, flags or self.fm_flags)
+
+    def fdiv(self, lhs, rhs, name="", flags=()):
+        return super().fdiv(lhs, rhs, name, flags or self.fm_flags)
+
+    def frem(self, lhs, rhs, name="", flags=()):
+        return super().frem(lhs, rhs, name, flags or self.fm_flags)
+
+    def fneg(self, arg, name="", flags=()):
+        return super().fneg(arg, name, flags or self.fm_flags)
+
+    def fcmp_ordered(self, cmpop, lhs, rhs, name="", flags=()):
+        return super().fcmp_ordered(cmpop, lhs, rhs, name, flags or self.fm_flags)
+
+    def fcmp_unordered(self, cmpop, lhs, rhs, name="", flags=()):
+        return super().fcmp_unordered(cmpop, lhs, rhs, name, flags or self.fm_flags)
+
+    def call(self, fn, args, name="", cconv=None, tail=False, fastmath=(), attrs=(), arg_attrs=None):
+        ret = fn.function_type.return_type if isinstance(fn, ir.Function) else None
+        if not fastmath and ret is not None and _is_float(ret):
+            fastmath = self.fm_flags
+        return super().call(fn, args, name, cconv, tail, fastmath, attrs, arg_attrs)
+
+
+def _is_float(t: ir.Type) -> bool:
+    if isinstance(t, ir.VectorType):
+        t = t.element
+    return isinstance(t, ir.HalfType | ir.FloatType | ir.DoubleType)
+
+
+class _FastMathAttrs(ir.values.FunctionAttributes):
+    """Function attributes plus the string attributes of ``FAST_MATH_FN_ATTRS``."""
+
+    def __bool__(self) -> bool:  # llvmlite prints a function's attributes only when truthy
+        return True
+
+    def _to_list(self, ret_type):
+        return super()._to_list(ret_type) + [f'"{k}"="{v}"' for k, v in FAST_MATH_FN_ATTRS]
+
+
+def mark_fast_math(fn: ir.Function) -> None:
+    """Give ``fn`` the fast-math string attributes (keeping the attributes it has)."""
+    attrs = _FastMathAttrs()
+    for a in fn.attributes:
+        attrs.add(a)
+    fn.attributes = attrs
+
 
 class ModuleState:
     """What the functions of one LLVM module share: declarations and callees."""
@@ -32,6 +115,8 @@ class ModuleState:
         self.libm_used: set[str] = set()
         #: Debug build: kernels and functions take a pointer to an error record (``checks``).
         self.debug = False
+        #: ``fast_math`` kernel option: float ops get ``FAST_MATH_FLAGS``.
+        self.fast_math = False
 
     def declare(self, name: str, fnty: ir.FunctionType) -> ir.Function:
         """The function ``name`` of the module, declared on first use."""
@@ -48,7 +133,9 @@ class Emitter:
         self.state = state
         self.fn = fn
         self.func_name = func_name
-        self.b = ir.IRBuilder()
+        self.b = FastMathBuilder() if state.fast_math else ir.IRBuilder()
+        if state.fast_math:
+            mark_fast_math(fn)
         self.values: dict[Value, ir.Value] = {}
         #: The thread's linear index (i32) and n-d index components (i32), when a kernel.
         self.linear: ir.Value | None = None

@@ -159,15 +159,21 @@ def declare_func(state: ModuleState, name: str) -> ir.Function:
 
 
 def lower_kernels(
-    module: Module, kernels: list[str], names: dict[str, str] | None = None, debug: bool = False
+    module: Module,
+    kernels: list[str],
+    names: dict[str, str] | None = None,
+    debug: bool = False,
+    fast_math: bool = False,
 ) -> ModuleState:
     """An LLVM module holding the range functions of ``kernels`` (and their callees).
 
     ``names`` maps a kernel symbol to its LLVM name (default ``kernel_symbol``).
     ``debug`` builds take an error record (``checks``) and can lower the check ops.
+    ``fast_math`` puts ``emitter.FAST_MATH_FLAGS`` on every float op of every function.
     """
     state = new_module(module)
     state.debug = debug
+    state.fast_math = fast_math
     for k in kernels:
         func = module.get_func(k)
         emit_kernel(state, func, (names or {}).get(k) or kernel_symbol(k))

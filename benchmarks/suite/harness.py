@@ -1,0 +1,179 @@
+"""Timing, fresh-process measurements, the results table and the JSON file.
+
+Every framework's step is synchronous when it returns (the impl modules make it
+so: Taichi steps end with ``ti.sync()``), so a step's wall time is its cost.
+``measure`` warms up (the first call compiles), then times ``reps`` calls and
+keeps going while the total is under ``min_time`` (fast steps get more samples).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+
+@dataclass
+class Stats:
+    """Timings of one cell, in seconds: median, minimum, spread (max - min) / median."""
+
+    median: float
+    min: float
+    spread: float
+    samples: list[float] = field(default_factory=list)
+
+    @classmethod
+    def of(cls, samples: list[float]) -> Stats:
+        """Statistics of ``samples`` (seconds)."""
+        med = statistics.median(samples)
+        spread = (max(samples) - min(samples)) / med if med > 0 else 0.0
+        return cls(med, min(samples), spread, list(samples))
+
+
+@dataclass
+class Runner:
+    """A workload prepared for one framework: ``step()`` runs one synchronized step on
+    the prepared data, ``fetch()`` gives the outputs as NumPy arrays. A launch-overhead
+    runner's step makes ``launches`` launches."""
+
+    step: Callable[[], None]
+    fetch: Callable[[], dict[str, Any]]
+    launches: int = 1
+
+
+@dataclass
+class Cell:
+    """One framework's result on one workload: timings, or why there are none."""
+
+    stats: Stats | None = None
+    error: float | None = None  # relative error against the float64 reference
+    status: str = "ok"  # "ok", "not installed", "n/a", "error: ...", "wrong: ..."
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+def measure(
+    step: Callable[[], None],
+    reps: int,
+    warmup: int = 1,
+    min_time: float = 0.3,
+    max_reps: int = 200,
+    per_call: int = 1,
+) -> Stats:
+    """Time ``step`` after ``warmup`` untimed calls; seconds per call (``per_call``
+    calls of the underlying operation per ``step`` are divided out)."""
+    for _ in range(warmup):
+        step()
+    samples: list[float] = []
+    total = 0.0
+    while len(samples) < reps or (total < min_time and len(samples) < max_reps):
+        t0 = time.perf_counter()
+        step()
+        dt = time.perf_counter() - t0
+        samples.append(dt / per_call)
+        total += dt
+    return Stats.of(samples)
+
+
+def run_script(source: str, env: dict[str, str], timeout: float = 300.0) -> dict[str, Any]:
+    """Run Python ``source`` in a fresh interpreter; its last stdout line is JSON.
+
+    The source is written to a file (frontends that read kernel source need one).
+    Adds ``spawn_epoch`` (``time.time()`` just before the process started) so a
+    script can report ``first_epoch`` and the caller subtract, and ``process_s``.
+    """
+    full_env = {**os.environ, **env}
+    with tempfile.TemporaryDirectory(prefix="kdsl-bench-") as tmp:
+        script = Path(tmp) / "bench_script.py"
+        script.write_text(source)
+        spawn = time.time()
+        t0 = time.perf_counter()
+        proc = subprocess.run(
+            [sys.executable, str(script)], env=full_env, capture_output=True, text=True,
+            timeout=timeout, cwd=tmp,
+        )  # fmt: skip
+        wall = time.perf_counter() - t0
+    if proc.returncode != 0:
+        tail = (proc.stderr or proc.stdout).strip().splitlines()
+        raise RuntimeError(tail[-1] if tail else f"exit status {proc.returncode}")
+    out = json.loads(proc.stdout.strip().splitlines()[-1])
+    out["process_s"] = wall
+    out["spawn_epoch"] = spawn
+    return out
+
+
+def short_error(exc: BaseException, limit: int = 48) -> str:
+    """``error: <Type>: <message>`` cut to ``limit`` characters for a table cell."""
+    msg = str(exc).strip().splitlines()
+    text = f"{type(exc).__name__}: {msg[0] if msg else ''}"
+    return "error: " + (text if len(text) <= limit else text[: limit - 3] + "...")
+
+
+# -- table --------------------------------------------------------------------
+def format_cell(cell: Cell | None, unit: str) -> str:
+    """A table cell: the median in ``unit`` ("ms", "us", "s", "x", "GB/s"), or the status."""
+    if cell is None:
+        return "-"
+    if cell.stats is None:
+        return cell.status
+    scale = {"ms": 1e3, "us": 1e6, "s": 1.0, "x": 1.0, "GB/s": 1.0}[unit]
+    v = cell.stats.median * scale
+    text = f"{v:.3g}" if v < 100 else f"{v:.0f}"
+    return text if cell.status == "ok" else f"{text} ({cell.status})"
+
+
+def print_table(headers: list[str], rows: list[list[str]], out=sys.stdout) -> None:
+    """A left-aligned first column and right-aligned others, separated by two spaces."""
+    widths = [max(len(r[i]) for r in [headers, *rows]) for i in range(len(headers))]
+
+    def line(r: list[str]) -> str:
+        cells = [r[0].ljust(widths[0])] + [c.rjust(w) for c, w in zip(r[1:], widths[1:])]
+        return "  ".join(cells).rstrip()
+
+    print(line(headers), file=out)
+    print("-" * len(line(headers)), file=out)
+    for r in rows:
+        print(line(r), file=out)
+
+
+# -- JSON ---------------------------------------------------------------------
+def machine() -> dict[str, Any]:
+    """What the numbers were measured on."""
+    cpu = platform.processor()
+    try:
+        for ln in Path("/proc/cpuinfo").read_text().splitlines():
+            if ln.startswith("model name"):
+                cpu = ln.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return {
+        "python": platform.python_version(),
+        "platform": platform.platform(),
+        "cpu": cpu,
+        "cores": len(os.sched_getaffinity(0))
+        if hasattr(os, "sched_getaffinity")
+        else os.cpu_count(),
+    }
+
+
+def to_json(cells: dict[str, dict[str, Cell]], meta: dict[str, Any]) -> dict[str, Any]:
+    """The whole run as a JSON-ready dict (samples kept, in seconds)."""
+    return {
+        "meta": {**meta, "machine": machine()},
+        "results": {w: {f: asdict(c) for f, c in row.items()} for w, row in cells.items()},
+    }
+
+
+def write_json(data: dict[str, Any], path: Path) -> None:
+    """Write ``data`` to ``path`` (parents created)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(data, indent=1, default=str) + "\n")

@@ -1,0 +1,225 @@
+"""IR module -> one CUDA C translation unit.
+
+The unit holds, in order: the pieces the module's ops asked for (types, then the
+helpers that use them; nothing else, see ``emitter.Source``), prototypes of the
+called functions, their definitions, then the kernels. A kernel is::
+
+    extern "C" __global__ void __launch_bounds__(256) k_<name>_<n>(<params>, kd_grid kd_g
+                                                                  [, long long *kd_err])
+
+with one C parameter per kernel argument passed by value (arrays as descriptors),
+then the launch grid (``kd_g.n`` threads; ``kd_g.dim`` the extents), then in debug
+builds the error record. Each thread runs one index (an exact grid of 256-thread
+blocks, no grid-stride loop): ``kd_i = blockIdx.x * blockDim.x + threadIdx.x``
+(32-bit: launches are limited to 2**31 - 1 threads, like the cpu backend, since
+``tid()`` is an ``int32``), and an n-d ``tid()`` is split from it row-major with
+32-bit division. Array addresses are computed in 64 bits (``helpers.element_ptr``).
+
+Every body line carries its op's source location: ``#line`` directives name the
+user's Python file and line, so NVRTC messages point there. Statements of one
+Python line share one C line; lines of kdsl's own code map back to the ``.cu``
+unit itself.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from kdsl.backends.cuda.emitter import FuncEmitter, Source
+from kdsl.backends.cuda.ops import TABLE
+from kdsl.errors import KdslCapabilityError
+from kdsl.ir import types as T
+from kdsl.ir.core import Loc, Module, Operation
+
+#: Threads per block.
+BLOCK = 256
+#: The name NVRTC gives the generated unit (and the ``#line`` directives use for it).
+UNIT_NAME = "kdsl_module.cu"
+
+_GRID = "struct kd_grid { unsigned int n; unsigned int dim[4]; };"
+
+
+@dataclass
+class CudaSource:
+    """Generated CUDA C and the C entry name of each kernel symbol."""
+
+    text: str
+    entries: dict[str, str]
+    uses_f16: bool = False
+
+
+def tid_ndims(func: Operation) -> set[int]:
+    """The ``ndim`` of every ``kd.tid`` in ``func``."""
+    return {op.attrs["ndim"] for op in func.walk() if op.name == "kd.tid"}
+
+
+def kernel_names(module: Module) -> list[str]:
+    """Symbols of the kernels of ``module``."""
+    return [f.attrs["sym_name"] for f in module.funcs if f.attrs.get("kind") == "kernel"]
+
+
+def generate(module: Module, kernels: list[str], debug: bool = False) -> CudaSource:
+    """The CUDA C unit holding ``kernels`` (and their callees); see the module docstring."""
+    src = Source(module, TABLE, debug)
+    src.need("kd_grid", lambda: _GRID)
+    bodies: list[tuple[str, list]] = []
+    entries = {}
+    for k in kernels:
+        entries[k] = src.func_name(k)
+        bodies.append(_kernel(src, module.get_func(k)))
+    funcs: list[tuple[str, str, list]] = []
+    done: set[str] = set()
+    while len(done) < len(src.funcs_todo):
+        name = next(n for n in src.funcs_todo if n not in done)
+        done.add(name)
+        if not module.has_func(name):
+            raise KdslCapabilityError(f"call to unknown function '{name}'")
+        funcs.append(_function(src, module.get_func(name)))
+    return CudaSource(_assemble(src, funcs, bodies), entries, src.uses_f16)
+
+
+def _params(em: FuncEmitter, func: Operation) -> list[str]:
+    out = []
+    for a in func.regions[0].block.args:
+        if isinstance(a.type, T.ArrayType) and isinstance(a.type.dtype, T.StructType):
+            raise KdslCapabilityError(
+                f"arrays of {a.type.dtype} are not supported by the cuda backend", func.loc
+            )
+        name = em.fresh()
+        em.bind(a, name)
+        out.append(f"{em.ctype(a.type)} {name}")
+    return out
+
+
+def _kernel(src: Source, func: Operation) -> tuple[str, list]:
+    em = FuncEmitter(src, func, is_kernel=True)
+    params = _params(em, func) + ["kd_grid kd_g"]
+    if src.debug:
+        params.append("long long *kd_err")
+    nds = sorted(n for n in tid_ndims(func) if n > 1)
+    if len(nds) > 1:
+        raise KdslCapabilityError(f"kernel uses tid() with {nds} dimensions at once", func.loc)
+    em.line("const unsigned int kd_i = blockIdx.x * blockDim.x + threadIdx.x;")
+    em.line("if (kd_i >= kd_g.n) return;")
+    if nds:
+        nd = nds[0]
+        em.line("unsigned int kd_r = kd_i;")
+        for d in range(nd - 1, 0, -1):
+            em.line(f"const int kd_t{d} = (int)(kd_r % kd_g.dim[{d}]); kd_r /= kd_g.dim[{d}];")
+        em.line("const int kd_t0 = (int)kd_r;")
+        em.tid_parts = [f"kd_t{d}" for d in range(nd)]
+    em.lower_block(func.regions[0].block)
+    head = (
+        f'extern "C" __global__ void __launch_bounds__({BLOCK}) '
+        f"{src.func_name(func.attrs['sym_name'])}({', '.join(params)})"
+    )
+    return head, em.lines
+
+
+def _function(src: Source, func: Operation) -> tuple[str, str, list]:
+    em = FuncEmitter(src, func, is_kernel=False)
+    res = list(func.attrs.get("res_types", []))
+    if not res:
+        em.ret_type = "void"
+    elif len(res) == 1:
+        em.ret_type = src.ctype(res[0])
+    else:
+        em.ret_type = src.ret_struct(res)
+    params = _params(em, func)
+    if src.debug:
+        params.append("long long *kd_err")
+    out = em.lower_block(func.regions[0].block)
+    if not res:
+        em.line("return;")
+    elif len(res) == 1:
+        em.line(f"return {out[0]};")
+    else:
+        em.line(f"return {em.ret_type}{{{', '.join(out)}}};")
+    head = f"__device__ {em.ret_type} {src.func_name(func.attrs['sym_name'])}({', '.join(params)})"
+    return head, head + ";", em.lines
+
+
+def _escape(path: str) -> str:
+    """``path`` as the body of a C string literal."""
+    out = []
+    for ch in path:
+        if ch in '\\"':
+            out.append("\\" + ch)
+        elif " " <= ch <= "~":
+            out.append(ch)
+        else:
+            out.append(f"\\x{ord(ch):02x}" if ord(ch) < 256 else "?")
+    return "".join(out)
+
+
+def _loc_ok(loc: Loc | None) -> bool:
+    return loc is not None and bool(loc.file) and loc.line > 0
+
+
+class _Writer:
+    """Physical lines with ``#line`` bookkeeping (see the module docstring)."""
+
+    def __init__(self) -> None:
+        self.out: list[str] = []
+        self.mapped: tuple[str, int] | None = None  # (file, line) the next line maps to
+
+    def plain(self, text: str) -> None:
+        if self.mapped is not None:
+            self.out.append(f'#line {len(self.out) + 2} "{UNIT_NAME}"')
+            self.mapped = None
+        self.out.extend(text.split("\n"))
+
+    def located(self, text: str, loc: Loc | None) -> None:
+        if not _loc_ok(loc):
+            self.plain(text)
+            return
+        if self.mapped != (loc.file, loc.line):
+            self.out.append(f'#line {loc.line} "{_escape(loc.file)}"')
+        self.out.append(text)
+        self.mapped = (loc.file, loc.line + 1)
+
+    def body(self, lines: list) -> None:
+        """Body lines; consecutive statements of one source line share a C line."""
+        i = 0
+        while i < len(lines):
+            depth, text, loc = lines[i]
+            j = i + 1
+            if _joinable(text):
+                while (
+                    j < len(lines)
+                    and lines[j][0] == depth
+                    and _same_line(lines[j][2], loc)
+                    and _joinable(lines[j][1])
+                ):
+                    j += 1
+            joined = " ".join(t for _, t, _ in lines[i:j])
+            self.located("  " * depth + joined, loc)
+            i = j
+
+
+def _joinable(text: str) -> bool:
+    return not text.endswith("{") and not text.startswith("}")
+
+
+def _same_line(a: Loc | None, b: Loc | None) -> bool:
+    if not (_loc_ok(a) and _loc_ok(b)):
+        return False
+    return a.file == b.file and a.line == b.line
+
+
+def _assemble(src: Source, funcs: list, kernels: list) -> str:
+    w = _Writer()
+    w.plain("// CUDA C generated by kdsl's cuda backend; holds only what its kernels use.")
+    for piece in src.pieces.values():
+        w.plain(piece)
+    for _, proto, _ in funcs:
+        w.plain(proto)
+    for head, _, lines in funcs:
+        w.plain(head + " {")
+        w.body(lines)
+        w.plain("}")
+    for head, lines in kernels:
+        w.plain(head + " {")
+        w.body(lines)
+        w.plain("}")
+    return "\n".join(w.out) + "\n"

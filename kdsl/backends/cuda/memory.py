@@ -1,0 +1,181 @@
+"""Lowerings of the ``kd`` dialect: thread index, array shape, load, store, atomics.
+
+An array is its descriptor (``ctypes_``); the address of element ``(i, j, ...)`` is
+``data + i * strides[0] + j * strides[1] + ...`` in bytes, computed in 64 bits so
+arrays of any size work while the thread index stays 32-bit. Indices are not
+bounds-checked in release builds (debug builds insert ``kd.check_bounds``).
+
+Atomics use CUDA's native ``atomic*`` functions where one exists for the type
+(float add included) and a compare-and-swap loop on the value's bits otherwise:
+float min/max (kdsl's NaN and signed-zero rule, see ``helpers.float_minmax``) and
+every 8- and 16-bit type (on the aligned 32-bit word around it). Comparing bits,
+not values, ends the loop even when memory holds a NaN.
+"""
+
+from __future__ import annotations
+
+from kdsl.backends.cuda import ctypes_ as CT
+from kdsl.backends.cuda import helpers as H
+from kdsl.backends.cuda.arith import is_f16, scalar_rule
+from kdsl.backends.cuda.emitter import FuncEmitter, Lowering, Source
+from kdsl.errors import KdslCapabilityError
+from kdsl.ir import types as T
+from kdsl.ir.core import Operation, Value
+
+_FI = "__device__ __forceinline__"
+
+
+def _tid(em: FuncEmitter, op: Operation) -> str:
+    if not em.is_kernel:
+        raise KdslCapabilityError("tid() is only available inside a kernel on cuda", op.loc)
+    if op.attrs["ndim"] == 1:
+        return "(int)kd_i"
+    return em.tid_parts[op.attrs["dim"]]
+
+
+def _array_shape(em: FuncEmitter, op: Operation) -> str:
+    return f"(int){em.get(op.operands[0])}.shape[{op.attrs['dim']}]"
+
+
+def element_ptr(em: FuncEmitter, arr: Value, idx: list[Value]) -> str:
+    """C expression of the (``char *``) address of an element; no bounds check."""
+    at: T.ArrayType = arr.type
+    if isinstance(at.dtype, T.StructType):
+        raise KdslCapabilityError(f"arrays of {at.dtype} are not supported by the cuda backend")
+    fn = H.element_ptr(em.src, at.ndim)
+    return f"{fn}({em.get(arr)}, {', '.join(em.get(i) for i in idx)})"
+
+
+def _load(em: FuncEmitter, op: Operation) -> str:
+    t = op.results[0].type
+    p = element_ptr(em, op.operands[0], list(op.operands[1:]))
+    if t == T.BOOL:  # bools are bytes in memory (NumPy's layout)
+        return f"*(const unsigned char *){p} != 0"
+    return f"*(const {em.ctype(t)} *){p}"
+
+
+def _store(em: FuncEmitter, op: Operation) -> None:
+    t = op.operands[0].type
+    v = em.get(op.operands[0])
+    p = element_ptr(em, op.operands[1], list(op.operands[2:]))
+    if t == T.BOOL:
+        em.line(f"*(unsigned char *){p} = (unsigned char){v};")
+    else:
+        em.line(f"*({em.ctype(t)} *){p} = {v};")
+
+
+# -- atomics -----------------------------------------------------------------------
+
+#: (kind, C type) -> a native CUDA call on (pointer, value); the pointer is cast as shown.
+_NATIVE = {
+    **{("add", c): "atomicAdd(p, v)" for c in ("int", "unsigned int", "float", "double",
+                                               "unsigned long long")},
+    ("add", "long long"): "(long long)atomicAdd((unsigned long long *)p, (unsigned long long)v)",
+    ("sub", "int"): "atomicSub(p, v)", ("sub", "unsigned int"): "atomicSub(p, v)",
+    ("sub", "float"): "atomicAdd(p, -v)", ("sub", "double"): "atomicAdd(p, -v)",
+    ("sub", "unsigned long long"): "atomicAdd(p, 0ull - v)",
+    ("sub", "long long"): "(long long)atomicAdd((unsigned long long *)p, 0ull - "
+                          "(unsigned long long)v)",
+    **{(k, c): f"atomic{k.capitalize()}(p, v)" for k in ("min", "max")
+       for c in ("int", "unsigned int", "long long", "unsigned long long")},
+    **{(k, c): f"atomic{k.capitalize()}(p, v)" for k in ("and", "or", "xor")
+       for c in ("int", "unsigned int", "unsigned long long")},
+    **{(k, "long long"): f"(long long)atomic{k.capitalize()}((unsigned long long *)p, "
+                         "(unsigned long long)v)" for k in ("and", "or", "xor")},
+    **{("exch", c): "atomicExch(p, v)" for c in ("int", "unsigned int", "float",
+                                                 "unsigned long long")},
+    ("exch", "long long"): "(long long)atomicExch((unsigned long long *)p, (unsigned long long)v)",
+    ("exch", "double"): "__longlong_as_double((long long)atomicExch((unsigned long long *)p, "
+                        "(unsigned long long)__double_as_longlong(v)))",
+}  # fmt: skip
+
+
+def _combine(src: Source, kind: str, et: T.ScalarType, cur: str, v: str) -> str:
+    if kind == "exch":
+        return v
+    return scalar_rule(kind, et)(src, et, cur, v)
+
+
+def _bits(et: T.ScalarType) -> tuple[str, str]:
+    """(to bits, from bits) C format strings for a 32- or 64-bit scalar."""
+    if et.is_float:
+        if et.bits == 32:
+            return "__float_as_uint({})", "__uint_as_float({})"
+        return "(unsigned long long)__double_as_longlong({})", "__longlong_as_double((long long){})"
+    u = CT.unsigned_c(et)
+    return f"({u}){{}}", f"({CT.scalar_c(et)}){{}}"
+
+
+def _small_bits(et: T.ScalarType) -> tuple[str, str]:
+    """(to bits, from bits) for an 8- or 16-bit scalar held in the low bits of a word."""
+    if is_f16(et):
+        return "(unsigned int){}.bits", "kd_f16{{(unsigned short){}}}"
+    if et.is_bool:
+        return "(unsigned int){}", "({} != 0u)"
+    mask = (1 << et.bits) - 1
+    return f"((unsigned int){{}} & {mask:#x}u)", f"({CT.scalar_c(et)}){{}}"
+
+
+def atomic_helper(src: Source, kind: str, et: T.ScalarType) -> str:
+    """The name of ``kd_atomic_<kind>_<tag>(T *p, T v)``, which gives the old value."""
+    c = src.ctype(et)
+    name = f"kd_atomic_{kind}_{CT.tag(et)}"
+    native = _NATIVE.get((kind, c))
+
+    def make() -> str:
+        head = f"{_FI} {c} {name}({c} *p, {c} v) {{\n"
+        if native is not None:
+            return head + f"  return {native};\n}}"
+        new = _combine(src, kind, et, "cur", "v")
+        if et.bits >= 32:
+            u = CT.unsigned_c(et)
+            to, frm = _bits(et)
+            return head + (
+                f"  {u} *w = ({u} *)p;\n  {u} old = *(volatile {u} *)w, seen;\n"
+                f"  do {{\n    seen = old;\n    {c} cur = {frm.format('seen')};\n"
+                f"    old = atomicCAS(w, seen, {to.format(f'({new})')});\n"
+                f"  }} while (old != seen);\n  return {frm.format('old')};\n}}"
+            )
+        to, frm = _small_bits(et)
+        mask = (1 << et.bits) - 1
+        return head + (
+            "  unsigned int *w = (unsigned int *)((unsigned long long)p & ~3ull);\n"
+            "  unsigned int shift = ((unsigned int)(unsigned long long)p & 3u) * 8u;\n"
+            f"  unsigned int mask = {mask:#x}u << shift;\n"
+            "  unsigned int old = *(volatile unsigned int *)w, seen;\n"
+            f"  do {{\n    seen = old;\n    {c} cur = {frm.format('((seen & mask) >> shift)')};\n"
+            f"    {c} nv = {new};\n"
+            f"    old = atomicCAS(w, seen, (seen & ~mask) | ({to.format('nv')} << shift));\n"
+            f"  }} while (old != seen);\n  return {frm.format('((old & mask) >> shift)')};\n}}"
+        )
+
+    src.need(f"fn:{name}", make)
+    return name
+
+
+def _atomic(em: FuncEmitter, op: Operation) -> str:
+    t = op.operands[0].type
+    et = T.elem_type(t)
+    kind = op.attrs["kind"]
+    p = element_ptr(em, op.operands[1], list(op.operands[2:]))
+    v = em.get(op.operands[0])
+    fn = atomic_helper(em.src, kind, et)
+    ec = em.ctype(et)
+    if isinstance(t, T.ScalarType):
+        return f"{fn}(({ec} *){p}, {v})"
+    base = em.fresh()
+    em.line(f"{ec} *{base} = ({ec} *){p};")
+    lanes = [f"{fn}({base} + {j}, {v}.c[{j}])" for j in range(CT.count(t))]
+    r = em.declare(t)
+    for j, lane in enumerate(lanes):
+        em.line(f"{r}.c[{j}] = {lane};")
+    return r
+
+
+TABLE: dict[str, Lowering] = {
+    "kd.tid": _tid,
+    "kd.array_shape": _array_shape,
+    "kd.load": _load,
+    "kd.store": _store,
+    "kd.atomic_rmw": _atomic,
+}

@@ -1,0 +1,142 @@
+"""NVRTC through CuPy's low-level binding: options, compilation, error mapping.
+
+kdsl passes every option itself (CuPy's ``RawModule`` would add ``-ftz=true``):
+
+- default builds keep IEEE behaviour identical to the cpu backend:
+  ``--ftz=false --prec-div=true --prec-sqrt=true --fmad=false`` (no flush of
+  subnormals, correctly rounded division and square root, no contraction of a
+  multiply and an add into an FMA);
+- ``fast_math`` builds use ``--use_fast_math`` (flush to zero, approximate division,
+  square root and transcendentals, FMA contraction);
+- always ``--gpu-architecture=sm_XX`` (a cubin for that GPU), ``--std=c++17`` and
+  ``--generate-line-info`` (profilers map instructions to the Python lines the
+  ``#line`` directives name; it does not change the code).
+
+A compile error becomes a ``KdslError`` naming the user's Python file and line
+(NVRTC reports the ``#line`` location) with that source line shown.
+"""
+
+from __future__ import annotations
+
+import functools
+import re
+from dataclasses import dataclass
+
+from kdsl.backends.cuda.lower import UNIT_NAME
+from kdsl.errors import KdslError
+from kdsl.ir.core import Loc, Module
+
+#: The architecture compile-only builds use when no GPU is visible.
+DEFAULT_ARCH = "sm_90"
+
+_LOG_LINE = re.compile(
+    r"^(?P<file>.*?)\((?P<line>\d+)\): (?P<sev>catastrophic error|error|warning)\S*: (?P<msg>.*)$"
+)
+
+
+@dataclass
+class Binary:
+    """What one NVRTC compilation gives."""
+
+    ptx: str
+    cubin: bytes
+    log: str
+
+
+def options(arch: str, fast_math: bool = False) -> list[str]:
+    """The NVRTC options of a build for ``arch`` (``sm_90``...); see the module docstring."""
+    opts = [f"--gpu-architecture={arch}", "--std=c++17", "--generate-line-info"]
+    if fast_math:
+        opts.append("--use_fast_math")
+    else:
+        opts += ["--ftz=false", "--prec-div=true", "--prec-sqrt=true", "--fmad=false"]
+    return opts
+
+
+def _nvrtc():
+    try:
+        from cupy_backends.cuda.libs import nvrtc
+    except ImportError as e:  # pragma: no cover - depends on the install
+        raise KdslError(
+            f"the cuda backend needs CuPy with NVRTC (pip install cupy-cuda12x): {e}"
+        ) from None
+    return nvrtc
+
+
+@functools.cache
+def version() -> str:
+    """NVRTC's version, ``"13.0"``; part of cache keys (another NVRTC, other code)."""
+    major, minor = _nvrtc().getVersion()
+    return f"{major}.{minor}"
+
+
+@functools.cache
+def supported_archs() -> tuple[int, ...]:
+    """The ``sm`` numbers this NVRTC can compile for."""
+    return tuple(_nvrtc().getSupportedArchs())
+
+
+def arch_for(compute_capability: int) -> str:
+    """``sm_XX`` for a device of ``compute_capability`` (e.g. 90): the newest this NVRTC
+    supports that is not newer than the device (of the same major version)."""
+    ok = [
+        a
+        for a in supported_archs()
+        if a <= compute_capability and a // 10 == compute_capability // 10
+    ]
+    return f"sm_{max(ok) if ok else compute_capability}"
+
+
+def compile_source(
+    source: str, arch: str, fast_math: bool = False, module: Module | None = None, kernel: str = ""
+) -> Binary:
+    """Compile a generated unit; a failure raises ``KdslError`` (see ``compile_error``)."""
+    nvrtc = _nvrtc()
+    prog = nvrtc.createProgram(source, UNIT_NAME, [], [])
+    try:
+        try:
+            nvrtc.compileProgram(prog, options(arch, fast_math))
+        except nvrtc.NVRTCError:
+            raise compile_error(nvrtc.getProgramLog(prog), source, module, kernel) from None
+        cubin = nvrtc.getCUBIN(prog) if arch.startswith("sm_") else b""
+        ptx = nvrtc.getPTX(prog)
+        if isinstance(ptx, bytes):
+            ptx = ptx.decode("utf-8", "replace")
+        return Binary(ptx.rstrip("\0"), bytes(cubin), nvrtc.getProgramLog(prog))
+    finally:
+        nvrtc.destroyProgram(prog)
+
+
+def compile_error(log: str, source: str, module: Module | None, kernel: str = "") -> KdslError:
+    """A ``KdslError`` for an NVRTC log: the first error, located in the Python source.
+
+    An error in a line mapped to the user's file gets that file and line (and, when
+    an op of ``module`` is on that line, its column and span); an error in kdsl's
+    own generated lines quotes the generated line.
+    """
+    first = None
+    for text in log.splitlines():
+        m = _LOG_LINE.match(text.strip())
+        if m and "error" in m["sev"]:
+            first = m
+            break
+    what = f"kernel '{kernel}'" if kernel else "a kernel"
+    if first is None:
+        return KdslError(f"NVRTC could not compile {what}:\n{log.strip()}")
+    file, line, msg = first["file"], int(first["line"]), first["msg"].strip()
+    head = f"NVRTC could not compile {what}: {msg}"
+    if file == UNIT_NAME:
+        lines = source.splitlines()
+        code = lines[line - 1].strip() if 0 < line <= len(lines) else "?"
+        return KdslError(f"{head}\n  in generated line {line} of {UNIT_NAME}: {code}")
+    return KdslError(head, _find_loc(module, file, line), kernel or None)
+
+
+def _find_loc(module: Module | None, file: str, line: int) -> Loc:
+    """The location of an op on ``file``:``line`` (for its column), else the line itself."""
+    if module is not None:
+        for op in module.walk():
+            loc = op.loc
+            if loc is not None and loc.file == file and loc.line == line and loc.col > 0:
+                return loc
+    return Loc(file, line, 1)

@@ -1,0 +1,198 @@
+"""The cpu launch path: packed arguments of every kind, prepared launches, threads."""
+
+import threading
+
+import numpy as np
+import pytest
+
+import kdsl as wp
+from kdsl.backends.cpu import pool
+from kdsl.backends.cpu.abi import ArgPacker
+from kdsl.ir import types as T
+
+
+@wp.kernel
+def every_scalar(
+    b: wp.bool,
+    i8: wp.int8,
+    u8: wp.uint8,
+    i16: wp.int16,
+    u16: wp.uint16,
+    i32: wp.int32,
+    u32: wp.uint32,
+    i64: wp.int64,
+    u64: wp.uint64,
+    f16: wp.float16,
+    f32: wp.float32,
+    f64: wp.float64,
+    ints: wp.array(dtype=wp.int64),
+    uints: wp.array(dtype=wp.uint64),
+    floats: wp.array(dtype=wp.float64),
+):
+    ints[0] = wp.int64(i8)
+    ints[1] = wp.int64(i16)
+    ints[2] = wp.int64(i32)
+    ints[3] = i64
+    ints[4] = wp.int64(0)
+    if b:
+        ints[4] = wp.int64(1)
+    uints[0] = wp.uint64(u8)
+    uints[1] = wp.uint64(u16)
+    uints[2] = wp.uint64(u32)
+    uints[3] = u64
+    floats[0] = wp.float64(f16)
+    floats[1] = wp.float64(f32)
+    floats[2] = f64
+
+
+SCALARS = [
+    True, np.int8(-7), np.uint8(250), np.int16(-30000), np.uint16(65000), -(2**31),
+    np.uint32(2**32 - 1), np.int64(-(2**62)), np.uint64(2**64 - 1), np.float16(1.5),
+    np.float32(-2.25), 1e300,
+]  # fmt: skip
+
+
+def _scalar_outputs():
+    return wp.zeros(5, dtype=wp.int64), wp.zeros(4, dtype=wp.uint64), wp.zeros(3, dtype=wp.float64)
+
+
+def _check_scalars(ints, uints, floats):
+    assert ints.numpy().tolist() == [-7, -30000, -(2**31), -(2**62), 1]
+    assert uints.numpy().tolist() == [250, 65000, 2**32 - 1, 2**64 - 1]
+    assert floats.numpy().tolist() == [1.5, -2.25, 1e300]
+
+
+def test_every_scalar_type_is_packed_exactly():
+    outs = _scalar_outputs()
+    wp.launch(every_scalar, 1, [*SCALARS, *outs], device="cpu")
+    _check_scalars(*outs)
+
+
+def test_every_scalar_type_through_a_prepared_launch():
+    outs = _scalar_outputs()
+    cmd = wp.launch(every_scalar, 1, [*SCALARS, *outs], device="cpu", record_cmd=True)
+    assert outs[0].numpy().tolist() == [0] * 5  # recorded, not run
+    cmd.launch()
+    _check_scalars(*outs)
+
+
+@wp.kernel
+def composite(
+    v: wp.vec3,
+    m: wp.mat22,
+    h: wp.vec3h,
+    x: wp.array2d(dtype=wp.vec3),
+    out: wp.array(dtype=float),
+):
+    out[0] = v[0] + v[1] * 10.0 + v[2] * 100.0
+    out[1] = m[0, 1] + m[1, 0] * 10.0
+    out[2] = float(h[2])
+    out[3] = x[1, 2][1]
+    out[4] = float(x.shape[1])
+
+
+def test_vectors_matrices_and_strided_arrays_are_packed():
+    base = np.arange(4 * 6 * 3, dtype=np.float32).reshape(4, 6, 3)
+    view = base[::2, ::2]  # a non-contiguous 2x3 view
+    x = wp.array(view, dtype=wp.vec3, copy=False)
+    out = wp.zeros(5, dtype=float)
+    wp.launch(
+        composite,
+        1,
+        [wp.vec3(1.0, 2.0, 3.0), wp.mat22(1.0, 2.0, 3.0, 4.0), wp.vec3h(0.0, 0.0, 0.5), x, out],
+    )
+    np.testing.assert_array_equal(out.numpy(), [321.0, 32.0, 0.5, view[1, 2, 1], 3.0])
+
+
+@wp.kernel
+def add_value(a: wp.array(dtype=float), value: float):
+    i = wp.tid()
+    a[i] = a[i] + value
+
+
+def test_prepared_launch_sees_changed_parameters_and_dims():
+    a = wp.zeros(8, dtype=float)
+    cmd = wp.launch(add_value, 8, [a, 1.0], record_cmd=True)
+    cmd.launch()
+    cmd.set_param_at_index(1, 2.0)
+    cmd.launch()
+    cmd.set_dim(4)
+    cmd.launch()
+    np.testing.assert_array_equal(a.numpy(), [5, 5, 5, 5, 3, 3, 3, 3])
+    b = wp.zeros(8, dtype=float)
+    cmd.set_param_by_name("a", b)
+    cmd.launch()
+    np.testing.assert_array_equal(b.numpy()[:5], [2, 2, 2, 2, 0])
+
+
+def test_changed_config_mode_recompiles_in_debug():
+    a = wp.zeros(4, dtype=float)
+    wp.launch(add_value, 4, [a, 1.0])
+    old = wp.config.mode
+    wp.config.mode = "debug"
+    try:
+        wp.launch(add_value, 4, [a, 1.0])  # must still work, through the checked build
+    finally:
+        wp.config.mode = old
+    np.testing.assert_array_equal(a.numpy(), [2, 2, 2, 2])
+
+
+def test_a_descriptor_follows_a_new_array_at_a_reused_address():
+    # The descriptor cache is keyed by buffer identity; a freed buffer's id may be reused.
+    for n in (3, 5, 7, 9):
+        a = wp.zeros(n, dtype=float)
+        wp.launch(add_value, n, [a, 1.0])
+        np.testing.assert_array_equal(a.numpy(), np.ones(n))
+        del a
+
+
+def test_launches_from_many_python_threads_at_once():
+    n = 1 << 14
+    arrays = [wp.zeros(n, dtype=float) for _ in range(8)]
+    errors = []
+    old = pool.min_parallel
+    pool.min_parallel = 1024  # make some launches go to the pool while others run inline
+
+    def work(a):
+        try:
+            for _ in range(20):
+                wp.launch(add_value, n, [a, 1.0])
+        except Exception as e:  # pragma: no cover - reported below
+            errors.append(e)
+
+    threads = [threading.Thread(target=work, args=(a,)) for a in arrays]
+    try:
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
+    finally:
+        pool.min_parallel = old
+    assert not errors
+    for a in arrays:
+        np.testing.assert_array_equal(a.numpy(), np.full(n, 20.0, dtype=np.float32))
+
+
+def test_packer_refuses_structs_and_layout_is_aligned():
+    s = T.StructType("S", (("a", T.F32),))
+    assert not ArgPacker([s]).supported
+    p = ArgPacker([T.F32, T.ArrayType(T.F32, 2), T.VectorType(3, T.F64)])
+    assert p.supported
+    assert all(off % 16 == 0 for off in p.offsets)
+    assert p.offsets[0] >= 8 * 3
+
+
+def test_set_num_threads_restarts_the_pool():
+    a = wp.zeros(1 << 13, dtype=float)
+    old_threads, old_min = pool.num_threads(), pool.min_parallel
+    pool.min_parallel = 1
+    try:
+        for n in (3, 1, 2):
+            pool.set_num_threads(n)
+            wp.launch(add_value, a.shape[0], [a, 1.0])
+    finally:
+        pool.set_num_threads(old_threads)
+        pool.min_parallel = old_min
+    np.testing.assert_array_equal(a.numpy(), np.full(a.shape[0], 3.0, dtype=np.float32))
+    with pytest.raises(ValueError):
+        pool.set_num_threads(0)
