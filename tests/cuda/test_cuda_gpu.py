@@ -134,3 +134,31 @@ def test_fast_math_kernel_runs():
     x, y = _arr([1.0, 2.0, 4.0]), _arr(np.zeros(3))
     wp.launch(fast_div, dim=3, inputs=[x, y], device=DEVICE, backend="cuda")
     np.testing.assert_allclose(y.numpy(), [1.0, 0.5, 0.25], rtol=1e-6)
+
+
+@wp.kernel
+def add_value(a: wp.array(dtype=float), value: float):
+    i = wp.tid()
+    a[i] = a[i] + value
+
+
+def test_prepared_launch_reruns_and_sees_new_parameters():
+    a = wp.zeros(1000, dtype=float, device=DEVICE)
+    cmd = wp.launch(add_value, 1000, [a, 1.0], device=DEVICE, record_cmd=True)
+    cmd.launch()
+    cmd.launch()
+    cmd.set_param_at_index(1, 0.5)
+    cmd.set_dim(10)
+    cmd.launch()
+    want = np.full(1000, 2.0, dtype=np.float32)
+    want[:10] += 0.5
+    np.testing.assert_array_equal(a.numpy(), want)
+
+
+def test_launches_on_a_user_stream_are_ordered():
+    s = wp.Stream(DEVICE)
+    a = wp.zeros(1 << 20, dtype=float, device=DEVICE)
+    with wp.ScopedStream(s):
+        for _ in range(10):
+            wp.launch(add_value, a.shape[0], [a, 1.0], device=DEVICE)
+    np.testing.assert_array_equal(a.numpy(), np.full(a.shape[0], 10.0, dtype=np.float32))

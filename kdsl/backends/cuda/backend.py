@@ -6,9 +6,10 @@ PTX or launched, so ``import kdsl`` and listing backends work without it.
 
 from __future__ import annotations
 
+import ctypes
 import functools
 import hashlib
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -200,7 +201,7 @@ class CudaBackend(Backend):
         ordinal, raw = _stream_of(stream)
         fn = k.function(ordinal)
         grid = (total, *dims, *([1] * (4 - len(dims))))
-        from cupy_backends.cuda.api import driver, runtime
+        driver, runtime = _cuda_api()
 
         record = None
         if k.sites is not None:
@@ -213,12 +214,8 @@ class CudaBackend(Backend):
             args, ordinal, grid, None if record is None else record.data.ptr
         )
         blocks = (total + BLOCK - 1) // BLOCK
-        import ctypes
-
-        import cupy
-
-        with cupy.cuda.Device(ordinal):
-            driver.launchKernel(fn, blocks, 1, 1, BLOCK, 1, 1, 0, raw, ctypes.addressof(params), 0)
+        _on_device(ordinal, driver.launchKernel, fn, blocks, 1, 1, BLOCK, 1, 1, 0, raw,
+                   ctypes.addressof(params), 0)  # fmt: skip
         del buf
         if record is not None:
             host = checks_common.new_record()
@@ -227,6 +224,67 @@ class CudaBackend(Backend):
             )
             runtime.streamSynchronize(raw)
             checks_common.raise_for_record(host, k.sites, name, compiled.symbol, dims)
+
+    def prepare(
+        self,
+        compiled: CompiledKernel,
+        dims: tuple[int, ...],
+        args: Sequence[Any],
+        stream: Any = None,
+    ) -> Callable[[], None]:
+        """A launch packed once: calling it is one ``cuLaunchKernel`` (release builds)."""
+        k: CudaKernel = compiled.payload
+        if k.sites is not None:  # a checked build needs a fresh error record each time
+            return super().prepare(compiled, dims, args, stream)
+        args = list(args)
+        total = 1
+        for d in dims:
+            total *= int(d)
+        if (
+            total == 0
+            or total > _MAX_THREADS
+            or any(nd not in (1, len(dims)) for nd in k.tid_ndims)
+        ):
+            return lambda: self.launch(compiled, dims, args, stream)  # launch() reports it
+        ordinal, raw = _stream_of(stream)
+        fn = k.function(ordinal)
+        grid = (total, *dims, *([1] * (4 - len(dims))))
+        buf, params = k.packer.pack(args, ordinal, grid)
+        blocks = (total + BLOCK - 1) // BLOCK
+        driver, _ = _cuda_api()
+        launch_kernel, addr = driver.launchKernel, ctypes.addressof(params)
+
+        def run() -> None:
+            _on_device(ordinal, launch_kernel, fn, blocks, 1, 1, BLOCK, 1, 1, 0, raw, addr, 0)
+
+        run.keep = (buf, params, args)  # type: ignore[attr-defined]
+        return run
+
+
+_API: tuple[Any, Any] | None = None
+
+
+def _cuda_api() -> tuple[Any, Any]:
+    """CuPy's driver and runtime bindings, imported on first use (not at ``import kdsl``)."""
+    global _API
+    if _API is None:
+        from cupy_backends.cuda.api import driver, runtime
+
+        _API = (driver, runtime)
+    return _API
+
+
+def _on_device(ordinal: int, fn: Callable[..., Any], *args: Any) -> Any:
+    """``fn(*args)`` with CUDA device ``ordinal`` current (switching only when needed)."""
+    runtime = _cuda_api()[1]
+    current = runtime.getDevice()
+    if current == ordinal:
+        return fn(*args)
+    runtime.setDevice(ordinal)
+    try:
+        return fn(*args)
+    finally:
+        runtime.setDevice(current)
 
 
 def _stream_of(stream: Any) -> tuple[int, int]:
