@@ -196,3 +196,36 @@ def test_set_num_threads_restarts_the_pool():
     np.testing.assert_array_equal(a.numpy(), np.full(a.shape[0], 3.0, dtype=np.float32))
     with pytest.raises(ValueError):
         pool.set_num_threads(0)
+
+
+@wp.kernel
+def index_2d(out: wp.array2d(dtype=wp.int32)):
+    i, j = wp.tid()
+    out[i, j] = i * 1000 + j
+
+
+@wp.kernel
+def index_4d(out: wp.array4d(dtype=wp.int32)):
+    i, j, k, m = wp.tid()
+    out[i, j, k, m] = ((i * 10 + j) * 10 + k) * 10 + m
+
+
+@pytest.mark.parametrize("threads", [1, 3, 7])
+def test_nd_launches_split_mid_row_cover_every_index_once(threads):
+    # Chunks of the linear range start and end inside rows; every index must be
+    # visited exactly once, with the right components.
+    old_threads, old_min = pool.num_threads(), pool.min_parallel
+    pool.set_num_threads(threads)
+    pool.min_parallel = 1
+    try:
+        out2 = wp.full((5, 7), -1, dtype=wp.int32)
+        wp.launch(index_2d, (5, 7), [out2])
+        out4 = wp.full((2, 3, 4, 5), -1, dtype=wp.int32)
+        wp.launch(index_4d, (2, 3, 4, 5), [out4])
+    finally:
+        pool.set_num_threads(old_threads)
+        pool.min_parallel = old_min
+    i, j = np.indices((5, 7))
+    np.testing.assert_array_equal(out2.numpy(), i * 1000 + j)
+    i, j, k, m = np.indices((2, 3, 4, 5))
+    np.testing.assert_array_equal(out4.numpy(), ((i * 10 + j) * 10 + k) * 10 + m)

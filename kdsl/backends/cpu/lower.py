@@ -15,15 +15,18 @@ it as an extra last parameter.
 
 from __future__ import annotations
 
+from typing import Any
+
 from llvmlite import ir
 
 from kdsl.backends.cpu import types as LT
+from kdsl.backends.cpu.composite import Parts, leaf_types, leaves, rebuild_all
 from kdsl.backends.cpu.emitter import Emitter, ModuleState
 from kdsl.backends.cpu.memory import load_value
 from kdsl.backends.cpu.ops import TABLE
 from kdsl.errors import KdslCapabilityError
 from kdsl.ir import types as T
-from kdsl.ir.core import Module, Operation
+from kdsl.ir.core import Block, Module, Operation
 
 KERNEL_TYPE = ir.FunctionType(LT.VOID, [LT.I64, LT.I64, LT.PTR, LT.PTR])
 
@@ -43,19 +46,19 @@ def new_module(module: Module, name: str = "kdsl") -> ModuleState:
     return ModuleState(ir.Module(name=name), module, TABLE)
 
 
-def _load_param(em: Emitter, ptr: ir.Value, t: T.Type) -> ir.Value:
+def _load_param(em: Emitter, ptr: ir.Value, t: T.Type) -> Any:
+    """Load a kernel parameter of type ``t`` from ``ptr`` (vectors and structs as ``Parts``)."""
     B = em.b
     if isinstance(t, T.ArrayType):
         if isinstance(t.dtype, T.StructType):
             raise KdslCapabilityError(f"arrays of {t.dtype} are not supported by the cpu backend")
         return B.load(ptr, typ=LT.descriptor_type(t.ndim), align=8)
     if isinstance(t, T.StructType):
-        out = ir.Constant(LT.llvm_type(t), ir.Undefined)
+        fields = []
         for i, (_, ft) in enumerate(t.fields):
             slot = B.gep(ptr, [ir.Constant(LT.I64, i)], inbounds=True, source_etype=LT.PTR)
-            field = _load_param(em, B.load(slot, typ=LT.PTR, align=8), ft)
-            out = B.insert_value(out, field, i)
-        return out
+            fields.append(_load_param(em, B.load(slot, typ=LT.PTR, align=8), ft))
+        return Parts(fields)
     if isinstance(t, T.HandleType):
         return B.load(ptr, typ=LT.I64, align=8)
     return load_value(em, ptr, t)
@@ -85,38 +88,106 @@ def emit_kernel(state: ModuleState, func: Operation, llname: str) -> ir.Function
     for d in range(nds[0] if nds else 0):
         p = B.gep(dims, [ir.Constant(LT.I64, d)], inbounds=True, source_etype=LT.I64)
         extents.append(B.load(p, typ=LT.I64, align=8))
+    if extents:
+        _row_loops(em, body_block, params, start, end, extents)
+    else:
+        _flat_loop(em, body_block, params, start, end)
+    return fn
+
+
+def _flat_loop(em: Emitter, body: Block, params: list, start: ir.Value, end: ir.Value) -> None:
+    """The thread loop of a kernel with a 1-d index: one counted loop over ``[start, end)``."""
+    B, fn = em.b, em.fn
+    entry = B.block
     # The loop counts in i32 (tid is i32) with no-wrap adds, so LLVM sees a simple
     # induction variable; launches are limited to 2**31 threads.
     lo, hi = B.trunc(start, LT.I32), B.trunc(end, LT.I32)
-    head, body, done = (fn.append_basic_block(n) for n in ("thread.head", "thread.body", "exit"))
+    head, body_bb, done = (fn.append_basic_block(n) for n in ("thread.head", "thread.body", "exit"))
     B.branch(head)
     B.position_at_end(head)
     i = B.phi(LT.I32, name="tid")
     i.add_incoming(lo, entry)
-    B.cbranch(B.icmp_signed("<", i, hi), body, done)
-    B.position_at_end(body)
+    B.cbranch(B.icmp_signed("<", i, hi), body_bb, done)
+    B.position_at_end(body_bb)
     em.linear = i
-    em.index = _split_index(em, i, extents)
-    if state.debug:  # a failed check ends its thread by branching here
+    em.index = []
+    _thread_body(em, body, params, i, head)
+    B.position_at_end(done)
+    B.ret_void()
+
+
+def _row_loops(
+    em: Emitter, body: Block, params: list, start: ir.Value, end: ir.Value, extents: list
+) -> None:
+    """The thread loop of a kernel with an n-d index: rows of the last dimension.
+
+    The linear range ``[start, end)`` is walked one row at a time: the outer
+    components are split from the row number once per row, and the inner loop
+    counts the last component directly. So a stencil's inner loop is a plain
+    counted loop with no division per thread, which LLVM can vectorize.
+    """
+    B, fn = em.b, em.fn
+    entry = B.block
+    inner = extents[-1]
+    row0, col0 = B.udiv(start, inner), B.urem(start, inner)
+    names = ("row.head", "row.body", "col.head", "col.body", "row.next", "exit")
+    row_head, row_body, col_head, col_body, row_next, done = (
+        fn.append_basic_block(n) for n in names
+    )
+    B.branch(row_head)
+    B.position_at_end(row_head)
+    row = B.phi(LT.I64, name="row")
+    first = B.phi(LT.I64, name="col.first")
+    row.add_incoming(row0, entry)
+    first.add_incoming(col0, entry)
+    row_base = B.mul(row, inner, flags=["nuw", "nsw"])
+    B.cbranch(B.icmp_signed("<", B.add(row_base, first), end), row_body, done)
+    B.position_at_end(row_body)
+    left = B.sub(end, row_base)
+    last = B.select(B.icmp_signed("<", left, inner), left, inner)
+    outer = _split_index(em, row, extents[:-1])
+    base32 = B.trunc(row_base, LT.I32)
+    lo, hi = B.trunc(first, LT.I32), B.trunc(last, LT.I32)
+    B.branch(col_head)
+    B.position_at_end(col_head)
+    col = B.phi(LT.I32, name="tid.col")
+    col.add_incoming(lo, row_body)
+    B.cbranch(B.icmp_signed("<", col, hi), col_body, row_next)
+    B.position_at_end(col_body)
+    em.linear = B.add(base32, col, flags=["nsw"])
+    em.index = [*outer, col]
+    _thread_body(em, body, params, col, col_head)
+    B.position_at_end(row_next)
+    row.add_incoming(B.add(row, ir.Constant(LT.I64, 1), flags=["nuw", "nsw"]), row_next)
+    first.add_incoming(ir.Constant(LT.I64, 0), row_next)
+    B.branch(row_head)
+    B.position_at_end(done)
+    B.ret_void()
+
+
+def _thread_body(
+    em: Emitter, body: Block, params: list, counter: ir.PhiInstr, head: ir.Block
+) -> None:
+    """One thread's code, then the step of ``counter`` and the branch back to ``head``."""
+    B, fn = em.b, em.fn
+    if em.state.debug:  # a failed check ends its thread by branching here
         em.abort_block = fn.append_basic_block("thread.abort")
-    em.lower_block(body_block, params)
-    i.add_incoming(B.add(i, ir.Constant(LT.I32, 1), flags=["nsw"]), B.block)
+    em.lower_block(body, params)
+    counter.add_incoming(B.add(counter, ir.Constant(LT.I32, 1), flags=["nsw"]), B.block)
     B.branch(head)
     if em.abort_block is not None:
         B.position_at_end(em.abort_block)
-        i.add_incoming(B.add(i, ir.Constant(LT.I32, 1), flags=["nsw"]), em.abort_block)
+        step = B.add(counter, ir.Constant(LT.I32, 1), flags=["nsw"])
+        counter.add_incoming(step, em.abort_block)
         B.branch(head)
-    B.position_at_end(done)
-    B.ret_void()
-    return fn
 
 
 def _split_index(em: Emitter, linear: ir.Value, extents: list[ir.Value]) -> list[ir.Value]:
-    """Row-major n-d index components (i32) of a linear thread index."""
+    """Row-major n-d index components (i32) of an i64 linear index over ``extents``."""
     if not extents:
         return []
     B = em.b
-    rest = B.zext(linear, LT.I64)
+    rest = linear
     out = []
     for ext in reversed(extents[1:]):
         out.append(B.trunc(B.urem(rest, ext), LT.I32))
@@ -134,9 +205,10 @@ def declare_func(state: ModuleState, name: str) -> ir.Function:
         raise KdslCapabilityError(f"call to unknown function '{name}'")
     func = state.module.get_func(name)
     body = func.regions[0].block
-    res = [LT.llvm_type(t) for t in func.attrs.get("res_types", [])]
+    # Vector, matrix and struct values cross the call as their leaves (``composite``).
+    res = [lt for t in func.attrs.get("res_types", []) for lt in leaf_types(t)]
     ret = LT.VOID if not res else res[0] if len(res) == 1 else ir.LiteralStructType(res)
-    params = [LT.llvm_type(a.type) for a in body.args]
+    params = [lt for a in body.args for lt in leaf_types(a.type)]
     fnty = ir.FunctionType(ret, params + [LT.PTR] if state.debug else params)
     fn = ir.Function(state.llmod, fnty, f"kdsl_func_{name}")
     fn.linkage = "internal"
@@ -145,7 +217,8 @@ def declare_func(state: ModuleState, name: str) -> ir.Function:
     em.b.position_at_end(fn.append_basic_block("entry"))
     if state.debug:
         em.error_record = fn.args[-1]
-    out = em.lower_block(body, list(fn.args)[: len(params)])
+    args = rebuild_all([a.type for a in body.args], list(fn.args)[: len(params)])
+    out = [leaf for v in em.lower_block(body, args) for leaf in leaves(v)]
     if not res:
         em.b.ret_void()
     elif len(res) == 1:
