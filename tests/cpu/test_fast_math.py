@@ -72,8 +72,11 @@ def test_unoptimized_ir_has_the_flags() -> None:
     for _, flags, _ in ops:
         assert set(flags.split()) == set(FAST_MATH_FLAGS), flags
     assert '"no-signed-zeros-fp-math"="true"' in text
-    (sqrt,) = [ln for ln in text.splitlines() if '@"llvm.sqrt' in ln and "call" in ln]
-    assert set(FAST_MATH_FLAGS) <= set(sqrt.split())
+    # One sqrt per copy of the j loop (dense and strided, see ``versioning``).
+    sqrts = [ln for ln in text.splitlines() if '@"llvm.sqrt' in ln and "call" in ln]
+    assert len(sqrts) == 2
+    for sqrt in sqrts:
+        assert set(FAST_MATH_FLAGS) <= set(sqrt.split())
 
 
 def test_default_build_has_no_fast_flags() -> None:
@@ -98,3 +101,26 @@ def test_option_keys_the_cache(cpu_backend) -> None:
     a = BACKEND.compile(ieee.build_module(), ieee.key, {"fast_math": True})
     b = BACKEND.compile(ieee.build_module(), ieee.key, {})
     assert a.metadata["cache_key"] != b.metadata["cache_key"]
+
+
+_WIDE_FLOAT_OP = re.compile(r"= (fmul|fadd|fsub) [a-z ]*<(4|8|16) x float>")
+
+
+def test_fast_math_vec3_loop_is_vectorized() -> None:
+    # vec3 values are scalarized and the dense copy of the j loop has constant strides,
+    # so LLVM's loop vectorizer widens the n-body sum over j: wide float ops in a loop
+    # whose header carries vector phis (the lanes of the split reduction).
+    text = _ir(fast, "llvm-ir", {"fast_math": True})
+    blocks = re.split(r"\n(?=[\w.]+:)", text)
+    loops = [b for b in blocks if re.search(r"phi <(4|8|16) x float>", b)]
+    assert loops, "no vectorized reduction loop"
+    assert any(len(_WIDE_FLOAT_OP.findall(b)) >= 6 for b in loops)
+    assert not re.search(r"<3 x float>", text)
+
+
+def test_ieee_build_keeps_vec3_scalar_order() -> None:
+    # Without reassoc the j sum stays sequential (results stay bit-identical), but no
+    # LLVM vector of a vec3's three components is left either.
+    text = _ir(ieee, "llvm-ir-unopt")
+    assert "<3 x float>" not in text
+    assert re.search(r"= fadd float", text)

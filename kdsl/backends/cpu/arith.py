@@ -3,16 +3,20 @@
 Integer division never traps: a zero divisor (and ``MIN / -1``) is replaced
 with a safe one under a ``select``, and the result picked afterwards. float16
 arithmetic is done in float32 and rounded back after each op, as NumPy does.
+Vector and matrix operands are ``composite.Parts``: every op is applied per
+component (``em.map``), so the emitters below only ever see scalars.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 from llvmlite import ir
 
 from kdsl.backends.cpu import types as LT
+from kdsl.backends.cpu.composite import Parts, leaves, rebuild
 from kdsl.backends.cpu.emitter import Emitter, Lowering
 from kdsl.ir import semantics as sem
 from kdsl.ir import types as T
@@ -21,21 +25,15 @@ from kdsl.ir.core import Operation
 _HALF = ir.HalfType()
 
 
-def widen_half(em: Emitter, et: T.ScalarType, fn: Callable[..., ir.Value], *vals: ir.Value):
-    """``fn(*vals)``, computed in float32 and rounded back when ``et`` is float16."""
+def widen_half(em: Emitter, et: T.ScalarType, fn: Callable[..., Any], *vals: Any):
+    """``fn(*vals)``, computed in float32 and rounded back when ``et`` is float16.
+
+    ``vals`` and the result may be scalars or ``Parts``; each component is widened.
+    """
     if not (et.is_float and et.bits == 16):
         return fn(*vals)
-    wide = [em.b.fpext(v, LT.with_lanes(LT.F32, v.type)) for v in vals]
-    r = fn(*wide)
-    return em.b.fptrunc(r, LT.with_lanes(_HALF, r.type))
-
-
-def _operands(em: Emitter, op: Operation) -> tuple[ir.Value, ir.Value, T.ScalarType]:
-    """Both operands, scalars broadcast to the result's vector type, and the element type."""
-    rt = op.results[0].type
-    like = LT.llvm_type(rt)
-    a, b = em.args(op)
-    return em.splat(a, like), em.splat(b, like), T.elem_type(rt)
+    wide = [em.map(lambda x: em.b.fpext(x, LT.F32), v) for v in vals]
+    return em.map(lambda x: em.b.fptrunc(x, _HALF), fn(*wide))
 
 
 def binary(int_fn: Callable | None, float_fn: Callable | None) -> Lowering:
@@ -44,11 +42,14 @@ def binary(int_fn: Callable | None, float_fn: Callable | None) -> Lowering:
     Each emitter is ``fn(em, et, a, b)``; float16 is widened around ``float_fn``.
     """
 
-    def lower(em: Emitter, op: Operation) -> ir.Value:
-        a, b, et = _operands(em, op)
+    def scalar(em: Emitter, et: T.ScalarType, a: ir.Value, b: ir.Value) -> ir.Value:
         if et.is_float:
             return widen_half(em, et, lambda x, y: float_fn(em, et, x, y), a, b)
         return int_fn(em, et, a, b)
+
+    def lower(em: Emitter, op: Operation) -> Any:
+        et = T.elem_type(op.results[0].type)
+        return em.map(lambda a, b: scalar(em, et, a, b), *em.args(op))
 
     return lower
 
@@ -107,7 +108,7 @@ def int_mod(em: Emitter, et: T.ScalarType, a: ir.Value, b: ir.Value) -> ir.Value
 def float_floordiv(em: Emitter, et: T.ScalarType, a: ir.Value, b: ir.Value) -> ir.Value:
     q = em.b.fdiv(a, b)
     if et.bits == 16:  # NumPy rounds the quotient to float16 before flooring
-        q = em.b.fpext(em.b.fptrunc(q, LT.with_lanes(_HALF, q.type)), q.type)
+        q = em.b.fpext(em.b.fptrunc(q, _HALF), q.type)
     return em.call_intrinsic("llvm.floor", q)
 
 
@@ -153,17 +154,15 @@ def _constant(em: Emitter, op: Operation) -> ir.Value:
     return ir.Constant(lt, int(np.asarray(v).astype(f"i{t.bits // 8}")))
 
 
-def _neg(em: Emitter, op: Operation) -> ir.Value:
+def _neg(em: Emitter, op: Operation) -> Any:
     (a,) = em.args(op)
     et = T.elem_type(op.results[0].type)
-    if et.is_float:
-        return em.b.fneg(a)
-    return em.b.neg(a)
+    return em.map(em.b.fneg if et.is_float else em.b.neg, a)
 
 
-def _not(em: Emitter, op: Operation) -> ir.Value:
+def _not(em: Emitter, op: Operation) -> Any:
     (a,) = em.args(op)
-    return em.b.not_(a)
+    return em.map(em.b.not_, a)
 
 
 _PRED = {"eq": "==", "ne": "!=", "lt": "<", "le": "<=", "gt": ">", "ge": ">="}
@@ -184,18 +183,21 @@ def _cmp(em: Emitter, op: Operation) -> ir.Value:
     a, b = em.args(op)
     pred = op.attrs["pred"]
     et = T.elem_type(op.operands[0].type)
-    r = compare(em, et, pred, a, b)
-    if isinstance(r.type, ir.VectorType):  # whole-value eq / ne
-        which = "llvm.vector.reduce.and" if pred == "eq" else "llvm.vector.reduce.or"
-        fn = em.intrinsic(which, [r.type], LT.I1, [r.type])
-        return em.b.call(fn, [r])
-    return r
+    r = em.map(lambda x, y: compare(em, et, pred, x, y), a, b)
+    if not isinstance(r, Parts):
+        return r
+    # Whole-value eq (all components equal) / ne (any component differs).
+    join = em.b.and_ if pred == "eq" else em.b.or_
+    out = r[0]
+    for x in r.items[1:]:
+        out = join(out, x)
+    return out
 
 
 def cast(em: Emitter, a: ir.Value, src: T.ScalarType, dst: T.ScalarType) -> ir.Value:
-    """Convert ``a`` (scalar or vector) from ``src`` to ``dst`` with kdsl's rules."""
+    """Convert the scalar ``a`` from ``src`` to ``dst`` with kdsl's rules."""
     B = em.b
-    to = LT.with_lanes(LT.scalar_type(dst), a.type)
+    to = LT.scalar_type(dst)
     if src == dst:
         return a
     if dst.is_bool:
@@ -209,7 +211,7 @@ def cast(em: Emitter, a: ir.Value, src: T.ScalarType, dst: T.ScalarType) -> ir.V
         return B.fpext(a, to) if dst.bits > src.bits else B.fptrunc(a, to)
     if src.is_float:
         if src.bits == 16:
-            a = B.fpext(a, LT.with_lanes(LT.F32, a.type))
+            a = B.fpext(a, LT.F32)
         name = "llvm.fptosi.sat" if dst.is_signed else "llvm.fptoui.sat"
         return B.call(em.intrinsic(name, [to, a.type], to, [a.type]), [a])
     if dst.is_float:
@@ -221,14 +223,16 @@ def cast(em: Emitter, a: ir.Value, src: T.ScalarType, dst: T.ScalarType) -> ir.V
     return a  # same width, other signedness: same bits
 
 
-def _cast(em: Emitter, op: Operation) -> ir.Value:
+def _cast(em: Emitter, op: Operation) -> Any:
     (a,) = em.args(op)
-    return cast(em, a, T.elem_type(op.operands[0].type), T.elem_type(op.results[0].type))
+    src, dst = T.elem_type(op.operands[0].type), T.elem_type(op.results[0].type)
+    return em.map(lambda x: cast(em, x, src, dst), a)
 
 
-def _select(em: Emitter, op: Operation) -> ir.Value:
+def _select(em: Emitter, op: Operation) -> Any:
     c, a, b = em.args(op)
-    return em.b.select(c, a, b)
+    picked = (em.b.select(c, x, y) for x, y in zip(leaves(a), leaves(b)))
+    return rebuild(op.results[0].type, picked)
 
 
 def _method(name: str) -> Callable:

@@ -45,6 +45,7 @@ from kdsl.backends.checks_common import (  # noqa: F401 - re-exported for the cp
     raise_for_record,
 )
 from kdsl.backends.cpu import types as LT
+from kdsl.backends.cpu.composite import components
 from kdsl.backends.cpu.emitter import Emitter, Lowering
 from kdsl.errors import KdslCapabilityError
 from kdsl.ir import types as T
@@ -145,22 +146,24 @@ def _check_bounds(em: Emitter, op: Operation) -> None:
     B.position_at_end(cont)
 
 
-def _any_lane(em: Emitter, v: ir.Value) -> ir.Value:
-    if not isinstance(v.type, ir.VectorType):
-        return v
-    out = em.b.extract_element(v, ir.Constant(LT.I32, 0))
-    for j in range(1, v.type.count):
-        out = em.b.or_(out, em.b.extract_element(v, ir.Constant(LT.I32, j)))
+def _any(em: Emitter, flags: list[ir.Value]) -> ir.Value:
+    out = flags[0]
+    for f in flags[1:]:
+        out = em.b.or_(out, f)
     return out
 
 
 def _check_finite(em: Emitter, op: Operation) -> None:
     _record(em, op)
     B = em.b
-    v = em.get(op.operands[0])
-    nan = _any_lane(em, B.fcmp_unordered("uno", v, v))
-    inf = _any_lane(
-        em, B.fcmp_ordered("==", em.call_intrinsic("llvm.fabs", v), em.const(v.type, float("inf")))
+    comps = components(em.get(op.operands[0]))
+    nan = _any(em, [B.fcmp_unordered("uno", x, x) for x in comps])
+    inf = _any(
+        em,
+        [
+            B.fcmp_ordered("==", em.call_intrinsic("llvm.fabs", x), em.const(x.type, float("inf")))
+            for x in comps
+        ],
     )
     fail, write, cont = (em.new_block(n) for n in ("finite.fail", "finite.write", "finite.ok"))
     B.cbranch(B.or_(nan, inf), fail, cont).set_weights([1, 1000])

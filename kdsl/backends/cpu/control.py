@@ -2,21 +2,26 @@
 
 ``scf.if`` becomes a diamond, ``scf.for`` and ``scf.while`` a header block whose
 phis carry the loop values. Callees of ``func.call`` become internal LLVM
-functions of the same module (after inlining there usually are none).
+functions of the same module (after inlining there usually are none). Vector,
+matrix and struct values cross phis and calls as their leaves (``composite``):
+one phi per scalar component, one parameter per component.
 """
 
 from __future__ import annotations
 
+from typing import Any
+
 from llvmlite import ir
 
-from kdsl.backends.cpu import checks
-from kdsl.backends.cpu import types as LT
+from kdsl.backends.cpu import checks, versioning
+from kdsl.backends.cpu.composite import leaf_types, leaves, rebuild_all
 from kdsl.backends.cpu.emitter import Emitter, Lowering
 from kdsl.ir import types as T
 from kdsl.ir.core import Operation
 
 
-def _phis(em: Emitter, values: list[ir.Value], pred: ir.Block, name: str) -> list[ir.Instruction]:
+def _phis(em: Emitter, values: list[Any], pred: ir.Block, name: str) -> list[ir.Instruction]:
+    """One phi per leaf of ``values`` (see ``composite``), entered from ``pred``."""
     phis = []
     for v in values:
         phi = em.b.phi(v.type, name=name)
@@ -25,7 +30,16 @@ def _phis(em: Emitter, values: list[ir.Value], pred: ir.Block, name: str) -> lis
     return phis
 
 
-def _if(em: Emitter, op: Operation) -> list[ir.Value]:
+def _add_incoming(phis: list[ir.Instruction], values: list[Any], pred: ir.Block) -> None:
+    for phi, v in zip(phis, _flat(values)):
+        phi.add_incoming(v, pred)
+
+
+def _flat(values: list[Any]) -> list[ir.Value]:
+    return [leaf for v in values for leaf in leaves(v)]
+
+
+def _if(em: Emitter, op: Operation) -> list[Any]:
     B = em.b
     then_bb, else_bb, merge_bb = (
         em.new_block("if.then"),
@@ -36,28 +50,37 @@ def _if(em: Emitter, op: Operation) -> list[ir.Value]:
     incoming = []
     for bb, region in ((then_bb, op.regions[0]), (else_bb, op.regions[1])):
         B.position_at_end(bb)
-        vals = em.lower_block(region.block)
+        vals = _flat(em.lower_block(region.block))
         incoming.append((vals, B.block))
         B.branch(merge_bb)
     B.position_at_end(merge_bb)
-    results = []
-    for i, r in enumerate(op.results):
-        phi = B.phi(LT.llvm_type(r.type), name="if.val")
-        for vals, bb in incoming:
-            phi.add_incoming(vals[i], bb)
-        results.append(phi)
-    return results
+    types = [lt for r in op.results for lt in leaf_types(r.type)]
+    phis = [B.phi(lt, name="if.val") for lt in types]
+    for vals, bb in incoming:
+        _add_incoming(phis, vals, bb)
+    return rebuild_all([r.type for r in op.results], phis)
 
 
-def _for(em: Emitter, op: Operation) -> list[ir.Value]:
+def _for(em: Emitter, op: Operation) -> list[Any]:
+    arrays = versioning.arrays_to_version(op)
+    if not arrays:
+        return _emit_for(em, op)
+    types = [r.type for r in op.results]
+    return versioning.versioned(em, arrays, lambda: _emit_for(em, op), types)
+
+
+def _emit_for(em: Emitter, op: Operation) -> list[Any]:
     B = em.b
     lb, ub, step, *init = em.args(op)
     it: T.ScalarType = op.operands[0].type
+    types = [r.type for r in op.results]
     entry = B.block
     head, body, done = em.new_block("for.head"), em.new_block("for.body"), em.new_block("for.end")
     B.branch(head)
     B.position_at_end(head)
-    iv, *carried = _phis(em, [lb, *init], entry, "for.iv")
+    (iv,) = _phis(em, [lb], entry, "for.iv")
+    phis = _phis(em, _flat(init), entry, "for.val")
+    carried = rebuild_all(types, phis)
     zero = em.const(step.type, 0)
     lt = B.icmp_signed("<", iv, ub) if it.is_signed else B.icmp_unsigned("<", iv, ub)
     if it.is_signed:  # a negative step counts down, a zero step runs nothing
@@ -72,14 +95,13 @@ def _for(em: Emitter, op: Operation) -> list[ir.Value]:
     nxt = em.lower_block(op.regions[0].block, [iv, *carried])
     latch = B.block
     iv.add_incoming(B.add(iv, step), latch)
-    for phi, v in zip(carried, nxt):
-        phi.add_incoming(v, latch)
+    _add_incoming(phis, nxt, latch)
     B.branch(head)
     B.position_at_end(done)
     return carried
 
 
-def _while(em: Emitter, op: Operation) -> list[ir.Value]:
+def _while(em: Emitter, op: Operation) -> list[Any]:
     B = em.b
     entry = B.block
     head, after, done = (
@@ -89,32 +111,34 @@ def _while(em: Emitter, op: Operation) -> list[ir.Value]:
     )
     B.branch(head)
     B.position_at_end(head)
-    carried = _phis(em, em.args(op), entry, "while.val")
+    phis = _phis(em, _flat(em.args(op)), entry, "while.val")
+    carried = rebuild_all([v.type for v in op.operands], phis)
     cond, *passed = em.lower_block(op.regions[0].block, carried)
     B.cbranch(cond, after, done)
     B.position_at_end(after)
     nxt = em.lower_block(op.regions[1].block, passed)
-    for phi, v in zip(carried, nxt):
-        phi.add_incoming(v, B.block)
+    _add_incoming(phis, nxt, B.block)
     B.branch(head)
     B.position_at_end(done)
     return passed
 
 
-def _call(em: Emitter, op: Operation) -> list[ir.Value]:
+def _call(em: Emitter, op: Operation) -> list[Any]:
     from kdsl.backends.cpu.lower import declare_func  # lower imports the table
 
     fn = declare_func(em.state, op.attrs["callee"])
-    args = em.args(op)
+    args = _flat(em.args(op))
     if em.error_record is not None:  # debug build: pass the record on, stop if it failed
         args.append(em.error_record)
     out = em.b.call(fn, args)
     checks.stop_if_failed(em)
-    if not op.results:
-        return []
-    if len(op.results) == 1:
-        return [out]
-    return [em.b.extract_value(out, i) for i in range(len(op.results))]
+    types = [r.type for r in op.results]
+    n = sum(len(leaf_types(t)) for t in types)
+    if n == 0:
+        return rebuild_all(types, [])
+    if n == 1:
+        return rebuild_all(types, [out])
+    return rebuild_all(types, [em.b.extract_value(out, i) for i in range(n)])
 
 
 TABLE: dict[str, Lowering] = {

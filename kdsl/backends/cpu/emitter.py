@@ -3,7 +3,9 @@
 Each entry of the lowering table (``ops.TABLE``) is ``fn(em, op)`` and returns the
 LLVM values of ``op``'s results (a list, one value, or None). It reads operands
 through ``em.get`` and emits through ``em.b``; nested regions go through
-``em.lower_block``.
+``em.lower_block``. A vector, matrix or struct value is a ``composite.Parts`` of
+scalar LLVM values (never an LLVM vector), ``em.map`` applies a scalar emitter to
+each component.
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ from typing import Any
 from llvmlite import ir
 
 from kdsl.backends.cpu import types as LT
+from kdsl.backends.cpu.composite import Parts
 from kdsl.errors import KdslCapabilityError
 from kdsl.ir.core import Block, Module, Operation, Value
 
@@ -146,15 +149,15 @@ class Emitter:
         self.abort_block: ir.Block | None = None
 
     # -- values ---------------------------------------------------------------
-    def get(self, v: Value) -> ir.Value:
-        """The LLVM value bound to IR value ``v``."""
+    def get(self, v: Value) -> Any:
+        """The LLVM value (``Parts`` for a vector, matrix or struct) bound to ``v``."""
         return self.values[v]
 
-    def args(self, op: Operation) -> list[ir.Value]:
+    def args(self, op: Operation) -> list[Any]:
         """The LLVM values of all operands of ``op``."""
         return [self.values[v] for v in op.operands]
 
-    def bind(self, values: Sequence[Value], llvals: Sequence[ir.Value]) -> None:
+    def bind(self, values: Sequence[Value], llvals: Sequence[Any]) -> None:
         for v, lv in zip(values, llvals):
             self.values[v] = lv
 
@@ -173,7 +176,7 @@ class Emitter:
             out = [out]
         self.bind(op.results, out)
 
-    def lower_block(self, block: Block, args: Sequence[ir.Value] = ()) -> list[ir.Value]:
+    def lower_block(self, block: Block, args: Sequence[Any] = ()) -> list[Any]:
         """Lower ``block`` with its arguments bound; gives its terminator's operands."""
         self.bind(block.args, args)
         term = block.terminator
@@ -205,10 +208,8 @@ class Emitter:
         return self.b.call(fn, list(vals))
 
     def libm(self, name: str, *vals: ir.Value) -> ir.Value:
-        """Call the C library function ``name`` (``sin``...) elementwise on float values."""
+        """Call the C library function ``name`` (``sin``...) on float scalars."""
         t = vals[0].type
-        if isinstance(t, ir.VectorType):
-            return self.map_lanes(lambda *xs: self.libm(name, *xs), *vals)
         if isinstance(t, ir.HalfType):
             wide = [self.b.fpext(v, LT.F32) for v in vals]
             return self.b.fptrunc(self.libm(name, *wide), t)
@@ -217,30 +218,20 @@ class Emitter:
         fn = self.state.declare(sym, ir.FunctionType(t, [t] * len(vals)))
         return self.b.call(fn, list(vals))
 
-    def map_lanes(self, fn: Callable[..., ir.Value], *vals: ir.Value) -> ir.Value:
-        """Apply a scalar emitter to each lane of vector values."""
-        n = vals[0].type.count
-        out = None
-        for i in range(n):
-            lane = fn(*[self.b.extract_element(v, I32c(i)) for v in vals])
-            if out is None:
-                out = ir.Constant(ir.VectorType(lane.type, n), ir.Undefined)
-            out = self.b.insert_element(out, lane, I32c(i))
-        return out
+    def map(self, fn: Callable[..., ir.Value], *vals: Any) -> Any:
+        """``fn`` applied componentwise: scalars in, scalar out; ``Parts`` in, ``Parts`` out.
 
-    def splat(self, value: ir.Value, like: ir.Type) -> ir.Value:
-        """``value`` broadcast to the vector type ``like`` (or unchanged for scalars)."""
-        if not isinstance(like, ir.VectorType) or isinstance(value.type, ir.VectorType):
-            return value
-        vt = ir.VectorType(value.type, like.count)
-        one = self.b.insert_element(ir.Constant(vt, ir.Undefined), value, I32c(0))
-        mask = ir.Constant(ir.VectorType(LT.I32, like.count), [0] * like.count)
-        return self.b.shuffle_vector(one, ir.Constant(vt, ir.Undefined), mask)
+        A scalar operand next to vector or matrix operands is used for every component
+        (``v * s``).
+        """
+        n = next((len(v) for v in vals if isinstance(v, Parts)), None)
+        if n is None:
+            return fn(*vals)
+        cols = [v.items if isinstance(v, Parts) else [v] * n for v in vals]
+        return Parts(fn(*xs) for xs in zip(*cols))
 
     def const(self, t: ir.Type, value: Any) -> ir.Value:
-        """A constant of scalar or vector type ``t`` (vectors get ``value`` in each lane)."""
-        if isinstance(t, ir.VectorType):
-            return ir.Constant(t, [ir.Constant(t.element, value)] * t.count)
+        """A constant of the scalar type ``t``."""
         return ir.Constant(t, value)
 
 

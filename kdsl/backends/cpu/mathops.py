@@ -1,7 +1,10 @@
 """Lowerings of the ``math`` dialect: LLVM intrinsics where LLVM has an exact one,
-the C math library (through symbols the JIT resolves, see ``jit``) for the rest."""
+the C math library (through symbols the JIT resolves, see ``jit``) for the rest.
+Vector and matrix operands are lowered one scalar component at a time (``em.map``)."""
 
 from __future__ import annotations
+
+from typing import Any
 
 from llvmlite import ir
 
@@ -24,24 +27,32 @@ LIBM = ("cbrt", "tan", "asin", "acos", "atan", "sinh", "cosh", "tanh", "erf", "e
 
 
 def _intrinsic(name: str) -> Lowering:
-    def lower(em: Emitter, op: Operation) -> ir.Value:
-        (a,) = em.args(op)
+    def lower(em: Emitter, op: Operation) -> Any:
         et = T.elem_type(op.results[0].type)
-        return widen_half(em, et, lambda x: em.call_intrinsic(name, x), a)
+        return em.map(lambda a: widen_half(em, et, lambda x: em.call_intrinsic(name, x), a),
+                      *em.args(op))  # fmt: skip
 
     return lower
 
 
 def _libm(name: str) -> Lowering:
-    def lower(em: Emitter, op: Operation) -> ir.Value:
-        return em.libm(name, *em.args(op))
+    def lower(em: Emitter, op: Operation) -> Any:
+        return em.map(lambda *xs: em.libm(name, *xs), *em.args(op))
 
     return lower
 
 
-def _abs(em: Emitter, op: Operation) -> ir.Value:
-    (a,) = em.args(op)
-    et = T.elem_type(op.results[0].type)
+def _componentwise(fn):
+    """A lowering applying the scalar emitter ``fn(em, et, a)`` to each component."""
+
+    def lower(em: Emitter, op: Operation) -> Any:
+        et = T.elem_type(op.results[0].type)
+        return em.map(lambda *xs: fn(em, et, *xs), *em.args(op))
+
+    return lower
+
+
+def _abs(em: Emitter, et: T.ScalarType, a: ir.Value) -> ir.Value:
     if et.is_float:
         return em.call_intrinsic("llvm.fabs", a)
     if not et.is_signed:
@@ -51,9 +62,7 @@ def _abs(em: Emitter, op: Operation) -> ir.Value:
     return em.b.call(fn, [a, poison_min])
 
 
-def _sign(em: Emitter, op: Operation) -> ir.Value:
-    (a,) = em.args(op)
-    et = T.elem_type(op.results[0].type)
+def _sign(em: Emitter, et: T.ScalarType, a: ir.Value) -> ir.Value:
     if et.is_float:
         neg = em.b.fcmp_ordered("<", a, em.const(a.type, 0.0))
         return em.b.select(neg, em.const(a.type, -1.0), em.const(a.type, 1.0))
@@ -80,18 +89,18 @@ def _isfinite(em: Emitter, op: Operation) -> ir.Value:
     return em.b.fcmp_ordered("<", mag, em.const(a.type, float("inf")))
 
 
-def _copysign(em: Emitter, op: Operation) -> ir.Value:
-    return em.call_intrinsic("llvm.copysign", *em.args(op))
+def _copysign(em: Emitter, et: T.ScalarType, a: ir.Value, b: ir.Value) -> ir.Value:
+    return em.call_intrinsic("llvm.copysign", a, b)
 
 
 TABLE: dict[str, Lowering] = {
     **{f"math.{k}": _intrinsic(v) for k, v in INTRINSICS.items()},
     **{f"math.{k}": _libm(k) for k in LIBM},
-    "math.abs": _abs,
-    "math.sign": _sign,
+    "math.abs": _componentwise(_abs),
+    "math.sign": _componentwise(_sign),
     "math.isnan": _isnan,
     "math.isinf": _isinf,
     "math.isfinite": _isfinite,
     "math.atan2": _libm("atan2"),
-    "math.copysign": _copysign,
+    "math.copysign": _componentwise(_copysign),
 }

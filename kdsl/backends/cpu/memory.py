@@ -8,10 +8,13 @@ an out-of-range index reads or writes wild memory. Use the ``interp`` backend
 
 from __future__ import annotations
 
+from typing import Any
+
 from llvmlite import ir
 
 from kdsl.backends.cpu import types as LT
-from kdsl.backends.cpu.emitter import Emitter, I32c, Lowering
+from kdsl.backends.cpu.composite import Parts, components
+from kdsl.backends.cpu.emitter import Emitter, Lowering
 from kdsl.errors import KdslCapabilityError
 from kdsl.ir import types as T
 from kdsl.ir.core import Operation, Value
@@ -50,30 +53,43 @@ def element_ptr(em: Emitter, arr: ir.Value, at: T.ArrayType, idx: list[Value]) -
     return B.gep(B.extract_value(arr, 0), [off], inbounds=True, source_etype=etype)
 
 
-def _mem_type(t: T.Type) -> ir.Type:
-    """The type a value of ``t`` is loaded and stored as."""
+def _components(em: Emitter, ptr: ir.Value, t: T.Type) -> list[ir.Value]:
+    """The addresses of the scalar components of a value of ``t`` stored at ``ptr``."""
     if isinstance(t, T.StructType):
         raise KdslCapabilityError(f"arrays of {t} are not supported by the cpu backend yet")
-    s = LT.memory_scalar(T.elem_type(t))
-    n = LT.count(t)
-    return s if isinstance(t, T.ScalarType) else ir.VectorType(s, n)
+    if isinstance(t, T.ScalarType):
+        return [ptr]
+    mt = LT.memory_scalar(T.elem_type(t))
+    return [ptr] + [
+        em.b.gep(ptr, [ir.Constant(LT.I64, k)], inbounds=True, source_etype=mt)
+        for k in range(1, LT.count(t))
+    ]
 
 
-def load_value(em: Emitter, ptr: ir.Value, t: T.Type) -> ir.Value:
-    """Load a value of IR type ``t`` from memory (bools are bytes there)."""
+def load_value(em: Emitter, ptr: ir.Value, t: T.Type) -> Any:
+    """Load a value of IR type ``t`` from memory (bools are bytes there).
+
+    A vector or matrix is loaded one scalar component at a time (consecutive
+    addresses), giving ``Parts``; LLVM's vectorizers merge the loads again.
+    """
     et = T.elem_type(t)
-    raw = em.b.load(ptr, typ=_mem_type(t), align=et.np_dtype.itemsize)
-    if et.is_bool:
-        return em.b.icmp_unsigned("!=", raw, em.const(raw.type, 0))
-    return raw
+    mt, align = LT.memory_scalar(et), et.np_dtype.itemsize
+    out = []
+    for p in _components(em, ptr, t):
+        raw = em.b.load(p, typ=mt, align=align)
+        if et.is_bool:
+            raw = em.b.icmp_unsigned("!=", raw, em.const(raw.type, 0))
+        out.append(raw)
+    return out[0] if isinstance(t, T.ScalarType) else Parts(out)
 
 
-def store_value(em: Emitter, value: ir.Value, ptr: ir.Value, t: T.Type) -> None:
-    """Store ``value`` of IR type ``t`` to memory."""
+def store_value(em: Emitter, value: Any, ptr: ir.Value, t: T.Type) -> None:
+    """Store ``value`` of IR type ``t`` to memory, one scalar component at a time."""
     et = T.elem_type(t)
-    if et.is_bool:
-        value = em.b.zext(value, _mem_type(t))
-    em.b.store(value, ptr, align=et.np_dtype.itemsize)
+    for p, x in zip(_components(em, ptr, t), components(value)):
+        if et.is_bool:
+            x = em.b.zext(x, LT.I8)
+        em.b.store(x, p, align=et.np_dtype.itemsize)
 
 
 def _load(em: Emitter, op: Operation) -> ir.Value:
@@ -136,26 +152,20 @@ def _width(t: ir.Type) -> int:
     return {ir.HalfType: 16, ir.FloatType: 32, ir.DoubleType: 64}[type(t)]
 
 
-def _atomic(em: Emitter, op: Operation) -> ir.Value:
+def _atomic(em: Emitter, op: Operation) -> Any:
     at = op.operands[1].type
     et = T.elem_type(at.dtype)
     ptr = element_ptr(em, em.get(op.operands[1]), at, op.operands[2:])
-    value = em.get(op.operands[0])
     rmw = _rmw_op(op.attrs["kind"], et)
-    if et.is_bool:  # bytes in memory; the rmw works on the byte
-        value = em.b.zext(value, LT.with_lanes(LT.I8, value.type))
-    if isinstance(value.type, ir.VectorType):  # componentwise, one atomic per lane
-        mt = value.type.element
-        out = ir.Constant(value.type, ir.Undefined)
-        for j in range(value.type.count):
-            lane_ptr = em.b.gep(ptr, [ir.Constant(LT.I64, j)], inbounds=True, source_etype=mt)
-            old = _rmw(em, rmw, lane_ptr, em.b.extract_element(value, I32c(j)))
-            out = em.b.insert_element(out, old, I32c(j))
-    else:
-        out = _rmw(em, rmw, ptr, value)
-    if et.is_bool:
-        return em.b.icmp_unsigned("!=", out, em.const(out.type, 0))
-    return out
+    out = []  # componentwise: one atomic per scalar component
+    for p, x in zip(_components(em, ptr, at.dtype), components(em.get(op.operands[0]))):
+        if et.is_bool:  # bytes in memory; the rmw works on the byte
+            old = _rmw(em, rmw, p, em.b.zext(x, LT.I8))
+            old = em.b.icmp_unsigned("!=", old, em.const(old.type, 0))
+        else:
+            old = _rmw(em, rmw, p, x)
+        out.append(old)
+    return out[0] if isinstance(at.dtype, T.ScalarType) else Parts(out)
 
 
 TABLE: dict[str, Lowering] = {

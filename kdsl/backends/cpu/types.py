@@ -1,13 +1,14 @@
 """IR types as LLVM types, for registers and for memory.
 
 Registers: bool is ``i1``, integers ``iN`` (signedness lives in the IR type, not
-here), floats ``half``/``float``/``double``. Vectors, quaternions, transforms and
-matrices are LLVM vectors of their scalars (matrices flattened row-major), so
-elementwise ops and intrinsics apply to them whole. Structs are literal structs.
-Arrays are descriptors ``{ptr data, [ndim x i64] shape, [ndim x i64] strides}``
+here), floats ``half``/``float``/``double``. Vectors, quaternions, transforms,
+matrices and structs have no register type of their own: they live as their
+scalar parts (``composite.Parts``), so LLVM sees only scalar code and its loop
+vectorizer can take loops that use them. Arrays are descriptors ``{ptr data, [ndim x i64] shape, [ndim x i64] strides}``
 whose strides count scalar elements (not bytes) so LLVM sees unit strides.
 
-Memory: a bool is one byte (NumPy's layout), everything else as in registers.
+Memory: a bool is one byte (NumPy's layout), everything else as in registers; the
+components of a vector or matrix element are consecutive scalars (row-major).
 """
 
 from __future__ import annotations
@@ -54,13 +55,12 @@ def descriptor_type(ndim: int) -> ir.LiteralStructType:
 
 
 def llvm_type(t: T.Type) -> ir.Type:
-    """The register type of any IR value type (arrays are descriptor structs)."""
+    """The register type of a leaf IR type: scalar, array (descriptor) or handle.
+
+    Vector, matrix and struct values are several registers: see ``composite.leaf_types``.
+    """
     if isinstance(t, T.ScalarType):
         return scalar_type(t)
-    if isinstance(t, T.VectorType | T.MatrixType):
-        return ir.VectorType(scalar_type(t.elem), count(t))
-    if isinstance(t, T.StructType):
-        return ir.LiteralStructType([llvm_type(ft) for _, ft in t.fields])
     if isinstance(t, T.ArrayType):
         return descriptor_type(t.ndim)
     if isinstance(t, T.HandleType):
@@ -71,10 +71,3 @@ def llvm_type(t: T.Type) -> ir.Type:
 def memory_scalar(t: T.ScalarType) -> ir.Type:
     """The in-memory type of one scalar component (bool is a byte)."""
     return I8 if t.is_bool else scalar_type(t)
-
-
-def with_lanes(scalar: ir.Type, like: ir.Type) -> ir.Type:
-    """``scalar``, as a vector with as many lanes as ``like`` when that is a vector."""
-    if isinstance(like, ir.VectorType):
-        return ir.VectorType(scalar, like.count)
-    return scalar

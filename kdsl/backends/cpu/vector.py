@@ -1,90 +1,112 @@
-"""Lowerings of the ``vec`` and ``struct`` dialects.
+"""Lowerings of the ``vec`` and ``struct`` dialects, on scalarized values.
 
-Vectors and matrices are LLVM vectors (matrices flattened row-major), so
-components are ``extractelement``/``insertelement`` with possibly dynamic indices,
-and fixed permutations (transpose, cross) are ``shufflevector``. Dynamic indices
-are not range-checked (release mode); the interp backend checks them.
+A vector or matrix value is a ``composite.Parts`` of its scalar components
+(matrices row-major), a struct a ``Parts`` of its fields, so these lowerings are
+plain bookkeeping on Python lists plus scalar arithmetic. Constant indices (the
+usual case after constant folding) pick a component directly; a dynamic index
+picks it with a chain of selects (vectorizable, unlike a spill to memory). Dynamic
+indices are not range-checked (release mode): an out-of-range one picks an
+arbitrary component. The interp backend checks them.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any
 
 from llvmlite import ir
 
 from kdsl.backends.cpu import types as LT
 from kdsl.backends.cpu.arith import widen_half
-from kdsl.backends.cpu.emitter import Emitter, I32c, Lowering
+from kdsl.backends.cpu.composite import Parts, components
+from kdsl.backends.cpu.emitter import Emitter, Lowering
 from kdsl.ir import types as T
 from kdsl.ir.core import Operation, Value
 
 
-def _lanes(em: Emitter, v: ir.Value) -> list[ir.Value]:
-    if not isinstance(v.type, ir.VectorType):
-        return [v]
-    return [em.b.extract_element(v, I32c(i)) for i in range(v.type.count)]
+def _construct(em: Emitter, op: Operation) -> Parts:
+    return Parts(x for v in em.args(op) for x in components(v))
 
 
-def build(em: Emitter, t: ir.VectorType, parts: list[ir.Value]) -> ir.Value:
-    """A vector of type ``t`` from its scalar lanes."""
-    out = ir.Constant(t, ir.Undefined)
-    for i, p in enumerate(parts):
-        out = em.b.insert_element(out, p, I32c(i))
+def _splat(em: Emitter, op: Operation) -> Parts:
+    (s,) = em.args(op)
+    return Parts([s] * LT.count(op.results[0].type))
+
+
+def _index(em: Emitter, v: Value) -> int | ir.Value:
+    """Index ``v`` as a Python int when it is a constant, else as an i64 value."""
+    x = em.get(v)
+    if isinstance(x, ir.Constant) and isinstance(x.constant, int):
+        c = x.constant
+        if not v.type.is_signed and c < 0:  # unsigned constants above the signed range
+            c += 1 << v.type.bits
+        return c
+    if v.type.bits < 64:
+        x = em.b.sext(x, LT.I64) if v.type.is_signed else em.b.zext(x, LT.I64)
+    return x
+
+
+def _flat_index(em: Emitter, t: T.Type, idx: list[Value]) -> int | ir.Value:
+    """Component number of element ``idx`` (one index of a vector, two of a matrix)."""
+    vals = [_index(em, v) for v in idx]
+    if len(vals) == 1:
+        return vals[0]
+    i, j = vals
+    if isinstance(i, int) and isinstance(j, int):
+        return i * t.cols + j
+    i, j = (ir.Constant(LT.I64, x) if isinstance(x, int) else x for x in (i, j))
+    return em.b.add(em.b.mul(i, ir.Constant(LT.I64, t.cols)), j)
+
+
+def _is_lane(em: Emitter, k: int | ir.Value, lane: int) -> ir.Value:
+    """i1: the dynamic component number ``k`` is ``lane``."""
+    return em.b.icmp_unsigned("==", k, ir.Constant(LT.I64, lane))
+
+
+def _pick(em: Emitter, comps: list[ir.Value], k: int | ir.Value) -> ir.Value:
+    """Component ``k`` of ``comps`` (a constant or dynamic component number)."""
+    if isinstance(k, int):
+        if 0 <= k < len(comps):
+            return comps[k]
+        return ir.Constant(comps[0].type, ir.Undefined)
+    out = comps[0]
+    for lane in range(1, len(comps)):
+        out = em.b.select(_is_lane(em, k, lane), comps[lane], out)
     return out
 
 
-def _shuffle(em: Emitter, v: ir.Value, mask: list[int]) -> ir.Value:
-    m = ir.Constant(ir.VectorType(LT.I32, len(mask)), mask)
-    return em.b.shuffle_vector(v, ir.Constant(v.type, ir.Undefined), m)
+def _put(em: Emitter, comps: list[ir.Value], k: int | ir.Value, x: ir.Value) -> list[ir.Value]:
+    """``comps`` with component ``k`` replaced by ``x``."""
+    if isinstance(k, int):
+        return [x if lane == k else c for lane, c in enumerate(comps)]
+    return [em.b.select(_is_lane(em, k, lane), x, c) for lane, c in enumerate(comps)]
 
 
-def _construct(em: Emitter, op: Operation) -> ir.Value:
-    parts = [lane for v in em.args(op) for lane in _lanes(em, v)]
-    return build(em, LT.llvm_type(op.results[0].type), parts)
-
-
-def _splat(em: Emitter, op: Operation) -> ir.Value:
-    (s,) = em.args(op)
-    return em.splat(s, LT.llvm_type(op.results[0].type))
-
-
-def _flat_index(em: Emitter, t: T.Type, idx: list[Value]) -> ir.Value:
-    """Lane of element ``idx`` (one index of a vector, two of a matrix), as i64."""
-    vals = []
-    for v in idx:
-        x = em.get(v)
-        if v.type.bits < 64:
-            x = em.b.sext(x, LT.I64) if v.type.is_signed else em.b.zext(x, LT.I64)
-        vals.append(x)
-    if len(vals) == 1:
-        return vals[0]
-    row = em.b.mul(vals[0], ir.Constant(LT.I64, t.cols))
-    return em.b.add(row, vals[1])
-
-
-def _row_lanes(em: Emitter, t: T.MatrixType, row: Value) -> list[ir.Value]:
-    base = _flat_index(em, t, [row])
-    base = em.b.mul(base, ir.Constant(LT.I64, t.cols))
+def _row_numbers(em: Emitter, t: T.MatrixType, row: Value) -> list[int | ir.Value]:
+    """The component numbers of row ``row`` of a matrix of type ``t``."""
+    r = _index(em, row)
+    if isinstance(r, int):
+        return [r * t.cols + j for j in range(t.cols)]
+    base = em.b.mul(r, ir.Constant(LT.I64, t.cols))
     return [em.b.add(base, ir.Constant(LT.I64, j)) for j in range(t.cols)]
 
 
-def _extract(em: Emitter, op: Operation) -> ir.Value:
+def _extract(em: Emitter, op: Operation) -> Any:
     t = op.operands[0].type
-    v, idx = em.get(op.operands[0]), op.operands[1:]
+    comps, idx = em.get(op.operands[0]).items, op.operands[1:]
     if isinstance(t, T.MatrixType) and len(idx) == 1:
-        lanes = [em.b.extract_element(v, i) for i in _row_lanes(em, t, idx[0])]
-        return build(em, LT.llvm_type(t.row_type), lanes)
-    return em.b.extract_element(v, _flat_index(em, t, idx))
+        return Parts(_pick(em, comps, k) for k in _row_numbers(em, t, idx[0]))
+    return _pick(em, comps, _flat_index(em, t, idx))
 
 
-def _insert(em: Emitter, op: Operation) -> ir.Value:
+def _insert(em: Emitter, op: Operation) -> Parts:
     t = op.operands[0].type
-    v, x, idx = em.get(op.operands[0]), em.get(op.operands[1]), op.operands[2:]
+    comps, x, idx = em.get(op.operands[0]).items, em.get(op.operands[1]), op.operands[2:]
     if isinstance(t, T.MatrixType) and len(idx) == 1:
-        for j, lane in enumerate(_row_lanes(em, t, idx[0])):
-            v = em.b.insert_element(v, em.b.extract_element(x, I32c(j)), lane)
-        return v
-    return em.b.insert_element(v, x, _flat_index(em, t, idx))
+        for k, xj in zip(_row_numbers(em, t, idx[0]), x.items):
+            comps = _put(em, comps, k, xj)
+        return Parts(comps)
+    return Parts(_put(em, comps, _flat_index(em, t, idx), x))
 
 
 def _num(em: Emitter, et: T.ScalarType) -> tuple[Callable, Callable]:
@@ -102,16 +124,16 @@ def _sum(em: Emitter, et: T.ScalarType, lanes: list[ir.Value]) -> ir.Value:
     return acc
 
 
-def dot(em: Emitter, et: T.ScalarType, a: ir.Value, b: ir.Value) -> ir.Value:
+def dot(em: Emitter, et: T.ScalarType, a: Parts, b: Parts) -> ir.Value:
     """Dot product, summed left to right."""
     _, mul = _num(em, et)
-    return _sum(em, et, _lanes(em, mul(a, b)))
+    return _sum(em, et, [mul(x, y) for x, y in zip(a, b)])
 
 
 def _widened(fn: Callable) -> Lowering:
-    """A lowering ``fn(em, et, *args)`` computed in float32 for float16 values."""
+    """A lowering ``fn(em, et, op, *args)`` computed in float32 for float16 values."""
 
-    def lower(em: Emitter, op: Operation) -> ir.Value:
+    def lower(em: Emitter, op: Operation) -> Any:
         et = T.elem_type(op.results[0].type)
         return widen_half(em, et, lambda *xs: fn(em, et, op, *xs), *em.args(op))
 
@@ -133,16 +155,15 @@ def _length(em, et, op, a):
 def _normalize(em, et, op, a):
     n = em.call_intrinsic("llvm.sqrt", dot(em, et, a, a))
     pos = em.b.fcmp_ordered(">", n, em.const(n.type, 0.0))
-    q = em.b.fdiv(a, em.splat(n, a.type))
-    return em.b.select(pos, q, em.const(a.type, 0.0))
+    zero = em.const(n.type, 0.0)
+    return em.map(lambda x: em.b.select(pos, em.b.fdiv(x, n), zero), a)
 
 
 def _cross(em, et, op, a, b):
     _, mul = _num(em, et)
     sub = em.b.fsub if et.is_float else em.b.sub
     yzx, zxy = [1, 2, 0], [2, 0, 1]
-    left = mul(_shuffle(em, a, yzx), _shuffle(em, b, zxy))
-    return sub(left, mul(_shuffle(em, a, zxy), _shuffle(em, b, yzx)))
+    return Parts(sub(mul(a[yzx[i]], b[zxy[i]]), mul(a[zxy[i]], b[yzx[i]])) for i in range(3))
 
 
 def _matmul(em, et, op, a, b):
@@ -151,48 +172,40 @@ def _matmul(em, et, op, a, b):
     rows = ta.rows if isinstance(ta, T.MatrixType) else 1
     inner = ta.cols if isinstance(ta, T.MatrixType) else ta.length
     cols = tb.cols if isinstance(tb, T.MatrixType) else 1
-    la, lb = _lanes(em, a), _lanes(em, b)
     _, mul = _num(em, et)
     out = []
     for i in range(rows):
         for j in range(cols):
-            out.append(
-                _sum(em, et, [mul(la[i * inner + k], lb[k * cols + j]) for k in range(inner)])
-            )
-    rt = LT.llvm_type(op.results[0].type)
-    return build(em, ir.VectorType(la[0].type, rt.count), out)
+            out.append(_sum(em, et, [mul(a[i * inner + k], b[k * cols + j]) for k in range(inner)]))
+    return Parts(out)
 
 
-def _transpose(em: Emitter, op: Operation) -> ir.Value:
+def _transpose(em: Emitter, op: Operation) -> Parts:
     t = op.operands[0].type
     (a,) = em.args(op)
-    return _shuffle(em, a, [j * t.cols + i for i in range(t.cols) for j in range(t.rows)])
+    return Parts(a[j * t.cols + i] for i in range(t.cols) for j in range(t.rows))
 
 
 def _outer(em, et, op, a, b):
-    n, m = a.type.count, b.type.count
     _, mul = _num(em, et)
-    left = _shuffle(em, a, [i for i in range(n) for _ in range(m)])
-    right = _shuffle(em, b, [j for _ in range(n) for j in range(m)])
-    return mul(left, right)
+    return Parts(mul(x, y) for x in a for y in b)
 
 
-def _struct_construct(em: Emitter, op: Operation) -> ir.Value:
-    out = ir.Constant(LT.llvm_type(op.results[0].type), ir.Undefined)
-    for i, v in enumerate(em.args(op)):
-        out = em.b.insert_value(out, v, i)
-    return out
+def _struct_construct(em: Emitter, op: Operation) -> Parts:
+    return Parts(em.args(op))
 
 
-def _struct_extract(em: Emitter, op: Operation) -> ir.Value:
+def _struct_extract(em: Emitter, op: Operation) -> Any:
     i = op.operands[0].type.field_index(op.attrs["field"])
-    return em.b.extract_value(em.get(op.operands[0]), i)
+    return em.get(op.operands[0])[i]
 
 
-def _struct_insert(em: Emitter, op: Operation) -> ir.Value:
+def _struct_insert(em: Emitter, op: Operation) -> Parts:
     i = op.operands[0].type.field_index(op.attrs["field"])
     s, x = em.args(op)
-    return em.b.insert_value(s, x, i)
+    fields = list(s.items)
+    fields[i] = x
+    return Parts(fields)
 
 
 TABLE: dict[str, Lowering] = {
