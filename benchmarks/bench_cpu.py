@@ -21,7 +21,6 @@ reused) kernel cache directory.
 from __future__ import annotations
 
 import argparse
-import importlib
 import sys
 import tempfile
 import time
@@ -52,39 +51,12 @@ PROCESS_REPS = 3
 
 def load_frameworks(names: list[str]) -> dict[str, Any]:
     """name -> impl module, or the status string of a framework that cannot be used."""
-    out: dict[str, Any] = {}
-    for name in names:
-        try:
-            out[name] = importlib.import_module(f"suite.{name}_impl")
-        except ModuleNotFoundError as e:
-            out[name] = (
-                "not installed" if e.name and name.startswith(e.name) else harness.short_error(e)
-            )
-        except Exception as e:  # a peer that fails to import must not stop the others
-            out[name] = harness.short_error(e)
-    return out
-
-
-def _copy(ins: dict) -> dict:
-    return {k: v.copy() if isinstance(v, np.ndarray) else v for k, v in ins.items()}
+    return harness.load_impls(names)
 
 
 def run_step_workload(wname: str, mod: Any, quick: bool, reps: int | None) -> Cell:
     """Prepare, verify (the first step also compiles), then time one framework."""
-    w = WORKLOADS[wname]
-    make = getattr(mod, "RUNNERS", {}).get(wname)
-    if make is None:
-        return Cell(status="n/a")
-    pristine = w.inputs(quick)
-    try:
-        runner = make(_copy(pristine))
-        runner.step()
-        err = w.error(pristine, runner.fetch())
-        stats = harness.measure(runner.step, reps or w.reps, per_call=runner.launches)
-    except Exception as e:  # one failing cell must not end the run
-        return Cell(status=harness.short_error(e))
-    status = "ok" if err <= w.tolerance else f"wrong: err {err:.1e}"
-    return Cell(stats, err, status)
+    return harness.run_step(WORKLOADS[wname], mod, "cpu", quick, reps)
 
 
 def run_triad(mod: Any, quick: bool, reps: int | None) -> Cell:
@@ -104,7 +76,7 @@ def run_scaling(mod: Any, quick: bool, reps: int | None) -> Cell:
     try:
         for threads in (1, 2):
             mod.set_threads(threads)
-            runner = mod.nbody(_copy(ins))
+            runner = mod.nbody(harness.copy_inputs(ins))
             runner.step()
             times[threads] = harness.measure(runner.step, reps or 3).median
     finally:
@@ -121,12 +93,16 @@ def run_process(mod: Any, quick: bool) -> dict[str, Cell]:
     reps = 1 if quick else PROCESS_REPS
     try:
         for _ in range(reps):
-            with tempfile.TemporaryDirectory(prefix="bench-cache-") as cache:
+            with (
+                tempfile.TemporaryDirectory(prefix="bench-cache-") as cache,
+                tempfile.TemporaryDirectory(prefix="bench-script-") as workdir,
+            ):
                 src, env = mod.start_script(cache, START_BODIES)
-                first = harness.run_script(src, env)
+                first = harness.run_script(src, env, workdir=workdir)
                 cold.append(first["first_epoch"] - first["spawn_epoch"])
                 compile_.append(first["compile_s"])
-                again = harness.run_script(src, env)
+                # Same script path: a kernel cache keyed by source locations must hit.
+                again = harness.run_script(src, env, workdir=workdir)
                 warm.append(again["after_import_s"])
     except Exception as e:
         return {k: Cell(status=harness.short_error(e)) for k in PROCESS_WORKLOADS}

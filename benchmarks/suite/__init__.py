@@ -2,6 +2,6 @@
 
 ``workloads`` defines sizes, float32 inputs, float64 NumPy references and tolerances
 once; ``<framework>_impl`` modules turn a workload into a runner (one step on prepared
-data, plus a way to fetch the result). ``bench_cpu.py`` (and later ``bench_cuda.py``)
-pick the frameworks and workloads and hand them to ``harness``.
+data, plus a way to fetch the result). ``bench_cpu.py`` and ``bench_cuda.py``
+pick the frameworks, workloads and device and hand them to ``harness``.
 """

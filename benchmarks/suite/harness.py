@@ -1,13 +1,19 @@
 """Timing, fresh-process measurements, the results table and the JSON file.
 
-Every framework's step is synchronous when it returns (the impl modules make it
-so: Taichi steps end with ``ti.sync()``), so a step's wall time is its cost.
+On the CPU every framework's step is synchronous when it returns (the impl modules
+make it so: Taichi steps end with ``ti.sync()``), so a step's wall time is its cost.
 ``measure`` warms up (the first call compiles), then times ``reps`` calls and
 keeps going while the total is under ``min_time`` (fast steps get more samples).
+
+On a GPU a step only enqueues work, and the runner carries ``sync`` (the framework's
+own wait for its stream or device). ``measure_device`` times batches of back-to-back
+steps between two syncs and divides, so launch latency overlaps kernel execution as
+in a real loop and every sample ends with the work finished.
 """
 
 from __future__ import annotations
 
+import importlib
 import json
 import os
 import platform
@@ -16,10 +22,13 @@ import subprocess
 import sys
 import tempfile
 import time
+import traceback
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 
 @dataclass
@@ -48,6 +57,8 @@ class Runner:
     step: Callable[[], None]
     fetch: Callable[[], dict[str, Any]]
     launches: int = 1
+    #: Waits until the work ``step`` enqueued has finished; None when ``step`` is synchronous.
+    sync: Callable[[], None] | None = None
 
 
 @dataclass
@@ -83,22 +94,123 @@ def measure(
     return Stats.of(samples)
 
 
-def run_script(source: str, env: dict[str, str], timeout: float = 300.0) -> dict[str, Any]:
+def measure_device(
+    step: Callable[[], None],
+    sync: Callable[[], None],
+    reps: int,
+    warmup: int = 1,
+    batch_time: float = 0.01,
+    min_time: float = 0.3,
+    max_reps: int = 200,
+    max_batch: int = 1000,
+) -> tuple[Stats, int]:
+    """Seconds per ``step`` of asynchronous GPU work, and the batch size used.
+
+    Each sample is ``batch`` back-to-back steps between two ``sync()`` calls, divided
+    by ``batch``; the batch is sized from one synchronized step so a sample lasts
+    about ``batch_time`` (the sync's own latency then counts for little).
+    """
+    for _ in range(warmup):
+        step()
+    sync()
+    t0 = time.perf_counter()
+    step()
+    sync()
+    one = time.perf_counter() - t0
+    batch = max(1, min(max_batch, int(batch_time / max(one, 1e-7))))
+    samples: list[float] = []
+    total = 0.0
+    while len(samples) < reps or (total < min_time and len(samples) < max_reps):
+        t0 = time.perf_counter()
+        for _ in range(batch):
+            step()
+        sync()
+        dt = time.perf_counter() - t0
+        samples.append(dt / batch)
+        total += dt
+    return Stats.of(samples), batch
+
+
+# -- one framework on one workload ------------------------------------------------------
+def load_impls(names: list[str]) -> dict[str, Any]:
+    """name -> ``suite.<name>_impl`` module, or the status string of one that cannot be used."""
+    out: dict[str, Any] = {}
+    for name in names:
+        try:
+            out[name] = importlib.import_module(f"suite.{name}_impl")
+        except ModuleNotFoundError as e:
+            out[name] = "not installed" if e.name and name.startswith(e.name) else short_error(e)
+        except Exception as e:  # a peer that fails to import must not stop the others
+            out[name] = short_error(e)
+    return out
+
+
+def copy_inputs(ins: dict) -> dict:
+    """A copy of workload inputs (arrays copied) so no framework sees another's writes."""
+    return {k: v.copy() if isinstance(v, np.ndarray) else v for k, v in ins.items()}
+
+
+def run_step(
+    w: Any,
+    mod: Any,
+    device: str,
+    quick: bool,
+    reps: int | None,
+    inputs: dict | None = None,
+    want: dict | None = None,
+) -> Cell:
+    """Prepare, verify (the first step also compiles), then time one framework on ``w``.
+
+    ``inputs`` and ``want`` (the float64 reference) may be given when several
+    frameworks share them; a runner with ``sync`` is timed by ``measure_device``.
+    """
+    make = getattr(mod, "RUNNERS", {}).get(w.runner_name)
+    if make is None:
+        return Cell(status="n/a")
+    pristine = w.inputs(quick) if inputs is None else inputs
+    extra: dict[str, Any] = {}
+    try:
+        runner = make(copy_inputs(pristine), device)
+        runner.step()
+        if runner.sync is not None:
+            runner.sync()
+        err = w.error(pristine, runner.fetch(), want)
+        if runner.sync is None:
+            stats = measure(runner.step, reps or w.reps, per_call=runner.launches)
+        else:
+            stats, extra["batch"] = measure_device(runner.step, runner.sync, reps or w.reps)
+    except Exception as e:  # one failing cell must not end the run
+        return Cell(status=short_error(e), extra=error_details(e))
+    status = "ok" if err <= w.tolerance else f"wrong: err {err:.1e}"
+    return Cell(stats, err, status, extra)
+
+
+def run_script(
+    source: str, env: dict[str, str], timeout: float = 300.0, workdir: str | None = None
+) -> dict[str, Any]:
     """Run Python ``source`` in a fresh interpreter; its last stdout line is JSON.
 
-    The source is written to a file (frontends that read kernel source need one).
+    The source is written to ``workdir``/bench_script.py (a temporary directory when
+    None): frontends read kernel source from the file, and a kernel cache keyed by
+    source locations only hits when a second run uses the same ``workdir``.
     Adds ``spawn_epoch`` (``time.time()`` just before the process started) so a
     script can report ``first_epoch`` and the caller subtract, and ``process_s``.
     """
     full_env = {**os.environ, **env}
+    # The script runs elsewhere: relative PYTHONPATH entries ("." for a checkout) must
+    # keep pointing where they did, and this checkout's kdsl comes first.
+    repo = str(Path(__file__).resolve().parents[2])
+    paths = [str(Path(p).resolve()) for p in full_env.get("PYTHONPATH", "").split(os.pathsep) if p]
+    full_env["PYTHONPATH"] = os.pathsep.join(dict.fromkeys([repo, *paths]))
     with tempfile.TemporaryDirectory(prefix="kdsl-bench-") as tmp:
-        script = Path(tmp) / "bench_script.py"
+        where = Path(workdir or tmp)
+        script = where / "bench_script.py"
         script.write_text(source)
         spawn = time.time()
         t0 = time.perf_counter()
         proc = subprocess.run(
             [sys.executable, str(script)], env=full_env, capture_output=True, text=True,
-            timeout=timeout, cwd=tmp,
+            timeout=timeout, cwd=where,
         )  # fmt: skip
         wall = time.perf_counter() - t0
     if proc.returncode != 0:
@@ -115,6 +227,14 @@ def short_error(exc: BaseException, limit: int = 48) -> str:
     msg = str(exc).strip().splitlines()
     text = f"{type(exc).__name__}: {msg[0] if msg else ''}"
     return "error: " + (text if len(text) <= limit else text[: limit - 3] + "...")
+
+
+def error_details(exc: BaseException) -> dict[str, str]:
+    """The whole message and the traceback of a failure, for the JSON file."""
+    return {
+        "error": f"{type(exc).__name__}: {str(exc).strip()}"[:2000],
+        "traceback": "".join(traceback.format_exception(exc))[-4000:],
+    }
 
 
 # -- table --------------------------------------------------------------------

@@ -1,5 +1,9 @@
 """Workload definitions shared by every framework and device: sizes, inputs, references.
 
+Workloads are device-neutral: the same sizes, inputs and references serve the CPU
+benchmark and the GPU one, and each ``*_impl`` runner takes the device ("cpu" or
+"cuda:0"). ``CUDA_WORKLOADS`` adds the rows only the GPU benchmark runs.
+
 A ``Workload`` says how big it is (full and ``--quick`` size), makes its float32
 inputs (the same arrays for every framework), computes the float64 NumPy reference
 of one step and judges a framework's result against it. Frameworks implement the
@@ -48,6 +52,13 @@ class Workload:
     fast_math: bool = False
     notes: str = ""
     select: Callable[[Inputs, Outputs], Outputs] | None = field(default=None, repr=False)
+    #: The ``RUNNERS`` key of the impl modules when it differs from ``name`` (a size variant).
+    impl: str = ""
+
+    @property
+    def runner_name(self) -> str:
+        """The key of this workload's runner in an impl module's ``RUNNERS``."""
+        return self.impl or self.name
 
     def inputs(self, quick: bool, seed: int = 1234) -> Inputs:
         """Fresh float32 inputs at the full or quick size (same seed, same data)."""
@@ -55,9 +66,11 @@ class Workload:
             self.quick_size if quick else self.size, np.random.default_rng(seed)
         )
 
-    def error(self, inputs: Inputs, got: Outputs) -> float:
-        """The largest relative error of ``got`` (one step from ``inputs``)."""
-        want = self.reference(inputs)
+    def error(self, inputs: Inputs, got: Outputs, want: Outputs | None = None) -> float:
+        """The largest relative error of ``got`` (one step from ``inputs``); ``want`` is
+        ``reference(inputs)`` when the caller already has it."""
+        if want is None:
+            want = self.reference(inputs)
         if self.select is not None:
             got = self.select(inputs, got)
         worst = 0.0
@@ -205,6 +218,16 @@ def launch_reference(ins: Inputs) -> Outputs:
     return {"b": b}
 
 
+# -- device-to-device copy (the GPU's bandwidth yardstick) -----------------------------
+def copy_inputs(n: int, rng: np.random.Generator) -> Inputs:
+    """A source array x and a zeroed destination y."""
+    return {"x": _f32(rng.uniform(-1, 1, n)), "y": np.zeros(n, np.float32)}
+
+
+def copy_reference(ins: Inputs) -> Outputs:
+    return {"y": f64(ins["x"])}
+
+
 # -- the list ------------------------------------------------------------------------
 _NBODY = dict(
     make_inputs=nbody_inputs, reference=nbody_reference, outputs=("acc",), select=_nbody_select
@@ -230,6 +253,18 @@ WORKLOADS: dict[str, Workload] = {
                  ("x_out", "v_out"), reps=50),
         Workload("launch", "launch", tolerance=1e-6, **_LAUNCH),
         Workload("launch_prepared", "prepared launch", tolerance=1e-6, **_LAUNCH),
+    ]
+}  # fmt: skip
+
+#: Rows only the GPU benchmark runs: saxpy at 2^26 (its GB/s is held to the copy's) and
+#: the device-to-device copy of 2^26 floats (CuPy only: the bandwidth yardstick).
+CUDA_WORKLOADS: dict[str, Workload] = {
+    w.name: w
+    for w in [
+        Workload("saxpy_26", "saxpy (2^26)", 2**26, 2**22, saxpy_inputs, saxpy_reference, 1e-6,
+                 ("y",), reps=20, impl="saxpy"),
+        Workload("copy", "d2d copy (2^26)", 2**26, 2**22, copy_inputs, copy_reference, 0.0,
+                 ("y",), reps=20),
     ]
 }  # fmt: skip
 

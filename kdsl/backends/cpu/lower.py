@@ -24,6 +24,7 @@ from kdsl.backends.cpu.composite import Parts, leaf_types, leaves, rebuild_all
 from kdsl.backends.cpu.emitter import Emitter, ModuleState
 from kdsl.backends.cpu.memory import load_value
 from kdsl.backends.cpu.ops import TABLE
+from kdsl.backends.cpu.versioning import vector_arrays, versioned
 from kdsl.errors import KdslCapabilityError
 from kdsl.ir import types as T
 from kdsl.ir.core import Block, Module, Operation
@@ -88,15 +89,34 @@ def emit_kernel(state: ModuleState, func: Operation, llname: str) -> ir.Function
     for d in range(nds[0] if nds else 0):
         p = B.gep(dims, [ir.Constant(LT.I64, d)], inbounds=True, source_etype=LT.I64)
         extents.append(B.load(p, typ=LT.I64, align=8))
-    if extents:
-        _row_loops(em, body_block, params, start, end, extents)
+    em.bind(body_block.args, params)
+
+    def emit() -> list:
+        # Parameters are read back from the value map: ``versioned`` rebinds dense arrays.
+        now = [em.get(a) for a in body_block.args]
+        if extents:
+            _row_loops(em, body_block, now, start, end, extents)
+        else:
+            _flat_loop(em, body_block, now, start, end)
+        return []
+
+    # Threads over arrays of vectors vectorize only with constant strides: see
+    # ``versioning``. A body with loops of its own is not copied (they are versioned).
+    has_loops = any(op.name in ("scf.for", "scf.while") for op in func.walk())
+    arrays = [] if has_loops else vector_arrays(body_block.args)
+    if arrays:
+        versioned(em, arrays, emit, [])
     else:
-        _flat_loop(em, body_block, params, start, end)
+        emit()
+    B.ret_void()
     return fn
 
 
 def _flat_loop(em: Emitter, body: Block, params: list, start: ir.Value, end: ir.Value) -> None:
-    """The thread loop of a kernel with a 1-d index: one counted loop over ``[start, end)``."""
+    """The thread loop of a kernel with a 1-d index: one counted loop over ``[start, end)``.
+
+    Like ``_row_loops`` it leaves the builder in its exit block.
+    """
     B, fn = em.b, em.fn
     entry = B.block
     # The loop counts in i32 (tid is i32) with no-wrap adds, so LLVM sees a simple
@@ -113,7 +133,6 @@ def _flat_loop(em: Emitter, body: Block, params: list, start: ir.Value, end: ir.
     em.index = []
     _thread_body(em, body, params, i, head)
     B.position_at_end(done)
-    B.ret_void()
 
 
 def _row_loops(
@@ -162,7 +181,6 @@ def _row_loops(
     first.add_incoming(ir.Constant(LT.I64, 0), row_next)
     B.branch(row_head)
     B.position_at_end(done)
-    B.ret_void()
 
 
 def _thread_body(
