@@ -17,6 +17,7 @@ from kdsl.errors import (
     KdslVerifyError,
 )
 from kdsl.frontend.api import *
+from kdsl.interop.api import *
 from kdsl.runtime.api import *
 from kdsl.types import *
 from kdsl.types import (

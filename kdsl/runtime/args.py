@@ -3,7 +3,9 @@
 Each argument is checked against its parameter's IR type and turned into what
 backends take: arrays as their buffers with element dims appended (NumPy on the
 CPU, ``cupy.ndarray`` on a CUDA device, where any ``__cuda_array_interface__``
-object on that device is also taken zero-copy), scalars as
+object on that device is also taken zero-copy; DLPack producers and
+``__array_interface__`` objects such as PyTorch CPU tensors and JAX arrays are
+read zero-copy too, see ``_foreign``), scalars as
 NumPy scalars of the exact type, vectors/matrices as NumPy arrays, structs as
 tuples. Python numbers get Warp's leniency (an int for a float parameter is
 fine); NumPy data must match exactly, so a float64 array or scalar is never
@@ -13,11 +15,13 @@ narrowed to float32 silently.
 from __future__ import annotations
 
 import builtins
+import sys
 from typing import Any
 
 import numpy as np
 
-from kdsl.errors import KdslLaunchError
+from kdsl.errors import KdslError, KdslLaunchError
+from kdsl.interop.descriptor import ArrayDescriptor
 from kdsl.ir import types as T
 from kdsl.runtime import cuda_memory as mem
 from kdsl.runtime.array import array
@@ -50,6 +54,10 @@ def describe(value: Any) -> str:
 
 def convert(t: T.Type, value: Any, device: Device) -> Any:
     """``value`` as the backend value of IR type ``t``; raises ``ArgError``."""
+    if _is_tracer(value):
+        from kdsl.interop.jax import tracer_message
+
+        raise ArgError(tracer_message(value))
     if isinstance(t, T.ArrayType):
         return _array(t, value, device)
     if isinstance(t, T.ScalarType):
@@ -66,6 +74,8 @@ def convert(t: T.Type, value: Any, device: Device) -> Any:
 
 
 def _array(t: T.ArrayType, value: Any, device: Device) -> Any:
+    if type(value) is ArrayDescriptor:
+        return _descriptor(t, value, device)
     if isinstance(value, array):
         if value.device != device:
             raise ArgError(f"expected an array on device '{device}', got one on '{value.device}'")
@@ -96,17 +106,105 @@ def _array(t: T.ArrayType, value: Any, device: Device) -> Any:
             )
         _check_foreign(t, value.dtype, value.shape, "NumPy")
         return value
+    if _has(value, "__dlpack__") or _has(value, "__array_interface__"):
+        return _foreign(t, value, device)
     raise ArgError(f"expected an array of {t.dtype}, got {describe(value)}")
 
 
-def _check_foreign(t: T.ArrayType, dtype: np.dtype, shape: tuple, what: str) -> None:
-    """Check a NumPy or CUDA-interface array: exact dtype, array dims + element dims."""
+def _has(value: Any, name: str) -> bool:
+    try:
+        return hasattr(value, name)
+    except Exception:  # a property that raises (a CUDA object's __array_interface__) is a "no"
+        return False
+
+
+def _is_tracer(value: Any) -> bool:
+    # Never imports JAX: a tracer exists only once JAX is loaded.
+    return "jax" in sys.modules and _jax_tracer(value)
+
+
+def _jax_tracer(value: Any) -> bool:
+    from kdsl.interop.jax import is_tracer
+
+    return is_tracer(value)
+
+
+def _descriptor(t: T.ArrayType, value: ArrayDescriptor, device: Device) -> Any:
+    if value.device != device:
+        raise ArgError(f"expected an array on device '{device}', got one on '{value.device}'")
+    if value.dtype != t.dtype:
+        raise ArgError(f"expected an array of {t.dtype}, got an array of {value.dtype}")
+    if value.ndim != t.ndim:
+        raise ArgError(f"expected a {t.ndim}-d array, got a {value.ndim}-d array")
+    return value.buf
+
+
+def _foreign(t: T.ArrayType, value: Any, device: Device) -> Any:
+    """A DLPack or ``__array_interface__`` producer (not NumPy, not CUDA-interface) as a buffer.
+
+    PyTorch tensors that require grad are read through ``detach()`` (same memory);
+    host data becomes a NumPy view, CUDA data a CuPy view, both zero-copy.
+    """
+    from kdsl.interop import dlpack
+    from kdsl.interop.torch import is_tensor
+
+    # what: for dtype messages ("a torch float64 array"); label: for device messages
+    what = label = type(value).__name__
+    fix = ".astype(np.{})"
+    if is_tensor(value):
+        from kdsl.interop.dtypes import InteropTypeError
+        from kdsl.interop.torch import scalar_of
+
+        what, label, fix = "torch", f"{value.dtype} tensor", ".to(torch.{})"
+        try:
+            scalar_of(value.dtype)
+        except InteropTypeError as e:
+            raise ArgError(
+                f"expected an array of {t.dtype}, got a {value.dtype} tensor: {e}"
+            ) from None
+        value = value.detach()
+    if _has(value, "__dlpack__"):
+        try:
+            kind, _ = dlpack.dlpack_device(value)
+        except Exception as e:  # a producer that cannot say where its data is
+            raise ArgError(f"expected an array of {t.dtype}, got a {label} ({e})") from None
+        if kind in dlpack._CUDA_TYPES and device.is_cpu:
+            raise ArgError(f"expected an array on device 'cpu', got a CUDA {label} (device memory)")
+        if kind in dlpack._HOST_TYPES and not device.is_cpu:
+            raise ArgError(
+                f"a {label} in host memory cannot be used by a launch on '{device}'; "
+                f"move it to '{device}' first"
+            )
+        try:
+            buf, where = dlpack.buffer_from_dlpack(value)
+        except KdslError as e:
+            raise ArgError(f"expected an array of {t.dtype}, got a {label}: {e.message}") from None
+        if where != device:
+            raise ArgError(f"expected an array on device '{device}', got a {label} on '{where}'")
+    else:
+        if not device.is_cpu:
+            raise ArgError(
+                f"a {label} (__array_interface__, host memory) cannot be used by a launch on "
+                f"'{device}'; move it to '{device}' first"
+            )
+        buf = np.asarray(value)
+    _check_foreign(t, buf.dtype, buf.shape, what, fix)
+    return buf
+
+
+def _check_foreign(
+    t: T.ArrayType, dtype: np.dtype, shape: tuple, what: str, fix: str = ".astype(np.{})"
+) -> None:
+    """Check a NumPy or CUDA-interface array: exact dtype, array dims + element dims.
+
+    ``fix`` is the conversion to suggest, with ``{}`` for the wanted dtype's name.
+    """
     inner = T.value_shape(t.dtype)
     want = T.elem_type(t.dtype).np_dtype
     if dtype != want:
         raise ArgError(
             f"expected an array of {t.dtype} (NumPy {want}), got a {what} {dtype} "
-            f"array; convert it with .astype(np.{want})"
+            f"array; convert it with {fix.format(want)}"
         )
     outer = len(shape) - len(inner)
     if outer != t.ndim or tuple(shape[outer:]) != inner:

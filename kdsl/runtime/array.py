@@ -191,6 +191,32 @@ class array:
         face["stream"] = get_stream(self._device).cuda_stream or 1
         return face
 
+    def __dlpack__(
+        self,
+        *,
+        stream: Any = None,
+        max_version: tuple[int, int] | None = None,
+        dl_device: tuple[int, int] | None = None,
+        copy: builtins.bool | None = None,
+    ) -> Any:
+        """DLPack export, by the buffer's own (NumPy's or CuPy's) ``__dlpack__``.
+
+        Versioned (1.0) when ``max_version`` allows it, legacy otherwise; element
+        dims are appended (a ``vec3`` array exports an ``(n, 3)`` tensor). On a GPU
+        the consumer's ``stream`` is made to wait for this device's kdsl stream.
+        """
+        from kdsl.interop.dlpack import export
+
+        return export(
+            self._buf, self._device, stream=stream, max_version=max_version,
+            dl_device=dl_device, copy=copy,
+        )  # fmt: skip
+
+    def __dlpack_device__(self) -> tuple[int, int]:
+        """``(1, 0)`` on the CPU, ``(2, ordinal)`` on a CUDA device (DLPack device codes)."""
+        kind, index = self._buf.__dlpack_device__()
+        return int(kind), int(index)
+
     def list(self) -> list:
         """The elements as a flat Python list (vector classes for vector dtypes)."""
         flat = np.ascontiguousarray(self.numpy()).reshape(-1, *self._inner)

@@ -1,0 +1,44 @@
+"""Public names of interoperability (star-imported by ``kdsl``).
+
+``from_numpy``, ``dtype_to_numpy`` and ``dtype_from_numpy`` come from the runtime
+and ``kdsl.types``; everything here imports its framework only when called.
+"""
+
+from kdsl.interop.descriptor import ArrayDescriptor
+from kdsl.interop.dlpack import from_dlpack, to_dlpack
+from kdsl.interop.jax import (
+    device_from_jax,
+    device_to_jax,
+    dtype_from_jax,
+    dtype_to_jax,
+    from_jax,
+    to_jax,
+)
+from kdsl.interop.paddle import (
+    device_from_paddle,
+    device_to_paddle,
+    dtype_from_paddle,
+    dtype_to_paddle,
+    from_paddle,
+    stream_from_paddle,
+    to_paddle,
+)
+from kdsl.interop.torch import (
+    device_from_torch,
+    device_to_torch,
+    dtype_from_torch,
+    dtype_to_torch,
+    from_torch,
+    stream_from_torch,
+    stream_to_torch,
+    to_torch,
+)
+
+__all__ = [
+    "ArrayDescriptor", "device_from_jax", "device_from_paddle", "device_from_torch",
+    "device_to_jax", "device_to_paddle", "device_to_torch", "dtype_from_jax",
+    "dtype_from_paddle", "dtype_from_torch", "dtype_to_jax", "dtype_to_paddle",
+    "dtype_to_torch", "from_dlpack", "from_jax", "from_paddle", "from_torch",
+    "stream_from_paddle", "stream_from_torch", "stream_to_torch", "to_dlpack", "to_jax",
+    "to_paddle", "to_torch",
+]  # fmt: skip

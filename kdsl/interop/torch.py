@@ -1,0 +1,220 @@
+"""PyTorch: ``from_torch``, ``to_torch`` and the device, dtype and stream helpers.
+
+Conversions share memory both ways. A CPU tensor is read through ``Tensor.numpy``
+and a CUDA tensor through its data pointer (a CuPy view that keeps the tensor
+alive); ``to_torch`` goes through DLPack, so on a GPU PyTorch's current stream
+waits for kdsl's. Gradients are shared too: ``from_torch(t, requires_grad=True)``
+wraps ``t.grad`` (allocated as zeros when missing) as the array's ``grad``, and
+``to_torch(a, requires_grad=True)`` makes ``a.grad`` the tensor's ``.grad``.
+PyTorch is imported only when one of these functions runs.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from kdsl.errors import KdslError
+from kdsl.interop.descriptor import ArrayDescriptor
+from kdsl.interop.dlpack import Exporter
+from kdsl.interop.dtypes import (
+    InteropDeviceError,
+    framework_name,
+    kdsl_scalar,
+    public_scalar,
+    scalar_from_name,
+    signed_twin,
+)
+from kdsl.interop.views import describe_buffer, view_buffer
+from kdsl.ir import types as T
+from kdsl.runtime import cuda_memory as mem
+from kdsl.runtime.array import array
+from kdsl.runtime.device import Device, get_device
+from kdsl.runtime.stream import Stream, get_stream
+
+
+def _torch() -> Any:
+    import torch
+
+    return torch
+
+
+def is_tensor(value: Any) -> bool:
+    """True for a ``torch.Tensor``, without importing torch when nothing else has."""
+    import sys
+
+    torch = sys.modules.get("torch")
+    return torch is not None and isinstance(value, torch.Tensor)
+
+
+def device_from_torch(torch_device: Any) -> Device:
+    """The kdsl device of a torch device or device string (``"cuda"`` = torch's current GPU)."""
+    torch = _torch()
+    try:
+        d = torch.device(torch_device)
+    except (RuntimeError, TypeError) as e:
+        raise InteropDeviceError(f"{torch_device!r} is not a torch device: {e}") from None
+    if d.type == "cpu":
+        return get_device("cpu")
+    if d.type == "cuda":
+        index = d.index if d.index is not None else torch.cuda.current_device()
+        try:
+            return get_device(f"cuda:{index}")
+        except KdslError as e:
+            raise InteropDeviceError(f"torch device {d}: {e.message}") from None
+    raise InteropDeviceError(
+        f"torch device '{d}' has no kdsl equivalent (kdsl runs on 'cpu' and 'cuda:N')"
+    )
+
+
+def device_to_torch(warp_device: Any) -> str:
+    """The torch device string of a kdsl device (``"cpu"``, ``"cuda:0"``)."""
+    dev = get_device(warp_device)
+    return "cpu" if dev.is_cpu else f"cuda:{dev.ordinal}"
+
+
+def dtype_from_torch(torch_dtype: Any) -> type:
+    """The kdsl scalar class of a torch dtype; bfloat16 and complex raise ``TypeError``."""
+    return public_scalar(scalar_of(torch_dtype))
+
+
+def scalar_of(torch_dtype: Any) -> T.ScalarType:
+    return scalar_from_name(framework_name(torch_dtype), f"torch dtype {torch_dtype}")
+
+
+def dtype_to_torch(warp_dtype: Any) -> Any:
+    """The torch dtype of a kdsl scalar type; uint16/32/64 map to the signed type of their width."""
+    t = signed_twin(kdsl_scalar(warp_dtype, "torch"))
+    return getattr(_torch(), t.np_dtype.name)
+
+
+def _tensor_buffer(t: Any, dev: Device) -> Any:
+    """A zero-copy NumPy (CPU) or CuPy (CUDA) view of tensor ``t``."""
+    t = t.detach()  # no autograd on the view; the storage is the same
+    if dev.is_cpu:
+        return t.numpy()
+    np_dtype = np.dtype(framework_name(t.dtype))
+    shape = tuple(t.shape)
+    cp = mem.cupy()
+    if t.numel() == 0:
+        with mem.scope(dev):
+            return cp.empty(shape, np_dtype)
+    size = t.element_size()
+    # The bytes the view may touch: from the first element to the farthest one.
+    span = (1 + sum((n - 1) * s for n, s in zip(shape, t.stride()))) * size
+    memory = cp.cuda.UnownedMemory(t.data_ptr(), span, t, dev.ordinal)
+    strides = tuple(s * size for s in t.stride())
+    with mem.scope(dev):
+        return cp.ndarray(shape, np_dtype, cp.cuda.MemoryPointer(memory, 0), strides=strides)
+
+
+def _view(t: Any, dtype: Any) -> tuple[Any, T.Type, Device]:
+    torch = _torch()
+    if not isinstance(t, torch.Tensor):
+        raise KdslError(f"from_torch() takes a torch.Tensor, not {type(t).__name__}")
+    dev = device_from_torch(t.device)
+    scalar_of(t.dtype)  # bfloat16/complex: a clear error before touching the data
+    what = describe_buffer(str(t.dtype), "tensor", t.shape)
+    buf, kt = view_buffer(_tensor_buffer(t, dev), dtype, what)
+    return buf, kt, dev
+
+
+def from_torch(
+    t: Any,
+    dtype: Any = None,
+    requires_grad: bool | None = None,
+    grad: Any = None,
+    return_ctype: bool = False,
+) -> array | ArrayDescriptor:
+    """A kdsl array sharing tensor ``t``'s memory (no copy).
+
+    ``dtype`` defaults to the tensor's; a vector or matrix dtype takes the trailing
+    dims as components (an ``(n, 3)`` float32 tensor with ``dtype=vec3`` gives a
+    length-n ``vec3`` array). ``requires_grad`` (default: ``t.requires_grad``) makes
+    the array's ``grad`` share ``grad`` if given, else ``t.grad``, which is allocated
+    as zeros when missing. ``return_ctype=True`` returns an ``ArrayDescriptor``
+    instead: cheaper to build, accepted by ``launch``, no ``grad``.
+    """
+    buf, kt, dev = _view(t, dtype)
+    if return_ctype:
+        return ArrayDescriptor(buf, kt, dev, owner=t)
+    a = array._wrap(buf, kt, dev)
+    if requires_grad is None:
+        requires_grad = bool(t.requires_grad)
+    if requires_grad:
+        g = grad
+        if g is None:
+            if t.grad is None:
+                t.grad = _torch().zeros_like(t, requires_grad=False)
+            g = t.grad
+        if isinstance(g, array):
+            a.grad = g
+        else:
+            if tuple(g.shape) != tuple(t.shape):
+                raise KdslError(
+                    f"from_torch(): grad has shape {tuple(g.shape)}, the tensor {tuple(t.shape)}"
+                )
+            gbuf, gt, gdev = _view(g, kt)
+            if gdev != dev:
+                raise KdslError(f"from_torch(): grad is on '{gdev}', the tensor on '{dev}'")
+            a.grad = array._wrap(gbuf, gt, gdev)
+        a.requires_grad = True  # grad is set: nothing is allocated
+    return a
+
+
+def _tensor_of(buf: Any, t: T.Type, dev: Device) -> Any:
+    et = T.elem_type(t)
+    twin = signed_twin(et)
+    if twin != et:  # torch has no full uint16/32/64 support: same bits, signed
+        with mem.scope(dev):
+            buf = buf.view(twin.np_dtype)
+    return _torch().from_dlpack(Exporter(buf, dev))
+
+
+def to_torch(a: array, requires_grad: bool | None = None) -> Any:
+    """A torch tensor sharing kdsl array ``a``'s memory (no copy).
+
+    Element dims are appended (a ``vec3`` array gives an ``(n, 3)`` tensor);
+    uint16/32/64 data is seen as the signed type of its width. With
+    ``requires_grad`` (default: ``a.requires_grad``) the tensor requires grad and its
+    ``.grad`` shares ``a.grad`` (allocated when missing).
+    """
+    if not isinstance(a, array):
+        raise KdslError(f"to_torch() takes a kdsl array, not {type(a).__name__}")
+    if a._t is None:
+        raise KdslError("to_torch(): the array has no dtype (array(dtype=Any))")
+    out = _tensor_of(a._buf, a._t, a.device)
+    if requires_grad is None:
+        requires_grad = a.requires_grad
+    if requires_grad:
+        if not T.elem_type(a._t).is_float:
+            raise KdslError(f"to_torch(requires_grad=True) needs a float array, not one of {a._t}")
+        if a.grad is None:
+            a.requires_grad = True  # allocates a zero grad
+        out.requires_grad_(True)
+        out.grad = _tensor_of(a.grad._buf, a.grad._t, a.grad.device)
+    return out
+
+
+def stream_from_torch(stream_or_device: Any = None) -> Stream:
+    """A kdsl ``Stream`` wrapping a torch CUDA stream (or a device's current torch stream)."""
+    torch = _torch()
+    if isinstance(stream_or_device, torch.cuda.Stream):
+        ts = stream_or_device
+    else:
+        if not torch.cuda.is_available():
+            raise InteropDeviceError("stream_from_torch(): PyTorch sees no CUDA device")
+        dev = None if stream_or_device is None else device_from_torch(stream_or_device)
+        if dev is not None and not dev.is_cuda:
+            raise InteropDeviceError(
+                f"stream_from_torch(): '{dev}' has no streams (CPU work is synchronous)"
+            )
+        ts = torch.cuda.current_stream(None if dev is None else dev.ordinal)
+    return Stream(device_from_torch(ts.device), cuda_stream=ts.cuda_stream)
+
+
+def stream_to_torch(stream_or_device: Any = None) -> Any:
+    """A ``torch.cuda.ExternalStream`` for a kdsl stream (or a device's current kdsl stream)."""
+    s = stream_or_device if isinstance(stream_or_device, Stream) else get_stream(stream_or_device)
+    return _torch().cuda.ExternalStream(s.cuda_stream, device=device_to_torch(s.device))

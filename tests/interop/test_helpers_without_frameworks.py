@@ -1,0 +1,30 @@
+"""Helpers that need no framework: Paddle's device strings, dtype name mapping."""
+
+import pytest
+
+import kdsl as wp
+from kdsl.errors import KdslError
+from kdsl.interop.dtypes import framework_name, scalar_from_name, signed_twin
+from kdsl.ir import types as T
+
+
+def test_paddle_device_strings_need_no_paddle():
+    assert wp.device_from_paddle("cpu") == "cpu"
+    assert wp.device_to_paddle("cpu") == "cpu"
+    with pytest.raises(RuntimeError, match="no kdsl equivalent"):
+        wp.device_from_paddle("xpu:0")
+    if not wp.is_cuda_available():
+        with pytest.raises(KdslError, match="not available"):
+            wp.device_from_paddle("gpu:0")
+
+
+def test_name_mapping_is_derived_from_the_one_dtype_table():
+    for t in T.SCALARS.values():
+        assert scalar_from_name(t.np_dtype.name, "x") == t
+    assert framework_name("torch.float32") == "float32"
+    assert framework_name("paddle.bool") == "bool"
+    assert signed_twin(T.U32) == T.I32 and signed_twin(T.U8) == T.U8
+    with pytest.raises(TypeError, match="no kdsl equivalent"):
+        scalar_from_name("bfloat16", "torch dtype torch.bfloat16")
+    with pytest.raises(TypeError, match="no kdsl equivalent"):
+        scalar_from_name("complex128", "x")
