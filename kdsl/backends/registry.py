@@ -13,7 +13,7 @@ A plugin that fails to load is reported with ``warnings.warn`` and listed in
 
 from __future__ import annotations
 
-import importlib.metadata
+import importlib
 import warnings
 from typing import Any
 
@@ -50,6 +50,8 @@ class _Registry:
     def discover(self) -> None:
         if self.discovered:
             return
+        import importlib.metadata  # here, not at the top: it is slow to import
+
         self.discovered = True
         for ep in importlib.metadata.entry_points(group=GROUP):
             source = f"entry point {ep.name} = {ep.value}"
@@ -75,24 +77,38 @@ class _Registry:
         self.sources = {n: s for n, s in self.sources.items() if n in self.loaded}
 
     def load(self, name: str) -> Backend | None:
+        if name in self.loaded:
+            return self.loaded[name]
+        if not self.discovered and name in BUILTIN_BACKENDS and name not in self.failures:
+            # A built-in loads without reading every installed distribution's metadata
+            # (importing importlib.metadata and scanning costs tens of milliseconds, a
+            # large part of a warm start). A plugin clashing with its name is still
+            # reported, by the first full discovery (listing backends, an unknown name).
+            value = BUILTIN_BACKENDS[name]
+            self.sources.setdefault(name, f"entry point {name} = {value}")
+            return self._instantiate(name, value, lambda: _load_reference(value))
         self.discover()
         if name in self.loaded:
             return self.loaded[name]
         ep = self.pending.pop(name, None)
         if ep is None:
             return None
+        return self._instantiate(name, ep.value, ep.load)
+
+    def _instantiate(self, name: str, value: str, load: Any) -> Backend | None:
+        """The backend ``load()`` gives, checked and recorded; None (and a warning) on failure."""
         try:
-            obj = ep.load()
+            obj = load()
             backend = obj() if isinstance(obj, type) and issubclass(obj, Backend) else obj
             if not isinstance(backend, Backend):
-                raise TypeError(f"{ep.value} is a {type(obj).__name__}, not a kdsl Backend")
+                raise TypeError(f"{value} is a {type(obj).__name__}, not a kdsl Backend")
             if backend.name != name:
                 raise ValueError(f"it is registered as {name!r} but names itself {backend.name!r}")
         except Exception as e:  # any plugin bug must not take kdsl down
             msg = f"{type(e).__name__}: {e}"
             self.failures[name] = msg
             warnings.warn(
-                f"kdsl backend plugin {name!r} ({ep.value}) failed to load: {msg}",
+                f"kdsl backend plugin {name!r} ({value}) failed to load: {msg}",
                 RuntimeWarning,
                 stacklevel=4,
             )
@@ -145,6 +161,8 @@ def get_backend(name: str) -> Backend:
 
 def is_registered(name: str) -> bool:
     """True when some backend claims ``name`` (without importing it)."""
+    if not _REGISTRY.discovered and name in BUILTIN_BACKENDS:
+        return name not in _REGISTRY.failures
     _REGISTRY.discover()
     return name in _REGISTRY.sources and name not in _REGISTRY.failures
 
@@ -165,6 +183,15 @@ def load_failures() -> dict[str, str]:
 def reset_registry() -> None:
     """Forget everything and rediscover on next use (for tests)."""
     _REGISTRY.reset()
+
+
+def _load_reference(value: str) -> Any:
+    """The object an entry-point value ``"package.module:attr"`` names."""
+    module, _, attr = value.partition(":")
+    obj: Any = importlib.import_module(module)
+    for part in filter(None, attr.split(".")):
+        obj = getattr(obj, part)
+    return obj
 
 
 def _describe(backend: Backend) -> str:
