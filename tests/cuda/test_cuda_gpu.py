@@ -162,3 +162,16 @@ def test_launches_on_a_user_stream_are_ordered():
         for _ in range(10):
             wp.launch(add_value, a.shape[0], [a, 1.0], device=DEVICE)
     np.testing.assert_array_equal(a.numpy(), np.full(a.shape[0], 10.0, dtype=np.float32))
+
+
+@pytest.mark.skipif(wp.get_cuda_device_count() < 2, reason="needs two CUDA devices")
+def test_one_kernel_on_two_gpus_in_one_process():
+    arrays = {d: wp.zeros(4096, dtype=float, device=d) for d in ("cuda:0", "cuda:1")}
+    for step, (d, a) in enumerate(arrays.items(), start=1):
+        for _ in range(step):
+            wp.launch(add_value, a.shape[0], [a, 1.5], device=d)
+    wp.synchronize()
+    np.testing.assert_array_equal(arrays["cuda:0"].numpy(), np.full(4096, 1.5, np.float32))
+    np.testing.assert_array_equal(arrays["cuda:1"].numpy(), np.full(4096, 3.0, np.float32))
+    with pytest.raises(KdslLaunchError, match="cuda:0"):
+        wp.launch(add_value, 4096, [arrays["cuda:0"], 1.0], device="cuda:1")
