@@ -67,11 +67,11 @@ def linear(out: wp.array(dtype=wp.int32)):
 @pytest.fixture
 def threaded():
     """Four threads and no inline cutoff, so small launches use the pool."""
-    old = pool.min_parallel
-    pool.min_parallel = 1
+    old = pool.min_parallel, pool.adaptive
+    pool.min_parallel, pool.adaptive = 1, False
     pool.set_num_threads(4)
     yield
-    pool.min_parallel = old
+    pool.min_parallel, pool.adaptive = old
     pool.set_num_threads(None)
 
 

@@ -150,8 +150,8 @@ def test_launches_from_many_python_threads_at_once():
     n = 1 << 14
     arrays = [wp.zeros(n, dtype=float) for _ in range(8)]
     errors = []
-    old = pool.min_parallel
-    pool.min_parallel = 1024  # make some launches go to the pool while others run inline
+    old = pool.min_parallel, pool.adaptive
+    pool.min_parallel, pool.adaptive = 1024, False  # some launches on the pool, some inline
 
     def work(a):
         try:
@@ -167,7 +167,7 @@ def test_launches_from_many_python_threads_at_once():
         for t in threads:
             t.join()
     finally:
-        pool.min_parallel = old
+        pool.min_parallel, pool.adaptive = old
     assert not errors
     for a in arrays:
         np.testing.assert_array_equal(a.numpy(), np.full(n, 20.0, dtype=np.float32))
@@ -184,15 +184,15 @@ def test_packer_refuses_structs_and_layout_is_aligned():
 
 def test_set_num_threads_restarts_the_pool():
     a = wp.zeros(1 << 13, dtype=float)
-    old_threads, old_min = pool.num_threads(), pool.min_parallel
-    pool.min_parallel = 1
+    old_threads, old_min = pool.num_threads(), (pool.min_parallel, pool.adaptive)
+    pool.min_parallel, pool.adaptive = 1, False
     try:
         for n in (3, 1, 2):
             pool.set_num_threads(n)
             wp.launch(add_value, a.shape[0], [a, 1.0])
     finally:
         pool.set_num_threads(old_threads)
-        pool.min_parallel = old_min
+        pool.min_parallel, pool.adaptive = old_min
     np.testing.assert_array_equal(a.numpy(), np.full(a.shape[0], 3.0, dtype=np.float32))
     with pytest.raises(ValueError):
         pool.set_num_threads(0)
@@ -214,9 +214,9 @@ def index_4d(out: wp.array4d(dtype=wp.int32)):
 def test_nd_launches_split_mid_row_cover_every_index_once(threads):
     # Chunks of the linear range start and end inside rows; every index must be
     # visited exactly once, with the right components.
-    old_threads, old_min = pool.num_threads(), pool.min_parallel
+    old_threads, old_min = pool.num_threads(), (pool.min_parallel, pool.adaptive)
     pool.set_num_threads(threads)
-    pool.min_parallel = 1
+    pool.min_parallel, pool.adaptive = 1, False
     try:
         out2 = wp.full((5, 7), -1, dtype=wp.int32)
         wp.launch(index_2d, (5, 7), [out2])
@@ -224,8 +224,37 @@ def test_nd_launches_split_mid_row_cover_every_index_once(threads):
         wp.launch(index_4d, (2, 3, 4, 5), [out4])
     finally:
         pool.set_num_threads(old_threads)
-        pool.min_parallel = old_min
+        pool.min_parallel, pool.adaptive = old_min
     i, j = np.indices((5, 7))
     np.testing.assert_array_equal(out2.numpy(), i * 1000 + j)
     i, j, k, m = np.indices((2, 3, 4, 5))
     np.testing.assert_array_equal(out4.numpy(), ((i * 10 + j) * 10 + k) * 10 + m)
+
+
+def test_the_pool_is_chosen_by_measured_cost():
+    # A cheap kernel measured inline stays inline at a size where a heavy one goes to
+    # the pool; neither decision changes the results.
+    cost = pool.RangeCost()
+    calls = []
+
+    def fn(start, end, *args):
+        calls.append((start, end))
+
+    old = pool.num_threads(), pool.min_parallel, pool.adaptive
+    pool.set_num_threads(2)
+    pool.min_parallel, pool.adaptive = 4096, True
+    try:
+        pool.run_range(fn, 100, cost=cost)  # not measured yet, small: inline and timed
+        assert calls == [(0, 100)] and cost.seconds_per_thread is not None
+        cost.seconds_per_thread = 1e-12  # cheap: 5000 threads still far below the dispatch cost
+        calls.clear()
+        pool.run_range(fn, 5000, cost=cost)
+        assert calls == [(0, 5000)]
+        cost.seconds_per_thread = 1.0  # heavy: split over both threads
+        calls.clear()
+        pool.run_range(fn, 5000, cost=cost)
+        assert sorted(calls) == [(0, 2500), (2500, 5000)]
+        assert pool.dispatch_seconds() > 0
+    finally:
+        pool.set_num_threads(old[0])
+        pool.min_parallel, pool.adaptive = old[1:]

@@ -47,6 +47,8 @@ class CpuKernel:
         #: Debug builds: the check sites (``kdsl.ir.ops_debug``); None in release builds.
         self.sites: dict | None = None
         self.packer = ArgPacker(arg_types)
+        #: The measured cost per thread, which decides inline versus pool (``pool``).
+        self.cost = pool.RangeCost()
 
 
 class CpuBackend(Backend):
@@ -148,7 +150,7 @@ class CpuBackend(Backend):
             keep = Packed(k.arg_types, args)
             argp = keep.address
         extents = (ctypes.c_int64 * len(dims))(*dims)
-        pool.run_range(k.fn, total, argp, ctypes.addressof(extents))
+        pool.run_range(k.fn, total, argp, ctypes.addressof(extents), cost=k.cost)
 
     def prepare(
         self,
@@ -174,10 +176,10 @@ class CpuBackend(Backend):
             argp = keep.address
         extents = (ctypes.c_int64 * len(dims))(*dims)
         dimp = ctypes.addressof(extents)
-        fn, run_range = k.fn, pool.run_range
+        fn, run_range, cost = k.fn, pool.run_range, k.cost
 
         def run() -> None:
-            run_range(fn, total, argp, dimp)
+            run_range(fn, total, argp, dimp, cost=cost)
 
         run.keep = (keep, extents)  # type: ignore[attr-defined]
         return run

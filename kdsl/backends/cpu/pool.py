@@ -1,10 +1,19 @@
 """A persistent thread pool that runs a kernel's thread range in chunks.
 
 The kernel is a ctypes function pointer; ctypes releases the GIL around the
-call, so chunks run truly in parallel. Launches smaller than ``min_parallel``
-threads run inline on the calling thread (starting workers costs more than they
-save). The worker count defaults to the CPUs this process may use and can be set
-with ``set_num_threads`` or the ``KDSL_CPU_THREADS`` environment variable.
+call, so chunks run truly in parallel. The worker count defaults to the CPUs this
+process may use and can be set with ``set_num_threads`` or the
+``KDSL_CPU_THREADS`` environment variable.
+
+Whether a launch goes to the pool is decided by measurement, not by a fixed size:
+handing a launch to the workers costs a fixed time (measured once, when the pool
+starts: ``dispatch_seconds``), and each kernel's cost per thread is measured on
+its own inline launches (``RangeCost``). A launch runs on the pool when its
+expected inline time exceeds what splitting it saves, ``t > overhead * n/(n-1)``
+for ``n`` threads. A kernel not measured yet runs inline below ``min_parallel``
+threads and on the pool above it. ``benchmarks/bench_launch.py`` shows the
+crossover for a cheap and a heavy kernel. ``adaptive = False`` restores a plain
+size threshold (``min_parallel``), which tests use to force either path.
 """
 
 from __future__ import annotations
@@ -12,6 +21,7 @@ from __future__ import annotations
 import os
 import queue
 import threading
+import time
 from collections.abc import Callable
 from typing import Any
 
@@ -21,8 +31,27 @@ _lock = threading.Lock()
 _workers: list[_Worker] = []
 _num_threads: int | None = None
 
-#: Launches with fewer threads than this run on the calling thread.
+#: Kernels whose cost is not measured yet run inline below this many threads; with
+#: ``adaptive = False`` it is the only rule.
 min_parallel = 4096
+#: Decide inline versus pool from measured costs (see the module docstring).
+adaptive = True
+_dispatch_seconds: float | None = None
+
+
+class RangeCost:
+    """The measured cost per thread of one kernel's inline launches (a running estimate)."""
+
+    __slots__ = ("seconds_per_thread",)
+
+    def __init__(self) -> None:
+        self.seconds_per_thread: float | None = None
+
+    def record(self, seconds: float, threads: int) -> None:
+        """Fold one inline launch of ``threads`` threads taking ``seconds`` into the estimate."""
+        per = seconds / threads
+        old = self.seconds_per_thread
+        self.seconds_per_thread = per if old is None else 0.5 * (old + per)
 
 
 class _Worker:
@@ -73,11 +102,12 @@ def num_threads() -> int:
 
 def set_num_threads(n: int | None) -> None:
     """Use ``n`` threads from now on (None: the default); restarts the pool."""
-    global _num_threads
+    global _num_threads, _dispatch_seconds
     if n is not None and n < 1:
         raise ValueError(f"the number of threads must be at least 1, got {n}")
     with _lock:
         _num_threads = n if n is not None else default_num_threads()
+        _dispatch_seconds = None  # measured again for the new thread count
         for w in _workers:
             w.tasks.put(None)  # finishes its queued work first, then exits
         _workers.clear()
@@ -103,23 +133,60 @@ def chunks(total: int, parts: int) -> list[tuple[int, int]]:
     return out
 
 
-def run_range(fn: Callable[..., None], total: int, *args: Any) -> None:
+def dispatch_seconds() -> float:
+    """The measured time to hand a launch to the pool and collect it (median of 7)."""
+    global _dispatch_seconds
+    if _dispatch_seconds is None:
+        n = num_threads()
+        samples = []
+        for _ in range(7):
+            t0 = time.perf_counter()
+            run(_nothing, n, n, force=True)
+            samples.append(time.perf_counter() - t0)
+        _dispatch_seconds = sorted(samples)[len(samples) // 2]
+    return _dispatch_seconds
+
+
+def _nothing(start: int, end: int) -> None:
+    """The empty range function ``dispatch_seconds`` times."""
+
+
+def run_range(
+    fn: Callable[..., None], total: int, *args: Any, cost: RangeCost | None = None
+) -> None:
     """Run the native range function ``fn(start, end, *args)`` over ``[0, total)``.
 
-    The launch path's entry: small launches call ``fn`` directly with no closure.
+    The launch path's entry: a launch that stays on the calling thread calls ``fn``
+    directly, timed into ``cost`` (the kernel's measured cost) when given.
     """
-    if total < min_parallel or num_threads() == 1:
+    n = num_threads()
+    if n == 1 or total < 2:
+        fn(0, total, *args)
+        return
+    per = cost.seconds_per_thread if cost is not None and adaptive else None
+    if per is None:
+        inline = total < min_parallel
+    else:
+        inline = per * total <= dispatch_seconds() * n / (n - 1)
+    if not inline:
+        run(lambda s, e: fn(s, e, *args), total, force=True)
+    elif cost is None:
         fn(0, total, *args)
     else:
-        run(lambda s, e: fn(s, e, *args), total)
+        t0 = time.perf_counter()
+        fn(0, total, *args)
+        cost.record(time.perf_counter() - t0, total)
 
 
-def run(fn: RangeFn, total: int, threads: int | None = None) -> None:
-    """Run ``fn(start, end)`` over ``[0, total)``, split over the pool's threads."""
+def run(fn: RangeFn, total: int, threads: int | None = None, force: bool = False) -> None:
+    """Run ``fn(start, end)`` over ``[0, total)``, split over the pool's threads.
+
+    Below ``min_parallel`` threads it runs inline unless ``force`` is set.
+    """
     if total <= 0:
         return
     n = threads or num_threads()
-    if n == 1 or total < min_parallel:
+    if n == 1 or (total < min_parallel and not force):
         fn(0, total)
         return
     ranges = chunks(total, n)
