@@ -174,8 +174,24 @@ def dtype_to_numpy(dtype: Any) -> np.dtype:
 
 
 def dtype_from_numpy(dtype: Any) -> type:
-    """The kdsl scalar class of a NumPy dtype."""
-    return SCALAR_CLASSES[T.scalar_from_numpy(dtype)]
+    """The kdsl scalar class of a NumPy dtype; a ``KdslTypeError`` for one kdsl lacks."""
+    try:
+        return SCALAR_CLASSES[T.scalar_from_numpy(dtype)]
+    except (KeyError, TypeError):
+        from kdsl.errors import KdslTypeError
+
+        raise KdslTypeError(
+            f"NumPy dtype {np.dtype(dtype) if _is_dtype(dtype) else dtype!r} has no kdsl "
+            "equivalent (kdsl has bool, int8..int64, uint8..uint64, float16, float32, float64)"
+        ) from None
+
+
+def _is_dtype(dtype: Any) -> bool:
+    try:
+        np.dtype(dtype)
+    except TypeError:
+        return False
+    return True
 
 
 vec2, vec3, vec4 = (vector(n) for n in (2, 3, 4))

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import kdsl as wp
-from kdsl.errors import KdslError, KdslLaunchError
+from kdsl.errors import KdslError, KdslLaunchError, KdslTypeError
 
 
 @wp.kernel
@@ -53,8 +53,7 @@ def test_dtype_from_numpy(np_dtype, dtype):
 
 
 def test_dtype_from_numpy_rejects_complex():
-    # kdsl.types.dtype_from_numpy raises KeyError today (see the interop report)
-    with pytest.raises((KeyError, TypeError), match="complex"):
+    with pytest.raises(KdslTypeError, match="complex64 has no kdsl equivalent"):
         wp.dtype_from_numpy(np.complex64)
 
 
