@@ -181,7 +181,7 @@ def dtype_from_numpy(dtype: Any) -> type:
         from kdsl.errors import KdslTypeError
 
         raise KdslTypeError(
-            f"NumPy dtype {np.dtype(dtype) if _is_dtype(dtype) else dtype!r} has no kdsl "
+            f"NumPy dtype {np.dtype(dtype).name if _is_dtype(dtype) else repr(dtype)} has no kdsl "
             "equivalent (kdsl has bool, int8..int64, uint8..uint64, float16, float32, float64)"
         ) from None
 
