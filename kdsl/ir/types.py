@@ -91,6 +91,19 @@ SCALARS: dict[str, ScalarType] = {
 }
 
 
+#: Each scalar's ``struct`` module code (standard sizes, used with a ``<`` prefix),
+#: for backends that pack launch arguments.
+_STRUCT_CODES = {
+    "bool": "?", "i8": "b", "i16": "h", "i32": "i", "i64": "q",
+    "u8": "B", "u16": "H", "u32": "I", "u64": "Q", "f16": "e", "f32": "f", "f64": "d",
+}  # fmt: skip
+
+
+def struct_code(t: ScalarType) -> str:
+    """The ``struct`` format code of scalar ``t`` (standard size, for ``<`` formats)."""
+    return _STRUCT_CODES[t.name]
+
+
 def scalar_from_numpy(dtype: np.dtype | type) -> ScalarType:
     """The scalar type for a NumPy dtype; raises KeyError for ones kdsl lacks."""
     name = np.dtype(dtype).name

@@ -81,20 +81,10 @@ def descriptor(t: T.ArrayType, buf: np.ndarray, index: int = 0) -> np.ndarray:
 
 # --- the fast path: one struct.pack_into per launch -----------------------------------
 
-_STRUCT_CODE = {
-    ("bool", 8): "?", ("int", 8): "b", ("uint", 8): "B", ("int", 16): "h", ("uint", 16): "H",
-    ("int", 32): "i", ("uint", 32): "I", ("int", 64): "q", ("uint", 64): "Q",
-    ("float", 16): "e", ("float", 32): "f", ("float", 64): "d",
-}  # fmt: skip
-
 #: Array descriptors by ``id`` of their NumPy buffer, checked through a weak reference:
 #: reading a buffer's address from NumPy costs about a microsecond, so a kernel
 #: launched again and again on the same arrays computes each descriptor once.
 _descriptors: dict[int, tuple[weakref.ref, tuple[int, ...]]] = {}
-
-
-def _scalar_code(t: T.ScalarType) -> str:
-    return _STRUCT_CODE[("bool", 8) if t.is_bool else (t.kind, t.bits)]
 
 
 def _cached_descriptor(t: T.ArrayType, buf: np.ndarray, index: int) -> tuple[int, ...]:
@@ -203,7 +193,7 @@ def _layout(t: T.Type) -> tuple[int, str, str]:
     if isinstance(t, T.HandleType):
         return 8, "Q", "handle"
     et = T.elem_type(t)
-    code = _scalar_code(et)
+    code = T.struct_code(et)
     n = 1 if isinstance(t, T.ScalarType) else _component_count(t)
     size = n * et.np_dtype.itemsize
     return size, code * n, "scalar" if n == 1 and isinstance(t, T.ScalarType) else "vector"

@@ -24,12 +24,6 @@ from kdsl.backends.cuda import ctypes_ as CT
 from kdsl.errors import KdslLaunchError
 from kdsl.ir import types as T
 
-_FMT = {
-    ("bool", 8): "?", ("int", 8): "b", ("int", 16): "h", ("int", 32): "i", ("int", 64): "q",
-    ("uint", 8): "B", ("uint", 16): "H", ("uint", 32): "I", ("uint", 64): "Q",
-    ("float", 16): "e", ("float", 32): "f", ("float", 64): "d",
-}  # fmt: skip
-
 #: The launch grid parameter: ``struct kd_grid { unsigned n; unsigned dim[4]; }``.
 _GRID_FMT = "IIIII"
 
@@ -58,9 +52,9 @@ class _Layout:
             if end > self.offset:  # trailing padding of the struct
                 self.fmt.append(f"{end - self.offset}x")
         elif isinstance(t, T.ScalarType):
-            self.fmt.append(_FMT[(t.kind, t.bits)])
+            self.fmt.append(T.struct_code(t))
         elif isinstance(t, T.VectorType | T.MatrixType):
-            self.fmt.append(f"{CT.count(t)}{_FMT[(t.elem.kind, t.elem.bits)]}")
+            self.fmt.append(f"{CT.count(t)}{T.struct_code(t.elem)}")
         elif isinstance(t, T.ArrayType):
             self.fmt.append(f"Q{2 * t.ndim}q")
         else:  # a handle
