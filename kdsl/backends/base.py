@@ -13,11 +13,14 @@ structs as tuples of field values.
 
 from __future__ import annotations
 
+import hashlib
 from abc import ABC, abstractmethod
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
+from kdsl.errors import KdslLaunchError
 from kdsl.ir.core import Module
 
 
@@ -105,6 +108,48 @@ class Backend(ABC):
 
     def __repr__(self) -> str:
         return f"<kdsl backend {self.name!r} v{self.version}>"
+
+
+#: The most threads one launch may have: ``tid()`` is an i32 on every built-in backend.
+MAX_THREADS = 2**31 - 1
+
+
+def launch_size(
+    compiled: CompiledKernel, dims: Sequence[int], tid_ndims: Iterable[int], backend: str
+) -> int:
+    """The number of threads of the grid ``dims``, checked for a launch of ``compiled``.
+
+    A kernel using an n-d ``tid()`` (n > 1) needs an n-d grid, and a grid may hold at
+    most ``MAX_THREADS`` threads; both raise ``KdslLaunchError`` naming the kernel.
+    """
+    name = compiled.metadata.get("name") or compiled.symbol
+    for nd in tid_ndims:
+        if nd != 1 and nd != len(dims):
+            raise KdslLaunchError(
+                f"kernel '{name}' uses a {nd}-d thread index but was launched with "
+                f"{len(dims)}-d dim={tuple(dims)}"
+            )
+    total = 1
+    for d in dims:
+        total *= int(d)
+    if total > MAX_THREADS:
+        raise KdslLaunchError(
+            f"kernel '{name}': {total} threads is more than the "
+            f"{backend} backend's limit of {MAX_THREADS}"
+        )
+    return total
+
+
+def source_version(version: str, sources: Iterable[Path]) -> str:
+    """``version`` plus a digest of a backend's ``sources``, for kernel cache keys.
+
+    Edited code generation then never reuses stale cache entries (a developer rarely
+    remembers to bump ``version``).
+    """
+    h = hashlib.sha256(version.encode())
+    for path in sorted(sources):
+        h.update(path.name.encode() + b"\0" + path.read_bytes())
+    return f"{version}+{h.hexdigest()[:16]}"
 
 
 def default_pipeline() -> str:

@@ -4,17 +4,22 @@ from __future__ import annotations
 
 import ctypes
 import functools
-import hashlib
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from kdsl.backends.base import Backend, CompiledKernel, optimize
+from kdsl.backends.base import (
+    Backend,
+    CompiledKernel,
+    launch_size,
+    optimize,
+    source_version,
+)
 from kdsl.backends.cpu import checks, jit, pool
 from kdsl.backends.cpu.abi import ArgPacker, Packed
 from kdsl.backends.cpu.lower import kernel_names, kernel_symbol, lower_kernels, tid_ndims
 from kdsl.config import check_pipeline
-from kdsl.errors import KdslError, KdslLaunchError
+from kdsl.errors import KdslError
 from kdsl.ir.core import Module
 from kdsl.ir.ops_debug import debug_sites
 from kdsl.ir.printer import print_module
@@ -23,17 +28,12 @@ from kdsl.runtime import cache as kernel_cache
 #: The C type of every range function: (start, end, args, dims).
 RANGE_FN = ctypes.CFUNCTYPE(None, ctypes.c_int64, ctypes.c_int64, ctypes.c_void_p, ctypes.c_void_p)
 
-_MAX_THREADS = 2**31 - 1  # tid() is an i32
 
 
 @functools.cache
 def _code_version(version: str) -> str:
-    """``version`` plus a digest of this backend's sources, so edited codegen never
-    reuses stale cache entries (a developer rarely remembers to bump ``version``)."""
-    h = hashlib.sha256(version.encode())
-    for path in sorted(Path(__file__).parent.glob("*.py")):
-        h.update(path.name.encode() + b"\0" + path.read_bytes())
-    return f"{version}+{h.hexdigest()[:16]}"
+    """``version`` plus a digest of this backend's sources (``base.source_version``)."""
+    return source_version(version, Path(__file__).parent.glob("*.py"))
 
 
 class CpuKernel:
@@ -186,23 +186,7 @@ class CpuBackend(Backend):
 
     def _check_dims(self, compiled: CompiledKernel, dims: tuple[int, ...]) -> int:
         """The number of threads of ``dims``, checked against the kernel's tid()."""
-        k: CpuKernel = compiled.payload
-        name = compiled.metadata.get("name") or compiled.symbol
-        for nd in k.tid_ndims:
-            if nd != 1 and nd != len(dims):
-                raise KdslLaunchError(
-                    f"kernel '{name}' uses a {nd}-d thread index but was launched with "
-                    f"{len(dims)}-d dim={dims}"
-                )
-        total = 1
-        for d in dims:
-            total *= d
-        if total > _MAX_THREADS:
-            raise KdslLaunchError(
-                f"kernel '{name}': {total} threads is more than the "
-                f"cpu backend's limit of {_MAX_THREADS}"
-            )
-        return total
+        return launch_size(compiled, dims, compiled.payload.tid_ndims, self.name)
 
     def _launch_checked(
         self, compiled: CompiledKernel, dims: tuple[int, ...], args: Sequence[Any], total: int

@@ -8,34 +8,34 @@ from __future__ import annotations
 
 import ctypes
 import functools
-import hashlib
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
 from kdsl.backends import checks_common
-from kdsl.backends.base import Backend, CompiledKernel, optimize
+from kdsl.backends.base import (
+    Backend,
+    CompiledKernel,
+    launch_size,
+    optimize,
+    source_version,
+)
 from kdsl.backends.cuda import nvrtc
 from kdsl.backends.cuda.lower import BLOCK, generate, kernel_names, tid_ndims
 from kdsl.backends.cuda.params import Packer
 from kdsl.config import check_pipeline
-from kdsl.errors import KdslError, KdslLaunchError
+from kdsl.errors import KdslError
 from kdsl.ir.core import Module
 from kdsl.ir.ops_debug import debug_sites
 from kdsl.ir.printer import print_module
 from kdsl.runtime import cache as kernel_cache
 
-_MAX_THREADS = 2**31 - 1  # tid() is an i32
-
 
 @functools.cache
 def _code_version(version: str) -> str:
-    """``version`` plus a digest of this backend's sources (edited codegen, new keys)."""
-    h = hashlib.sha256(version.encode())
+    """``version`` plus a digest of this backend's sources (``base.source_version``)."""
     here = Path(__file__).parent
-    for path in sorted([*here.glob("*.py"), here.parent / "checks_common.py"]):
-        h.update(path.name.encode() + b"\0" + path.read_bytes())
-    return f"{version}+{h.hexdigest()[:16]}"
+    return source_version(version, [*here.glob("*.py"), here.parent / "checks_common.py"])
 
 
 def device_arch(ordinal: int) -> str:
@@ -182,20 +182,7 @@ class CudaBackend(Backend):
         k: CudaKernel = compiled.payload
         name = compiled.metadata.get("name") or compiled.symbol
         dims = tuple(int(d) for d in dims)
-        for nd in k.tid_ndims:
-            if nd != 1 and nd != len(dims):
-                raise KdslLaunchError(
-                    f"kernel '{name}' uses a {nd}-d thread index but was launched with "
-                    f"{len(dims)}-d dim={dims}"
-                )
-        total = 1
-        for d in dims:
-            total *= d
-        if total > _MAX_THREADS:
-            raise KdslLaunchError(
-                f"kernel '{name}': {total} threads is more than the "
-                f"cuda backend's limit of {_MAX_THREADS}"
-            )
+        total = launch_size(compiled, dims, k.tid_ndims, self.name)
         if total == 0:
             return
         ordinal, raw = _stream_of(stream)
@@ -237,15 +224,9 @@ class CudaBackend(Backend):
         if k.sites is not None:  # a checked build needs a fresh error record each time
             return super().prepare(compiled, dims, args, stream)
         args = list(args)
-        total = 1
-        for d in dims:
-            total *= int(d)
-        if (
-            total == 0
-            or total > _MAX_THREADS
-            or any(nd not in (1, len(dims)) for nd in k.tid_ndims)
-        ):
-            return lambda: self.launch(compiled, dims, args, stream)  # launch() reports it
+        total = launch_size(compiled, dims, k.tid_ndims, self.name)
+        if total == 0:
+            return lambda: None
         ordinal, raw = _stream_of(stream)
         fn = k.function(ordinal)
         grid = (total, *dims, *([1] * (4 - len(dims))))
