@@ -4,6 +4,8 @@ Every test here needs a GPU and is skipped without one (CI has none); the lead
 runs them on a lent GPU machine.
 """
 
+import gc
+
 import numpy as np
 import pytest
 
@@ -254,6 +256,7 @@ def test_out_of_memory_is_a_clear_error():
     import cupy
 
     pool = cupy.get_default_memory_pool()
+    gc.collect()  # arrays of earlier tests that are already dead leave the pool first
     used_before = pool.used_bytes()
     with pytest.raises(
         KdslError, match=r"out of memory on 'cuda:0': cannot allocate 10000000000000 bytes"
@@ -264,4 +267,5 @@ def test_out_of_memory_is_a_clear_error():
     wp.synchronize()
     # Nothing was kept: the pool holds no more than before (the device's free memory
     # is no measure: other tests of this process leave cached blocks in the pool).
-    assert pool.used_bytes() == used_before
+    gc.collect()
+    assert pool.used_bytes() <= used_before
