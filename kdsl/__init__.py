@@ -19,6 +19,7 @@ from kdsl.errors import (
 from kdsl.frontend.api import *
 from kdsl.interop.api import *
 from kdsl.runtime.api import *
+from kdsl.stdlib.api import *
 from kdsl.types import *
 from kdsl.types import (
     bool,  # noqa: A004 - Warp's name

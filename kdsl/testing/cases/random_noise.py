@@ -1,0 +1,5 @@
+"""Conformance cases: random_noise (issue 5)."""
+
+from kdsl.testing.case import Case
+
+CASES: list[Case] = []
