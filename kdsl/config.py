@@ -19,6 +19,9 @@ from kdsl.errors import KdslError
 mode: str = "release"
 #: Check that kernels store no NaN or Inf (reported with the source line).
 verify_fp: bool = False
+#: The most memory (bytes) the backward pass of one launch may take for the tapes of
+#: its dynamic loops (see docs/autodiff.md); above it the adjoint launch is refused.
+max_tape_bytes: int = 2 * 1024**3
 
 _MODES = ("release", "debug")
 #: Kernel options that ``compile_options`` resolves into ``debug`` / ``verify_fp``.

@@ -1,0 +1,218 @@
+"""Adjoint launches: compile a kernel's adjoint on first use, size its tapes, run it.
+
+The adjoint function comes from the ``adjoint`` pass (``kdsl.passes.adjoint``). It
+is built only when a backward pass first needs it, and cached per kernel like any
+compiled kernel. Loops with a run-time trip count need tapes: when the pass also
+made a counting function, it runs first (on the same arguments) and reports each
+loop's most iterations, so the tapes are allocated exactly; their total is capped
+by ``kdsl.config.max_tape_bytes``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from kdsl import config
+from kdsl.errors import KdslError, KdslLaunchError, KdslRuntimeError
+from kdsl.ir import Module, Operation
+from kdsl.ir import types as T
+from kdsl.ir.vjp import is_differentiable
+
+_ADJ_ATTR = "_kdsl_adjoint"
+_COUNT_ATTR = "_kdsl_counter"
+
+
+class DerivedKernel:
+    """A kernel-like object for the launch machinery: a kernel's adjoint or tape counter."""
+
+    def __init__(self, kernel: Any, suffix: str, what: str) -> None:
+        self.base = kernel
+        self.key = kernel.key + suffix
+        self.name = f"{kernel.name} ({what})"
+        self.module = getattr(kernel, "module", None)
+        self.source_file = getattr(kernel, "source_file", None)
+        self._func: Operation | None = None
+
+    @property
+    def options(self) -> dict[str, Any]:
+        return self.base.options
+
+    @property
+    def tid_ndim(self) -> int:
+        return self.base.tid_ndim
+
+    def build_module(self) -> Module:
+        """The kernel's module, optimized, with only this derived function in it."""
+        from kdsl.passes import DEFAULT_PIPELINE, run_pipeline
+        from kdsl.passes.adjoint import AdjointPass
+
+        module = self.base.build_module()
+        run_pipeline(module, DEFAULT_PIPELINE)
+        AdjointPass(self.base.key).apply(module)
+        for f in module.funcs:
+            if f.attrs["sym_name"] != self.key:
+                f.erase()
+        if not module.has_func(self.key):
+            raise KdslError(f"kernel '{self.base.name}' has no {self.name}")
+        self._func = module.get_func(self.key)
+        return module
+
+    @property
+    def func(self) -> Operation:
+        if self._func is None:
+            self.build_module()
+        return self._func  # type: ignore[return-value]
+
+    @property
+    def arg_names(self) -> list[str]:
+        return [a.name_hint or f"arg{i}" for i, a in enumerate(self.func.regions[0].block.args)]
+
+    @property
+    def arg_types(self) -> list[T.Type]:
+        return [a.type for a in self.func.regions[0].block.args]
+
+
+def adjoint_kernel(kernel: Any) -> DerivedKernel:
+    """The (cached) adjoint of ``kernel``; raises when the kernel disabled its backward pass."""
+    if not (getattr(kernel, "options", None) or {}).get("enable_backward", True):
+        raise KdslError(
+            f"kernel '{kernel.name}' was compiled with enable_backward=False, so it has no "
+            "backward pass; remove the option to differentiate it"
+        )
+    adj = getattr(kernel, _ADJ_ATTR, None)
+    if adj is None:
+        from kdsl.passes._adjoint import ADJ_SUFFIX
+
+        adj = DerivedKernel(kernel, ADJ_SUFFIX, "adjoint")
+        setattr(kernel, _ADJ_ATTR, adj)
+    return adj
+
+
+def _counter(kernel: Any) -> DerivedKernel:
+    c = getattr(kernel, _COUNT_ATTR, None)
+    if c is None:
+        from kdsl.passes._adjoint import COUNT_SUFFIX
+
+        c = DerivedKernel(kernel, COUNT_SUFFIX, "tape counter")
+        setattr(kernel, _COUNT_ATTR, c)
+    return c
+
+
+def launch_adjoint(
+    kernel: Any,
+    dim: Any,
+    args: Sequence[Any],
+    adj_args: Sequence[Any],
+    device: Any = None,
+    stream: Any = None,
+    backend: Any = None,
+) -> None:
+    """Run the adjoint of ``kernel`` over ``dim``.
+
+    ``args`` are the forward launch's arguments in parameter order; ``adj_args`` one
+    entry per parameter: the gradient array of an array parameter (input gradients
+    receive ``+=``, output gradients hold the incoming gradient) or None when no
+    gradient is wanted (scalars' entries are ignored).
+    """
+    from kdsl.runtime import alloc
+    from kdsl.runtime.array import array
+    from kdsl.runtime.launch import (
+        _check_tid,
+        _plan,
+        _resolve_stream,
+        normalize_dim,
+    )
+    from kdsl.types import class_of
+
+    adj = adjoint_kernel(kernel)
+    dims = normalize_dim(dim, kernel.name)
+    _check_tid(kernel, dims)
+    n = len(kernel.arg_types)
+    if len(args) != n or len(adj_args) != n:
+        raise KdslLaunchError(
+            f"kernel '{kernel.name}': its adjoint takes {n} arguments and {n} adjoints, got "
+            f"{len(args)} and {len(adj_args)}"
+        )
+    plan = _plan(adj, device, backend)
+    dev = plan.device
+    convs = plan.converters
+    primal = [convs[i](v) for i, v in enumerate(args)]
+    adjoints = []
+    for i, (t, v, g) in enumerate(zip(kernel.arg_types, args, adj_args)):
+        if isinstance(t, T.ArrayType):
+            if g is None or not is_differentiable(t.dtype):
+                # Gradients nobody asked for land in scratch memory of the right shape.
+                g = alloc.zeros_like(v, device=dev) if isinstance(v, array) else v
+            adjoints.append(convs[n + i](g))
+        else:
+            adjoints.append(primal[i] if g is None else convs[n + i](g if g is not None else v))
+    hidden_types = adj.arg_types[2 * n :]
+    hidden: list[Any] = []
+    stream = _resolve_stream(dev, stream)
+    status = None
+    if hidden_types:
+        threads = int(np.prod(dims))
+        slots = _tape_slots(kernel, adj, dims, primal, dev, backend, stream)
+        leaves = adj.func.attrs["tape_leaves"]
+        sites = adj.func.attrs["tape_sites"]
+        _check_budget(kernel, hidden_types, leaves, slots, sites, threads)
+        it = iter(hidden_types)
+        for count, s in zip(leaves, slots):
+            for _ in range(count):
+                t = next(it)
+                hidden.append(alloc.zeros((threads, max(s, 1)), dtype=class_of(t.dtype),
+                                          device=dev))  # fmt: skip
+        status = alloc.zeros(1, dtype=class_of(T.I32), device=dev)
+        hidden.append(status)
+    converted = primal + adjoints + [convs[2 * n + i](h) for i, h in enumerate(hidden)]
+    plan.backend.launch(plan.compiled, dims, converted, stream)
+    if status is not None and int(status.numpy()[0]) != 0:
+        raise KdslRuntimeError(
+            f"the backward pass of kernel '{kernel.name}' ran a dynamic loop more times than "
+            "its counting pass measured (control flow that changes between runs, such as one "
+            "that depends on atomics); its gradients are incomplete"
+        )
+
+
+def _tape_slots(kernel, adj, dims, primal, dev, backend, stream) -> list[int]:
+    from kdsl.runtime import alloc
+    from kdsl.runtime.launch import _plan
+    from kdsl.types import class_of
+
+    slots = list(adj.func.attrs["tape_slots"])
+    if all(s >= 0 for s in slots):
+        return slots
+    counter = _counter(kernel)
+    plan = _plan(counter, dev, backend)
+    counts = alloc.zeros(len(slots), dtype=class_of(T.I32), device=dev)
+    args = primal + [plan.converters[-1](counts)]
+    plan.backend.launch(plan.compiled, dims, args, stream)
+    measured = counts.numpy()
+    return [int(measured[i]) if s < 0 else s for i, s in enumerate(slots)]
+
+
+def _itemsize(t: T.Type) -> int:
+    return T.elem_type(t).np_dtype.itemsize * int(np.prod(T.value_shape(t), dtype=np.int64))
+
+
+def _check_budget(kernel, types, leaves, slots, sites, threads) -> None:
+    it = iter(types)
+    total = 0
+    worst = None
+    for count, s, site in zip(leaves, slots, sites):
+        item = sum(_itemsize(next(it).dtype) for _ in range(count))
+        need = threads * max(s, 1) * item
+        total += need
+        if worst is None or need > worst[0]:
+            worst = (need, s, item, site)
+    if total > config.max_tape_bytes:
+        need, s, item, site = worst
+        raise KdslError(
+            f"the backward pass of kernel '{kernel.name}' needs {total} bytes of loop tapes, "
+            f"more than kdsl.config.max_tape_bytes = {config.max_tape_bytes}; the largest is "
+            f"the loop at {site}: {s} iterations x {threads} threads x {item} bytes. Raise "
+            "the limit, launch fewer threads per backward pass, or shorten the loop"
+        )
