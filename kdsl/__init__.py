@@ -5,7 +5,7 @@ Each subsystem lists its public names in its own ``api`` module; this file only
 gathers them. Importing kdsl imports no GPU, torch or jax package.
 """
 
-from kdsl import config, errors
+from kdsl import autograd, config, errors
 from kdsl.errors import (
     KdslCapabilityError,
     KdslError,
@@ -19,7 +19,6 @@ from kdsl.errors import (
 from kdsl.frontend.api import *
 from kdsl.interop.api import *
 from kdsl.runtime.api import *
-from kdsl.stdlib.api import *
 from kdsl.types import *
 from kdsl.types import (
     bool,  # noqa: A004 - Warp's name
@@ -28,5 +27,9 @@ from kdsl.types import (
     dtype_to_numpy,
     type_of,
 )
+
+# isort: split
+# Last: the standard library is kdsl code and uses the names above.
+from kdsl.stdlib.api import *
 
 __version__ = "0.1.0"

@@ -176,7 +176,7 @@ class AdjointBuilder:
     def _check_supported(self) -> None:
         written: set[Value] = set()
         for op in self.fwd.walk():
-            if op.name == "func.call":
+            if op.name == "func.call" and not self._callee(op).attrs.get("custom_grad"):
                 raise KdslError(
                     f"kdsl cannot differentiate a call to '{op.attrs['callee']}' that was not "
                     "inlined (recursive functions have no adjoint)", op.loc, self.sym)
@@ -251,8 +251,11 @@ class AdjointBuilder:
                 new = b.create("scf.while", [vmap[v] for v in op.operands],
                                [r.type for r in op.results], regions=regions)  # fmt: skip
             else:
+                attrs = dict(op.attrs)
+                if name == "func.call":
+                    attrs["callee"] = self._callee(op).attrs.get("custom_replay", attrs["callee"])
                 new = Operation(op.opdef, [vmap[v] for v in op.operands],
-                                [r.type for r in op.results], dict(op.attrs), (), op.loc)  # fmt: skip
+                                [r.type for r in op.results], attrs, (), op.loc)  # fmt: skip
                 b.insert(new)
         for old, r in zip(op.results, new.results):
             r.name_hint = old.name_hint
@@ -439,6 +442,8 @@ class AdjointBuilder:
         elif name in ("scf.for", "scf.while"):
             if self.matters(op):
                 (self._reverse_for if name == "scf.for" else self._reverse_while)(op, vmap, adj)
+        elif name == "func.call":
+            self._reverse_call(op, vmap, adj)
         elif op.operands and op.opdef.is_pure and any(
             is_differentiable(r.type) for r in op.results
         ):
@@ -452,6 +457,26 @@ class AdjointBuilder:
             contribs = rule(ctx, op, seeds)
             for operand, c in zip(op.operands, contribs):
                 self._acc(adj, operand, c)
+
+    def _callee(self, call: Operation) -> Operation:
+        return self.module.get_func(call.attrs["callee"])
+
+    def _reverse_call(self, op: Operation, vmap, adj) -> None:
+        """A call to a function with a custom gradient (``@kdsl.func_grad``).
+
+        The gradient function takes the primal arguments and one adjoint per result,
+        and returns one adjoint contribution per argument.
+        """
+        seeds = [adj.get(r) for r in op.results]
+        if all(s is None for s in seeds):
+            return
+        grad = self.module.get_func(self._callee(op).attrs["custom_grad"])
+        args = [vmap[v] for v in op.operands]
+        args += [s or self._zeros(r.type) for s, r in zip(seeds, op.results)]
+        call = self.b.create("func.call", args, [v.type for v in op.operands],
+                             {"callee": grad.attrs["sym_name"]})  # fmt: skip
+        for operand, c in zip(op.operands, call.results):
+            self._acc(adj, operand, c)
 
     def _reverse_write(self, op: Operation, vmap, adj) -> None:
         v, arr = op.operands[0], op.operands[1]

@@ -22,6 +22,7 @@ from kdsl.ir import types as T
 from kdsl.ir.vjp import is_differentiable
 
 _ADJ_ATTR = "_kdsl_adjoint"
+_INLINE = "inline"  # TODO(lead): inline{keep_custom_grad=true} once the option lands
 _COUNT_ATTR = "_kdsl_counter"
 
 
@@ -50,7 +51,8 @@ class DerivedKernel:
         from kdsl.passes.adjoint import AdjointPass
 
         module = self.base.build_module()
-        run_pipeline(module, DEFAULT_PIPELINE)
+        # Calls to functions with custom gradients stay calls until the adjoint exists.
+        run_pipeline(module, DEFAULT_PIPELINE.replace("inline", _INLINE, 1))
         AdjointPass(self.base.key).apply(module)
         for f in module.funcs:
             if f.attrs["sym_name"] != self.key:
@@ -149,6 +151,7 @@ def launch_adjoint(
             adjoints.append(convs[n + i](g))
         else:
             adjoints.append(primal[i] if g is None else convs[n + i](g if g is not None else v))
+    hidden_names = adj.arg_names[2 * n :]
     hidden_types = adj.arg_types[2 * n :]
     hidden: list[Any] = []
     stream = _resolve_stream(dev, stream)
@@ -156,17 +159,15 @@ def launch_adjoint(
     if hidden_types:
         threads = int(np.prod(dims))
         slots = _tape_slots(kernel, adj, dims, primal, dev, backend, stream)
-        leaves = adj.func.attrs["tape_leaves"]
-        sites = adj.func.attrs["tape_sites"]
-        _check_budget(kernel, hidden_types, leaves, slots, sites, threads)
-        it = iter(hidden_types)
-        for count, s in zip(leaves, slots):
-            for _ in range(count):
-                t = next(it)
-                hidden.append(alloc.zeros((threads, max(s, 1)), dtype=class_of(t.dtype),
-                                          device=dev))  # fmt: skip
-        status = alloc.zeros(1, dtype=class_of(T.I32), device=dev)
-        hidden.append(status)
+        _check_budget(kernel, hidden_names, hidden_types, slots, adj.func.attrs["tape_sites"],
+                      threads)  # fmt: skip
+        for name, t in zip(hidden_names, hidden_types):
+            if name == "tape_status":
+                status = alloc.zeros(1, dtype=class_of(T.I32), device=dev)
+                hidden.append(status)
+            else:
+                shape = (threads, max(slots[_tape_index(name)], 1))
+                hidden.append(alloc.zeros(shape, dtype=class_of(t.dtype), device=dev))
     converted = primal + adjoints + [convs[2 * n + i](h) for i, h in enumerate(hidden)]
     plan.backend.launch(plan.compiled, dims, converted, stream)
     if status is not None and int(status.numpy()[0]) != 0:
@@ -198,21 +199,26 @@ def _itemsize(t: T.Type) -> int:
     return T.elem_type(t).np_dtype.itemsize * int(np.prod(T.value_shape(t), dtype=np.int64))
 
 
-def _check_budget(kernel, types, leaves, slots, sites, threads) -> None:
-    it = iter(types)
-    total = 0
-    worst = None
-    for count, s, site in zip(leaves, slots, sites):
-        item = sum(_itemsize(next(it).dtype) for _ in range(count))
-        need = threads * max(s, 1) * item
-        total += need
-        if worst is None or need > worst[0]:
-            worst = (need, s, item, site)
+def _tape_index(name: str) -> int:
+    """The loop index ``L`` of a tape parameter named ``tape<L>_<j>``."""
+    return int(name[len("tape") :].split("_")[0])
+
+
+def _check_budget(kernel, names, types, slots, sites, threads) -> None:
+    need = [0] * len(slots)
+    items = [0] * len(slots)
+    for name, t in zip(names, types):
+        if name != "tape_status":
+            loop = _tape_index(name)
+            items[loop] += _itemsize(t.dtype)
+            need[loop] += threads * max(slots[loop], 1) * _itemsize(t.dtype)
+    total = sum(need)
     if total > config.max_tape_bytes:
-        need, s, item, site = worst
+        worst = max(range(len(need)), key=need.__getitem__)
         raise KdslError(
             f"the backward pass of kernel '{kernel.name}' needs {total} bytes of loop tapes, "
             f"more than kdsl.config.max_tape_bytes = {config.max_tape_bytes}; the largest is "
-            f"the loop at {site}: {s} iterations x {threads} threads x {item} bytes. Raise "
-            "the limit, launch fewer threads per backward pass, or shorten the loop"
+            f"the loop at {sites[worst]}: {slots[worst]} iterations x {threads} threads x "
+            f"{items[worst]} bytes. Raise the limit, launch fewer threads per backward pass, "
+            "or shorten the loop"
         )
