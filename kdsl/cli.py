@@ -35,6 +35,8 @@ EXIT_INTERNAL = 1
 
 #: Stages every backend shares: the frontend's IR and the IR after the pipeline.
 KIR, KIR_OPT = "kir", "kir-opt"
+#: The kernel's adjoint (and tape counter) after the pipeline.
+ADJOINT = "adjoint"
 
 
 class CliError(KdslError):
@@ -143,7 +145,8 @@ def _default_backend() -> str:
 
 def _stages(backend: Any) -> list[str]:
     """Every stage ``kdsl ir`` can print for ``backend``, in pipeline order."""
-    return [KIR, KIR_OPT, *(s for s in backend.stages() if s not in (KIR, KIR_OPT))]
+    own = (KIR, KIR_OPT, ADJOINT)
+    return [KIR, KIR_OPT, ADJOINT, *(s for s in backend.stages() if s not in own)]
 
 
 def _backend(name: str | None) -> Any:
@@ -157,8 +160,9 @@ def cmd_ir(args: argparse.Namespace) -> int:
     path, kernel_name = split_target(args.target)
     module = load_user_module(path)
     kernels = find_kernels(module, kernel_name, path)
-    backend = _backend(args.backend) if args.backend or args.stage not in (KIR, KIR_OPT) else None
-    if args.stage not in (KIR, KIR_OPT) and args.stage not in backend.stages():
+    own = (KIR, KIR_OPT, ADJOINT)
+    backend = _backend(args.backend) if args.backend or args.stage not in own else None
+    if args.stage not in own and args.stage not in backend.stages():
         stages = ", ".join(_stages(backend))
         raise CliError(f"backend {backend.name!r} has no stage {args.stage!r} (stages: {stages})")
     if args.pipeline is not None:
@@ -177,6 +181,14 @@ def _kernel_ir(kernel: Any, args: argparse.Namespace, backend: Any, pipeline: st
     from kdsl.ir import print_module
     from kdsl.passes import run_pipeline
 
+    if args.stage == ADJOINT:
+        from kdsl.runtime.adjoint import adjoint_module
+
+        ir = adjoint_module(kernel)
+        ir.get_func(kernel.key).erase()
+        run_pipeline(ir, pipeline, print_after_all=args.print_after_all,
+                     time_passes=args.time_passes, out=sys.stdout, debuginfo=args.debuginfo)  # fmt: skip
+        return print_module(ir, debuginfo=args.debuginfo)
     ir = kernel.build_module()
     if args.stage == KIR and not args.features:
         return print_module(ir, debuginfo=args.debuginfo)

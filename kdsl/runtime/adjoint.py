@@ -47,13 +47,7 @@ class DerivedKernel:
 
     def build_module(self) -> Module:
         """The kernel's module, optimized, with only this derived function in it."""
-        from kdsl.passes import DEFAULT_PIPELINE, run_pipeline
-        from kdsl.passes.adjoint import AdjointPass
-
-        module = self.base.build_module()
-        # Calls to functions with custom gradients stay calls until the adjoint exists.
-        run_pipeline(module, DEFAULT_PIPELINE.replace("inline", _INLINE, 1))
-        AdjointPass(self.base.key).apply(module)
+        module = adjoint_module(self.base)
         for f in module.funcs:
             if f.attrs["sym_name"] != self.key:
                 f.erase()
@@ -75,6 +69,21 @@ class DerivedKernel:
     @property
     def arg_types(self) -> list[T.Type]:
         return [a.type for a in self.func.regions[0].block.args]
+
+
+def adjoint_module(kernel: Any) -> Module:
+    """``kernel``'s optimized module with its adjoint (and tape counter) functions added.
+
+    The adjoint functions are not optimized yet: backends run their pipeline on them.
+    """
+    from kdsl.passes import DEFAULT_PIPELINE, run_pipeline
+    from kdsl.passes.adjoint import AdjointPass
+
+    module = kernel.build_module()
+    # Calls to functions with custom gradients stay calls until the adjoint exists.
+    run_pipeline(module, DEFAULT_PIPELINE.replace("inline", _INLINE, 1))
+    AdjointPass(kernel.key).apply(module)
+    return module
 
 
 def adjoint_kernel(kernel: Any) -> DerivedKernel:

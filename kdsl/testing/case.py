@@ -72,3 +72,27 @@ def integers(
 def f64(x: Any) -> np.ndarray:
     """``x`` as a float64 array (the dtype every reference computes in)."""
     return np.asarray(x, dtype=np.float64)
+
+
+@dataclass(frozen=True)
+class GradCase:
+    """A gradient conformance case: the kernel's adjoint against finite differences.
+
+    ``make_inputs(rng)`` returns every kernel argument by name (float64 arrays for
+    the differentiable ones); ``inputs`` names the arrays to differentiate with
+    respect to and ``outputs`` the arrays whose gradients seed the backward pass.
+    ``kdsl.autograd.gradcheck`` compares the Jacobians (central differences with
+    step ``eps``) within ``tol`` = (rtol, atol).
+    """
+
+    name: str
+    kernel: Any
+    dim: int | tuple[int, ...]
+    make_inputs: Callable[[np.random.Generator], Inputs]
+    inputs: tuple[str, ...]
+    outputs: tuple[str, ...]
+    requires: tuple[str, ...] = ("fp64",)
+    tol: tuple[float, float] = (1e-5, 1e-7)
+    eps: float = 1e-6
+    seed: int = 1234
+

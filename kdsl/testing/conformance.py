@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from kdsl.testing.case import Case
+from kdsl.testing.case import Case, GradCase
 
 
 @dataclass(frozen=True)
@@ -125,7 +125,7 @@ def compare(case: Case, name: str, actual: np.ndarray, expected: Any) -> None:
         )
 
 
-def check_case(case: Case, backend: str | Target, device: str | None = None) -> None:
+def check_case(case: Case | GradCase, backend: str | Target, device: str | None = None) -> None:
     """Run ``case`` on a backend (name or Target) and check every output.
 
     With a backend name and no ``device``, the backend's first device is used.
@@ -137,9 +137,40 @@ def check_case(case: Case, backend: str | Target, device: str | None = None) -> 
         if not found:
             raise KeyError(f"backend {backend!r} has no device {device!r}")
         target = found[0]
+    if isinstance(case, GradCase):
+        check_gradients(case, target)
+        return
     inputs = case.make_inputs(np.random.default_rng(case.seed))
     # The reference sees its own copy, so a kernel writing in place cannot change it.
     expected = case.reference({k: np.array(v, copy=True) for k, v in inputs.items()})
     actual = run_case(case, target, inputs)
     for name in case.outputs:
         compare(case, name, actual[name], expected[name])
+
+
+def check_gradients(case: GradCase, target: Target) -> None:
+    """Run ``kdsl.autograd.gradcheck`` for ``case`` on ``target``; AssertionError on a mismatch."""
+    import kdsl
+    from kdsl.autograd import gradcheck
+
+    values = case.make_inputs(np.random.default_rng(case.seed))
+    kernel = case.kernel
+    args = []
+    for n, t in zip(kernel.arg_names, kernel.arg_types):
+        a = _to_arg(values[n], t, target.device)
+        if n in case.inputs or n in case.outputs:
+            a.requires_grad = True
+        args.append(a)
+    n_out = len(case.outputs)
+    if list(kernel.arg_names[-n_out:]) != list(case.outputs):
+        raise ValueError(f"case {case.name}: the outputs must be the kernel's last parameters")
+    rtol, atol = case.tol
+    common = dict(
+        dim=case.dim, inputs=args[:-n_out], outputs=args[-n_out:], eps=case.eps, atol=atol,
+        rtol=rtol, show_summary=False, device=target.device, backend=target.backend,
+        input_output_mask=[(i, o) for i in case.inputs for o in case.outputs],
+    )  # fmt: skip
+    try:
+        gradcheck(kernel, **common)
+    except kdsl.KdslError as e:
+        raise AssertionError(f"{case.name}: {e}") from None

@@ -22,7 +22,7 @@ def test_suite_is_large_and_unique():
     cases = all_cases()
     assert len(cases) >= 60
     assert len({c.name for c in cases}) == len(cases)
-    assert len(GROUPS) == 8
+    assert len(GROUPS) >= 8
 
 
 def test_correct_reference_passes():

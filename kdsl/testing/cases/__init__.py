@@ -8,7 +8,8 @@ from kdsl.testing.case import Case
 
 #: Case modules, one per area, in the order the suite runs them.
 GROUPS = ("arith", "logic", "math", "vector", "control", "funcs", "memory", "programs",
-          "scalar_math", "linalg", "geometry", "random_noise", "atomics_print")
+          "scalar_math", "linalg", "geometry", "random_noise", "atomics_print",
+          "gradients")
 
 
 def all_cases() -> list[Case]:
