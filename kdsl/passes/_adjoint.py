@@ -382,7 +382,8 @@ class AdjointBuilder:
         with b.at_end(other):
             b.create("kd.store", [b.constant(1, I32), self._status(), b.constant(0, I32)])
             b.create("scf.yield", [])
-        b.create("scf.if", [fits], [], regions=[Region(then), Region(other)])
+        b.create("scf.if", [fits], [], {"tape_guard": tape.index},
+                 regions=[Region(then), Region(other)])  # fmt: skip
 
     def _load_tape(self, tape: LoopTape, k: Value, types: list[Type]) -> list[Value]:
         leaves = [self.b.value("kd.load", arr, self.ltid, k) for arr in tape.params]

@@ -53,7 +53,14 @@ class DerivedKernel:
                 f.erase()
         if not module.has_func(self.key):
             raise KdslError(f"kernel '{self.base.name}' has no {self.name}")
-        self._func = module.get_func(self.key)
+        func = module.get_func(self.key)
+        args = func.regions[0].block.args
+        self._func = func
+        self._arg_names = [a.name_hint or f"arg{i}" for i, a in enumerate(args)]
+        self._arg_types = [a.type for a in args]
+        #: (name, type, whether the code uses it) of each parameter after the adjoints.
+        n = len(self.base.arg_types)
+        self.hidden = [(a.name_hint, a.type, bool(a.uses)) for a in args[2 * n :]]
         return module
 
     @property
@@ -64,25 +71,29 @@ class DerivedKernel:
 
     @property
     def arg_names(self) -> list[str]:
-        return [a.name_hint or f"arg{i}" for i, a in enumerate(self.func.regions[0].block.args)]
+        self.func  # noqa: B018 - builds on first use
+        return self._arg_names
 
     @property
     def arg_types(self) -> list[T.Type]:
-        return [a.type for a in self.func.regions[0].block.args]
+        self.func  # noqa: B018 - builds on first use
+        return self._arg_types
 
 
 def adjoint_module(kernel: Any) -> Module:
     """``kernel``'s optimized module with its adjoint (and tape counter) functions added.
 
-    The adjoint functions are not optimized yet: backends run their pipeline on them.
+    The adjoint functions are simplified and stripped of unread tapes (``tape-dce``).
     """
-    from kdsl.passes import DEFAULT_PIPELINE, run_pipeline
+    from kdsl.passes import CLEANUP_PIPELINE, DEFAULT_PIPELINE, run_pipeline
     from kdsl.passes.adjoint import AdjointPass
 
     module = kernel.build_module()
     # Calls to functions with custom gradients stay calls until the adjoint exists.
     run_pipeline(module, DEFAULT_PIPELINE.replace("inline", _INLINE, 1))
     AdjointPass(kernel.key).apply(module)
+    # Simplify the adjoint, then drop the tapes its reverse sweep no longer reads.
+    run_pipeline(module, f"{CLEANUP_PIPELINE},tape-dce,{CLEANUP_PIPELINE}")
     return module
 
 
@@ -136,7 +147,6 @@ def launch_adjoint(
         _resolve_stream,
         normalize_dim,
     )
-    from kdsl.types import class_of
 
     adj = adjoint_kernel(kernel)
     dims = normalize_dim(dim, kernel.name)
@@ -160,23 +170,8 @@ def launch_adjoint(
             adjoints.append(convs[n + i](g))
         else:
             adjoints.append(primal[i] if g is None else convs[n + i](g if g is not None else v))
-    hidden_names = adj.arg_names[2 * n :]
-    hidden_types = adj.arg_types[2 * n :]
-    hidden: list[Any] = []
     stream = _resolve_stream(dev, stream)
-    status = None
-    if hidden_types:
-        threads = int(np.prod(dims))
-        slots = _tape_slots(kernel, adj, dims, primal, dev, backend, stream)
-        _check_budget(kernel, hidden_names, hidden_types, slots, adj.func.attrs["tape_sites"],
-                      threads)  # fmt: skip
-        for name, t in zip(hidden_names, hidden_types):
-            if name == "tape_status":
-                status = alloc.zeros(1, dtype=class_of(T.I32), device=dev)
-                hidden.append(status)
-            else:
-                shape = (threads, max(slots[_tape_index(name)], 1))
-                hidden.append(alloc.zeros(shape, dtype=class_of(t.dtype), device=dev))
+    hidden, status = _hidden_args(kernel, adj, dims, primal, dev, backend, stream)
     converted = primal + adjoints + [convs[2 * n + i](h) for i, h in enumerate(hidden)]
     plan.backend.launch(plan.compiled, dims, converted, stream)
     if status is not None and int(status.numpy()[0]) != 0:
@@ -187,14 +182,45 @@ def launch_adjoint(
         )
 
 
-def _tape_slots(kernel, adj, dims, primal, dev, backend, stream) -> list[int]:
+def _hidden_args(kernel, adj, dims, primal, dev, backend, stream) -> tuple[list, Any]:
+    """The tape arrays (and status flag) of one adjoint launch.
+
+    Tapes the adjoint reads are sized exactly (after the counting pass when a loop's
+    trip count is dynamic); parameters the optimized code no longer uses get a
+    one-element placeholder, and when no tape is read the counting pass is skipped.
+    """
+    from kdsl.runtime import alloc
+    from kdsl.types import class_of
+
+    adj.func  # noqa: B018 - builds on first use
+    if not adj.hidden:
+        return [], None
+    threads = int(np.prod(dims))
+    used = [(name, t) for name, t, live in adj.hidden if live and name != "tape_status"]
+    slots = _tape_slots(kernel, adj, dims, primal, dev, backend, stream, used)
+    _check_budget(kernel, used, slots, adj.func.attrs["tape_sites"], threads)
+    hidden: list[Any] = []
+    status = None
+    for name, t, live in adj.hidden:
+        if name == "tape_status":
+            status = alloc.zeros(1, dtype=class_of(T.I32), device=dev) if live else None
+            hidden.append(status if live else alloc.empty(1, dtype=class_of(T.I32), device=dev))
+        else:
+            shape = (threads, max(slots[_tape_index(name)], 1)) if live else (1, 1)
+            hidden.append(alloc.empty(shape, dtype=class_of(t.dtype), device=dev))
+    return hidden, status
+
+
+def _tape_slots(kernel, adj, dims, primal, dev, backend, stream, used) -> list[int]:
+    """Each loop's tape length: static, measured by the counting pass, or 0 when unread."""
     from kdsl.runtime import alloc
     from kdsl.runtime.launch import _plan
     from kdsl.types import class_of
 
     slots = list(adj.func.attrs["tape_slots"])
-    if all(s >= 0 for s in slots):
-        return slots
+    read = {_tape_index(name) for name, _ in used}
+    if all(s >= 0 or i not in read for i, s in enumerate(slots)):
+        return [s if i in read else 0 for i, s in enumerate(slots)]
     counter = _counter(kernel)
     plan = _plan(counter, dev, backend)
     counts = alloc.zeros(len(slots), dtype=class_of(T.I32), device=dev)
@@ -213,14 +239,13 @@ def _tape_index(name: str) -> int:
     return int(name[len("tape") :].split("_")[0])
 
 
-def _check_budget(kernel, names, types, slots, sites, threads) -> None:
+def _check_budget(kernel, used, slots, sites, threads) -> None:
     need = [0] * len(slots)
     items = [0] * len(slots)
-    for name, t in zip(names, types):
-        if name != "tape_status":
-            loop = _tape_index(name)
-            items[loop] += _itemsize(t.dtype)
-            need[loop] += threads * max(slots[loop], 1) * _itemsize(t.dtype)
+    for name, t in used:
+        loop = _tape_index(name)
+        items[loop] += _itemsize(t.dtype)
+        need[loop] += threads * max(slots[loop], 1) * _itemsize(t.dtype)
     total = sum(need)
     if total > config.max_tape_bytes:
         worst = max(range(len(need)), key=need.__getitem__)
