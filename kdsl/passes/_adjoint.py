@@ -87,6 +87,17 @@ def _static_trips(op: Operation) -> int | None:
     return len(range(lb, ub, st)) if st != 0 else 0
 
 
+def _is_tid(v: Value, dim: int, ndim: int) -> bool:
+    """``v`` is component ``dim`` of an ``ndim``-d thread index (1-d: the linear index)."""
+    op = getattr(v, "op", None)
+    return (
+        op is not None
+        and op.name == "kd.tid"
+        and op.attrs["dim"] == dim
+        and op.attrs["ndim"] == ndim
+    )
+
+
 def _defined_in(op: Operation) -> set[Value]:
     out: set[Value] = set()
     for inner in op.walk():
@@ -123,6 +134,7 @@ class AdjointBuilder:
         self.trips: dict[Operation, Value] = {}
         self.adj_arrays: dict[Value, Value] = {}
         self._matters: dict[Operation, bool] = {}
+        self._owned: dict[Value, bool] = {}
         self.counting = False
 
     # -- entry points ------------------------------------------------------------
@@ -434,8 +446,13 @@ class AdjointBuilder:
             if isinstance(g.type, StructType):
                 raise KdslError("kdsl cannot yet differentiate reads of struct arrays",
                                 op.loc, self.sym)  # fmt: skip
-            b.create("kd.atomic_rmw", [g, grad, *[vmap[i] for i in op.operands[1:]]],
-                     attrs={"kind": "add"})  # fmt: skip
+            idx = [vmap[i] for i in op.operands[1:]]
+            if self._exclusive(op.operands[0]):
+                # Only this thread touches this element: a plain read-add-write.
+                old = b.value("kd.load", grad, *idx)
+                b.create("kd.store", [b.value("arith.add", old, g), grad, *idx])
+            else:
+                b.create("kd.atomic_rmw", [g, grad, *idx], attrs={"kind": "add"})
         elif name in ("kd.store", "kd.atomic_rmw"):
             self._reverse_write(op, vmap, adj)
         elif name == "scf.if":
@@ -458,6 +475,28 @@ class AdjointBuilder:
             contribs = rule(ctx, op, seeds)
             for operand, c in zip(op.operands, contribs):
                 self._acc(adj, operand, c)
+
+    def _exclusive(self, arr: Value) -> bool:
+        """Whether every access to ``arr`` indexes it by the thread index itself.
+
+        Then each thread owns its elements, and so their gradients: the adjoint may
+        accumulate without atomics. (Passing one array as two parameters breaks this,
+        as it breaks the forward kernel's own assumptions.)
+        """
+        hit = self._owned.get(arr)
+        if hit is None:
+            nd = arr.type.ndim
+            hit = True
+            for op, index in arr.uses:
+                if op.name not in ("kd.load", "kd.store", "kd.atomic_rmw"):
+                    continue
+                first = 1 if op.name == "kd.load" else 2
+                idx = op.operands[first : first + nd]
+                if index != first - 1 or not all(_is_tid(v, d, nd) for d, v in enumerate(idx)):
+                    hit = False
+                    break
+            self._owned[arr] = hit
+        return hit
 
     def _callee(self, call: Operation) -> Operation:
         return self.module.get_func(call.attrs["callee"])

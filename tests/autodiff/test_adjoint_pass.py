@@ -98,11 +98,23 @@ def test_cli_prints_the_adjoint_stage():
     import subprocess
     import sys
 
-    target = f"{gradients.__file__}:dynamic_loop"
+    target = f"{gradients.__file__}:gather_in_loop"
     proc = subprocess.run([sys.executable, "-m", "kdsl.cli", "ir", target, "--stage", "adjoint"],
                           capture_output=True, text=True, timeout=120)  # fmt: skip
     assert proc.returncode == 0, proc.stderr
     out = proc.stdout
     assert "__adj(" in out and "__count(" in out  # the adjoint and its tape counter
-    assert 'kd.atomic_rmw' in out and '{kind = "add"}' in out  # reads became atomic adds
+    # Reads of other threads' elements became atomic adds into the gradient.
+    assert 'kd.atomic_rmw' in out and '{kind = "add"}' in out
     assert "tape_slots = [-1]" in out  # a run-time trip count
+
+
+def test_elements_a_thread_owns_get_plain_gradient_updates():
+    # x is only ever indexed by the thread index: no other thread touches adj_x[i].
+    from kdsl.ir import print_module
+    from kdsl.runtime.adjoint import adjoint_kernel
+
+    text = print_module(adjoint_kernel(dynamic_loop).build_module())
+    assert "kd.atomic_rmw" not in text
+    assert "kd.store" in text and "%adj_x" in text
+
