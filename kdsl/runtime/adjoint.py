@@ -205,10 +205,28 @@ def _hidden_args(kernel, adj, dims, primal, dev, backend, stream) -> tuple[list,
         if name == "tape_status":
             status = alloc.zeros(1, dtype=class_of(T.I32), device=dev) if live else None
             hidden.append(status if live else alloc.empty(1, dtype=class_of(T.I32), device=dev))
+        elif not live:
+            hidden.append(alloc.empty((1, 1), dtype=class_of(t.dtype), device=dev))
         else:
-            shape = (threads, max(slots[_tape_index(name)], 1)) if live else (1, 1)
-            hidden.append(alloc.empty(shape, dtype=class_of(t.dtype), device=dev))
+            hidden.append(_tape_array(t, threads, max(slots[_tape_index(name)], 1), dev))
     return hidden, status
+
+
+def _tape_array(t: T.ArrayType, threads: int, slots: int, dev: Any) -> Any:
+    """A ``[thread, iteration]`` tape whose memory layout suits the device.
+
+    On a GPU, consecutive threads should touch consecutive addresses (coalescing), so
+    the memory is iteration-major and the kernel sees a transposed, strided view; a
+    CPU thread walks its own row, so there it is thread-major.
+    """
+    from kdsl.runtime import alloc
+    from kdsl.runtime.array import array
+    from kdsl.types import class_of
+
+    if dev.is_cpu:
+        return alloc.empty((threads, slots), dtype=class_of(t.dtype), device=dev)
+    a = alloc.empty((slots, threads), dtype=class_of(t.dtype), device=dev)
+    return array._wrap(a._buf.swapaxes(0, 1), a._t, a._device)
 
 
 def _tape_slots(kernel, adj, dims, primal, dev, backend, stream, used) -> list[int]:
