@@ -5,7 +5,7 @@ Each subsystem lists its public names in its own ``api`` module; this file only
 gathers them. Importing kdsl imports no GPU, torch or jax package.
 """
 
-from kdsl import autograd, config, errors
+from kdsl import config, errors
 from kdsl.errors import (
     KdslCapabilityError,
     KdslError,
@@ -31,5 +31,9 @@ from kdsl.types import (
 # isort: split
 # Last: the standard library is kdsl code and uses the names above.
 from kdsl.stdlib.api import *
+
+# isort: split
+# ``kdsl.autograd`` (Warp's ``warp.autograd``) is built on the runtime above.
+from kdsl import autograd
 
 __version__ = "0.1.0"

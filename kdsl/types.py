@@ -22,9 +22,13 @@ __all__ = [
     "uint32", "uint64", "float16", "float32", "float64", "half", "vector", "matrix",
     "quaternion", "transformation", "vec2", "vec3", "vec4", "vec2f", "vec3f", "vec4f",
     "vec2d", "vec3d", "vec4d", "vec2h", "vec3h", "vec4h", "vec2i", "vec3i", "vec4i",
-    "vec2ui", "vec3ui", "vec4ui", "mat22", "mat33", "mat44", "mat22f", "mat33f", "mat44f",
+    "vec2ui", "vec3ui", "vec4ui", "vec2b", "vec3b", "vec4b", "vec2ub", "vec3ub", "vec4ub",
+    "vec2s", "vec3s", "vec4s", "vec2us", "vec3us", "vec4us", "vec2l", "vec3l", "vec4l",
+    "vec2ul", "vec3ul", "vec4ul", "mat22", "mat33", "mat44", "mat22f", "mat33f", "mat44f",
     "mat22d", "mat33d", "mat44d", "mat22h", "mat33h", "mat44h", "quat", "quatf", "quatd",
-    "quath", "transform", "transformf", "transformd", "transformh", "type_of", "class_of",
+    "quath", "transform", "transformf", "transformd", "transformh", "spatial_vector",
+    "spatial_vectorf", "spatial_vectord", "spatial_vectorh", "spatial_matrix", "spatial_matrixf",
+    "spatial_matrixd", "spatial_matrixh", "type_of", "class_of",
     "dtype_to_numpy", "dtype_from_numpy",
 ]  # fmt: skip
 
@@ -200,6 +204,12 @@ vec2d, vec3d, vec4d = (vector(n, float64) for n in (2, 3, 4))
 vec2h, vec3h, vec4h = (vector(n, float16) for n in (2, 3, 4))
 vec2i, vec3i, vec4i = (vector(n, int32) for n in (2, 3, 4))
 vec2ui, vec3ui, vec4ui = (vector(n, uint32) for n in (2, 3, 4))
+vec2b, vec3b, vec4b = (vector(n, int8) for n in (2, 3, 4))
+vec2ub, vec3ub, vec4ub = (vector(n, uint8) for n in (2, 3, 4))
+vec2s, vec3s, vec4s = (vector(n, int16) for n in (2, 3, 4))
+vec2us, vec3us, vec4us = (vector(n, uint16) for n in (2, 3, 4))
+vec2l, vec3l, vec4l = (vector(n, int64) for n in (2, 3, 4))
+vec2ul, vec3ul, vec4ul = (vector(n, uint64) for n in (2, 3, 4))
 mat22, mat33, mat44 = (matrix((n, n)) for n in (2, 3, 4))
 mat22f, mat33f, mat44f = mat22, mat33, mat44
 mat22d, mat33d, mat44d = (matrix((n, n), float64) for n in (2, 3, 4))
@@ -208,3 +218,8 @@ quat = quatf = quaternion()
 quatd, quath = quaternion(float64), quaternion(float16)
 transform = transformf = transformation()
 transformd, transformh = transformation(float64), transformation(float16)
+# Spatial (6D) vectors and matrices, as in Warp: (angular, linear) halves.
+spatial_vector = spatial_vectorf = vector(6)
+spatial_vectord, spatial_vectorh = vector(6, float64), vector(6, float16)
+spatial_matrix = spatial_matrixf = matrix((6, 6))
+spatial_matrixd, spatial_matrixh = matrix((6, 6), float64), matrix((6, 6), float16)

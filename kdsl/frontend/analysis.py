@@ -8,6 +8,7 @@ without visiting any body twice.
 from __future__ import annotations
 
 import ast
+from collections.abc import Callable
 
 RETURN, BREAK, CONTINUE = "return", "break", "continue"
 
@@ -64,6 +65,24 @@ def assigned_names(stmts: list[ast.stmt]) -> set[str]:
     for s in stmts:
         v.visit(s)
     return v.names
+
+
+def call_rebinds(
+    nodes: list[ast.AST], positions: Callable[[ast.Call], set[int]]
+) -> set[str]:
+    """Local names that calls with in-out parameters may rebind (``randf(state)``).
+
+    ``positions(call)`` gives the argument positions the callee writes back
+    (``inout.py``); a plain name passed there counts as assigned.
+    """
+    out: set[str] = set()
+    for root in nodes:
+        for node in ast.walk(root):
+            if isinstance(node, ast.Call) and node.args:
+                for k in positions(node):
+                    if k < len(node.args) and isinstance(node.args[k], ast.Name):
+                        out.add(node.args[k].id)
+    return out
 
 
 def exits(stmt: ast.stmt, in_loop: bool = True) -> set[str]:

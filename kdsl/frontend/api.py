@@ -1,17 +1,22 @@
 """Public names of the frontend (decorators, kernel-language builtins).
 
 ``import kdsl as wp`` gets ``wp.kernel``, ``wp.func``, ``wp.tid``, ``wp.static``,
-``wp.constant`` and every builtin of ``kdsl.frontend.builtins.BUILTINS``
+``wp.constant``, ``wp.func_grad``/``wp.func_replay``/``wp.adjoint`` (custom
+gradients) and every builtin of ``kdsl.frontend.builtins.BUILTINS``
 (``wp.sin``, ``wp.dot``, ``wp.atomic_add``, ...).
 """
 
 from kdsl.frontend.builtins import BUILTINS, Builtin
+from kdsl.frontend.custom_grad import adjoint, func_grad, func_replay
+from kdsl.frontend.inout import inout
 from kdsl.frontend.kernel import Function, Kernel, func, kernel
 from kdsl.frontend.static import constant, static
+from kdsl.frontend.structs import Struct, struct
 
 globals().update(BUILTINS)
 
 __all__ = [
-    "Builtin", "Function", "Kernel", "constant", "func", "kernel", "static",
+    "Builtin", "Function", "Kernel", "adjoint", "constant", "func", "func_grad", "func_replay",
+    "inout", "kernel", "static", "Struct", "struct",
     *sorted(BUILTINS),
 ]  # fmt: skip

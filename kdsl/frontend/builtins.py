@@ -18,7 +18,7 @@ from kdsl.errors import KdslError, KdslTypeError
 from kdsl.frontend.values import is_weak
 from kdsl.ir import Value
 from kdsl.ir.ops_math import BINARY_MATH, PREDICATES, UNARY_MATH
-from kdsl.ir.types import BOOL, F32, ArrayType, MatrixType, ScalarType
+from kdsl.ir.types import BOOL, F32, ArrayType, MatrixType, ScalarType, VectorType
 
 Lower = Callable[[Any, list[Any], ast.Call], Any]
 
@@ -26,12 +26,15 @@ Lower = Callable[[Any, list[Any], ast.Call], Any]
 class Builtin:
     """A kernel builtin: ``lower(emitter, args, node)`` emits its ops."""
 
-    def __init__(self, name: str, lower: Lower, doc: str, arity: tuple[int, int], group: str):
+    def __init__(self, name: str, lower: Lower, doc: str, arity: tuple[int, int], group: str,
+                 keywords: tuple[str, ...] = ()):  # fmt: skip
         self.name = name
         self.lower = lower
         self.__doc__ = doc
         self.arity = arity
         self.group = group
+        #: Keyword arguments the builtin accepts (passed to ``lower`` as keywords).
+        self.keywords = keywords
 
     def __call__(self, *args: Any, **kwargs: Any) -> Any:
         raise KdslError(
@@ -46,9 +49,12 @@ class Builtin:
 BUILTINS: dict[str, Builtin] = {}
 
 
-def _define(name: str, arity: tuple[int, int], doc: str, group: str):
+def _define(name: str, arity: tuple[int, int], doc: str, group: str,
+            keywords: tuple[str, ...] = ()):  # fmt: skip
     def deco(fn: Lower) -> Lower:
-        BUILTINS[name] = Builtin(name, fn, doc, arity, group)
+        if name in BUILTINS:
+            raise ValueError(f"builtin {name!r} is defined twice")
+        BUILTINS[name] = Builtin(name, fn, doc, arity, group, keywords)
         return fn
 
     return deco
@@ -81,8 +87,29 @@ def _unary(op: str, float_only: bool) -> Lower:
 
 for _name, (_fn, _float_only, _doc) in UNARY_MATH.items():
     _define(_name, (1, 1), _doc, "math")(_unary(f"math.{_name}", _float_only))
+def _predicate(name: str) -> Lower:
+    # On a vector or matrix (as in Warp): isnan/isinf hold if any component does,
+    # isfinite if every component does.
+    def lower(em, args, node):
+        x = _float_default(em, args[0], node)
+        if not isinstance(x.type, VectorType | MatrixType):
+            return em.emit(f"math.{name}", x, node=node)
+        from kdsl.frontend.builtins_math import components
+
+        combine = "arith.and" if name == "isfinite" else "arith.or"
+        out = None
+        for c in components(em, x, node):
+            r = em.emit(f"math.{name}", c, node=node)
+            out = r if out is None else em.emit(combine, out, r, node=node)
+        return out
+
+    return lower
+
+
 for _name, (_fn, _doc) in PREDICATES.items():
-    _define(_name, (1, 1), _doc, "math")(_unary(f"math.{_name}", True))
+    _define(_name, (1, 1), _doc + " On a vector or matrix: "
+            + ("every component." if _name == "isfinite" else "any component."),
+            "math")(_predicate(_name))  # fmt: skip
 
 
 def _binary(op: str, floats: bool = False) -> Lower:
@@ -102,6 +129,14 @@ _define("pow", (2, 2), "``x`` raised to ``y`` (floats).", "math")(_binary("arith
 
 def _minmax(op: str) -> Lower:
     def lower(em, args, node):
+        if len(args) == 1:  # min(v): the smallest component of a vector (NaN skipped)
+            v = em.value(args[0], node)
+            if not isinstance(v.type, VectorType):
+                raise em.error(KdslTypeError, f"{op[6:]}() of one argument needs a vector, "
+                               f"not {v.type}", node)  # fmt: skip
+            from kdsl.frontend.builtins_math import components
+
+            args = components(em, v, node)
         vals = _unified(em, args, node)
         out = vals[0]
         for v in vals[1:]:
@@ -111,16 +146,12 @@ def _minmax(op: str) -> Lower:
     return lower
 
 
-_define("min", (2, 8), "The smallest argument (elementwise for vectors).", "math")(
+_define("min", (1, 8), "The smallest argument (elementwise for vectors); ``min(v)``: the "
+        "smallest component.", "math")(
     _minmax("arith.min"))  # fmt: skip
-_define("max", (2, 8), "The largest argument (elementwise for vectors).", "math")(
+_define("max", (1, 8), "The largest argument (elementwise for vectors); ``max(v)``: the "
+        "largest component.", "math")(
     _minmax("arith.max"))  # fmt: skip
-
-
-@_define("clamp", (3, 3), "``x`` limited to ``[lo, hi]``: ``min(max(x, lo), hi)``.", "math")
-def _clamp(em, args, node):
-    x, lo, hi = _unified(em, args, node)
-    return em.emit("arith.min", em.emit("arith.max", x, lo, node=node), hi, node=node)
 
 
 def _vec_op(op: str, n: int) -> Lower:
@@ -185,10 +216,27 @@ def _atomic(kind: str) -> Lower:
     return lower
 
 
-for _kind in ("add", "sub", "min", "max"):
+_ATOMIC_DOCS = {
+    "add": "``arr[i...] += value``", "sub": "``arr[i...] -= value``",
+    "min": "``arr[i...] = min(arr[i...], value)``", "max": "``arr[i...] = max(arr[i...], value)``",
+    "and": "``arr[i...] &= value`` (integers)", "or": "``arr[i...] |= value`` (integers)",
+    "xor": "``arr[i...] ^= value`` (integers)", "exch": "``arr[i...] = value``",
+}  # fmt: skip
+for _kind, _what in _ATOMIC_DOCS.items():
     _define(f"atomic_{_kind}", (3, 6),
-            f"``atomic_{_kind}(arr, i..., value)``: atomic {_kind} into ``arr[i...]``; "
-            "gives the old value.", "memory")(_atomic(_kind))  # fmt: skip
+            f"``atomic_{_kind}(arr, i..., value)``: atomically {_what}; gives the old value "
+            "(componentwise for vectors and matrices).", "memory")(_atomic(_kind))  # fmt: skip
+
+
+@_define("atomic_cas", (4, 7), "``atomic_cas(arr, i..., compare, value)``: atomically store "
+         "``value`` where ``arr[i...]`` equals ``compare`` (bitwise); gives the old value.",
+         "memory")  # fmt: skip
+def _atomic_cas(em, args, node):
+    arr = _array_arg(em, args[0], node, "atomic_cas")
+    compare = em.value(args[-2], node, want=arr.type.dtype)
+    value = em.value(args[-1], node, want=arr.type.dtype)
+    idx = _indices(em, args[1:-2], node)
+    return em.emit("kd.atomic_cas", compare, value, arr, *idx, node=node)
 
 
 @_define("load", (2, 5), "``load(arr, i...)``: ``arr[i...]`` (Warp's older spelling).", "memory")
@@ -261,3 +309,22 @@ PYTHON_CASTS: dict[Any, ScalarType] = {py.float: F32, py.int: ScalarType("int", 
 
 def is_matrix(v: Any) -> bool:
     return isinstance(v, Value) and isinstance(v.type, MatrixType)
+
+
+def _register_more() -> None:
+    # The composed builtins live in their own modules; importing them defines them.
+    from kdsl import types as public
+    from kdsl.frontend import builtins_linalg, builtins_math  # noqa: F401
+
+    # wp.vector / wp.matrix are type factories in Python scope, constructors in kernels.
+    PYTHON_ALIASES[public.vector] = BUILTINS["vector"]
+    PYTHON_ALIASES[public.matrix] = BUILTINS["matrix"]
+
+
+_register_more()
+
+# Quaternion/transform builtins, and normalize() of quaternions (kdsl/frontend/geometry.py).
+from kdsl.frontend import geometry as _geometry  # noqa: E402, F401
+
+# print() and printf() (format checking; kdsl/frontend/printing.py).
+from kdsl.frontend import printing as _printing  # noqa: E402, F401

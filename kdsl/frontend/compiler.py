@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING, Any
 from kdsl.errors import KdslError, KdslSyntaxError, KdslTypeError
 from kdsl.frontend.analysis import always_returns, has_nontail_return
 from kdsl.frontend.control import RET
+from kdsl.frontend.inout import InOut
 from kdsl.frontend.statements import StatementLowering
 from kdsl.frontend.values import describe, is_weak
 from kdsl.ir import Module, Operation, Value, new_func
@@ -34,6 +35,9 @@ class FunctionCompiler(StatementLowering):
         if isinstance(fdef, ast.AsyncFunctionDef):
             raise self.error(KdslSyntaxError, "an async def cannot be a kernel or function", fdef)
         _check_signature(self, fdef)
+        if self.kind == "kernel" and self.target.inout_params():
+            raise self.error(KdslSyntaxError, "a kernel cannot have inout() parameters; "
+                             "only a @kdsl.func writes one back to its caller", fdef)  # fmt: skip
         names = [a.arg for a in fdef.args.args]
         func = new_func(self.unit.module, sym_name, arg_types, names, [], self.kind,
                         self.loc(fdef))  # fmt: skip
@@ -53,9 +57,11 @@ class FunctionCompiler(StatementLowering):
             self.visit_body(fdef.body)
             res = self.res_types or []
             rv = [self.vars[f"$rv{k}"] for k in range(len(res))]
+            # In-out parameters come back after the declared results (see inout.py).
+            inout = [self.vars[names[k]] for k in self.target.inout_params()]
             end = fdef.body[-1] if fdef.body else fdef
-            self.b.create("func.return", rv, loc=self.loc(end))
-        func.attrs["res_types"] = list(res)
+            self.b.create("func.return", rv + inout, loc=self.loc(end))
+        func.attrs["res_types"] = list(res) + [v.type for v in inout]
         return func
 
     def call_user(self, fn: Function, args: list[Any], node: ast.Call) -> Any:
@@ -65,9 +71,25 @@ class FunctionCompiler(StatementLowering):
         res = callee.attrs["res_types"]
         op = self.b.create("func.call", values, list(res), {"callee": callee.attrs["sym_name"]},
                            loc=self.loc(node))  # fmt: skip
-        if not op.results:
+        results = list(op.results)
+        inout = overload.inout_params()
+        if inout:
+            results, written = results[: len(results) - len(inout)], results[-len(inout):]
+            self.write_back(inout, written, args, node)
+        if not results:
             return None
-        return op.results[0] if len(op.results) == 1 else tuple(op.results)
+        return results[0] if len(results) == 1 else tuple(results)
+
+    def write_back(self, positions, written: list[Value], args: list[Any], node: ast.Call) -> None:
+        """Rebind each local variable passed at an in-out position to its new value.
+
+        Only a plain local name whose current value is the one passed is rebound;
+        other arguments are temporaries (see ``inout.py``).
+        """
+        for k, new in zip(positions, written):
+            arg = node.args[k] if k < len(node.args) else None
+            if isinstance(arg, ast.Name) and self.vars.get(arg.id) is args[k]:
+                self.bind_raw(arg.id, new)
 
     def pick_overload(self, fn: Function, args: list[Any], node: ast.Call):
         for a in args:
@@ -157,6 +179,10 @@ class ModuleCompiler:
         finally:
             self.stack.pop()
         self.done[id(ov)] = func
+        if ov.custom_grad is not None or ov.custom_replay is not None:
+            from kdsl.frontend.custom_grad import compile_custom
+
+            compile_custom(self, ov, func)
         return func
 
 
@@ -170,6 +196,21 @@ def resolve_annotation(target: Any, name: str, ann: Any, node: ast.AST | None) -
             f"parameter '{name}' of {src.name} needs a type annotation (e.g. {name}: float)",
             src.loc(node), src.name,
         )  # fmt: skip
+    ann = evaluate_annotation(target, name, ann, node)
+    if isinstance(ann, InOut):
+        ann = ann.type
+    try:
+        return type_of(ann)
+    except (TypeError, KdslError):
+        raise KdslTypeError(
+            f"the annotation of '{name}' is not a kdsl type: {ann!r} (expected float, int, "
+            "wp.vec3, wp.array(dtype=...), ...)", src.loc(node), src.name,
+        ) from None  # fmt: skip
+
+
+def evaluate_annotation(target: Any, name: str, ann: Any, node: ast.AST | None) -> Any:
+    """A parameter annotation as an object (a string annotation is evaluated)."""
+    src = target.src
     if isinstance(ann, str):
         try:
             # Closure variables count too: a kernel factory's dtype lives there.
@@ -179,10 +220,4 @@ def resolve_annotation(target: Any, name: str, ann: Any, node: ast.AST | None) -
         except Exception:
             raise KdslTypeError(f"cannot resolve the annotation {ann!r} of '{name}'",
                                 src.loc(node), src.name) from None  # fmt: skip
-    try:
-        return type_of(ann)
-    except (TypeError, KdslError):
-        raise KdslTypeError(
-            f"the annotation of '{name}' is not a kdsl type: {ann!r} (expected float, int, "
-            "wp.vec3, wp.array(dtype=...), ...)", src.loc(node), src.name,
-        ) from None  # fmt: skip
+    return ann

@@ -20,8 +20,17 @@ from collections.abc import Callable
 from typing import Any
 
 from kdsl.errors import KdslSyntaxError, KdslTypeError
-from kdsl.frontend.analysis import BREAK, CONTINUE, RETURN, assigned_names, body_exits, exits
+from kdsl.frontend.analysis import (
+    BREAK,
+    CONTINUE,
+    RETURN,
+    assigned_names,
+    body_exits,
+    call_rebinds,
+    exits,
+)
 from kdsl.frontend.expressions import ExpressionLowering
+from kdsl.frontend.inout import inout_positions, static_callee
 from kdsl.frontend.values import default_type
 from kdsl.ir import Block, Region, Value
 from kdsl.ir.types import BOOL, F32, I32, Type
@@ -63,6 +72,10 @@ class ControlFlowLowering(ExpressionLowering):
         for name in sorted(set(then_v) | set(else_v)):
             tv, ev = then_v.get(name), else_v.get(name)
             if tv is ev:
+                # Both branches bound the name to one value from before the if
+                # (`if c: return a` / `return a`): no merge, but it is bound now.
+                if tv is not None and self.vars.get(name) is not tv:
+                    self.bind_raw(name, tv)
                 continue
             if tv is None or ev is None:
                 if not name.startswith("$"):
@@ -92,10 +105,17 @@ class ControlFlowLowering(ExpressionLowering):
         self.maybe = maybe - set(self.vars)
 
     def if_value(self, cond: Value, then_fn, else_fn, node: ast.AST, t: Type | None) -> Value:
-        """An expression-level ``scf.if`` with one result (``and``/``or``/ternary)."""
-        then_b, else_b = Block(), Block()
-        tv = self.in_block(then_b, then_fn)
-        ev = self.in_block(else_b, else_fn)
+        """An expression-level ``scf.if`` with one result (``and``/``or``/ternary).
+
+        An arm may rebind variables through an in-out call (``randf(state)``): those
+        become extra results, so the state advances only on the arm that ran.
+        """
+        arms: dict[str, Any] = {}
+        then_b, then_v, _ = self.branch(lambda: arms.__setitem__("t", then_fn()))
+        else_b, else_v, _ = self.branch(lambda: arms.__setitem__("e", else_fn()))
+        tv, ev = arms["t"], arms["e"]
+        changed = sorted(n for n in then_v.keys() & else_v.keys() & self.vars.keys()
+                         if then_v[n] is not else_v[n])  # fmt: skip
         if t is None:
             if isinstance(tv, Value) or isinstance(ev, Value):
                 t = tv.type if isinstance(tv, Value) else ev.type
@@ -107,11 +127,15 @@ class ControlFlowLowering(ExpressionLowering):
             raise self.error(
                 KdslTypeError, f"both arms must have one type, got {tv.type} and {ev.type}", node
             )
-        self.in_block(then_b, lambda: self.b.create("scf.yield", [tv]))
-        self.in_block(else_b, lambda: self.b.create("scf.yield", [ev]))
-        op = self.b.create("scf.if", [cond], [tv.type], regions=[Region(then_b), Region(else_b)],
+        for block, v, scope in ((then_b, tv, then_v), (else_b, ev, else_v)):
+            yielded = [v, *(scope[n] for n in changed)]
+            self.in_block(block, lambda y=yielded: self.b.create("scf.yield", y))
+        types = [tv.type, *(self.vars[n].type for n in changed)]
+        op = self.b.create("scf.if", [cond], types, regions=[Region(then_b), Region(else_b)],
                            loc=self.loc(node))  # fmt: skip
-        return op.result
+        for n, r in zip(changed, op.results[1:]):
+            self.bind_raw(n, r)
+        return op.results[0]
 
     def bind_raw(self, name: str, v: Value) -> None:
         if not name.startswith("$") and v.name_hint is None:
@@ -132,8 +156,15 @@ class ControlFlowLowering(ExpressionLowering):
 
     # --- loops --------------------------------------------------------------------
 
-    def loop_setup(self, body: list[ast.stmt], target: str | None) -> tuple[list[str], dict]:
-        """Carried names (assigned in the body, live before it) and the saved flags."""
+    def call_inout_positions(self, call: ast.Call) -> set[int]:
+        """Argument positions of ``call`` its callee may write back (``inout.py``)."""
+        fn = static_callee(call.func, set(self.vars) | self.maybe, self.globals)
+        return inout_positions(fn, len(call.args)) if fn is not None else set()
+
+    def loop_setup(
+        self, body: list[ast.stmt], target: str | None, test: ast.expr | None = None
+    ) -> tuple[list[str], dict]:
+        """Carried names (assigned in the body or the test, live before) and the saved flags."""
         saved = {k: self.vars.get(k) for k in (BRK, CONT)}
         level = body_exits(body)
         if BREAK in level:
@@ -142,10 +173,10 @@ class ControlFlowLowering(ExpressionLowering):
             self.vars.pop(BRK, None)
         self.vars.pop(CONT, None)
         # Stores into array elements (`out[i] = x`) do not rebind the array name.
+        written = assigned_names(body)
+        written |= call_rebinds([*body, *([test] if test else [])], self.call_inout_positions)
         carried = sorted(
-            n
-            for n in assigned_names(body)
-            if n in self.vars and n != target and self.vars[n].type.is_value
+            n for n in written if n in self.vars and n != target and self.vars[n].type.is_value
         )
         for flag in (BRK, RET):
             if flag in self.vars and (flag == BRK or RETURN in level):
@@ -254,7 +285,9 @@ class ControlFlowLowering(ExpressionLowering):
                 c = self.if_value(stop, lambda: False, lambda: cond_fn(self.vars), node, BOOL)
             else:
                 c = cond_fn(self.vars)
-            self.b.create("scf.condition", [c, *before.args])
+            # The test may rebind carried names (an in-out call such as randf(state)):
+            # the body and the loop's results see the values it leaves.
+            self.b.create("scf.condition", [c, *(self.vars[n] for n in carried)])
         finally:
             self.vars = saved_vars
 

@@ -90,6 +90,9 @@ class Emitter(ast.NodeVisitor):
         """A captured Python value as a frontend value (weak literal, constant, vector)."""
         if is_weak(x):
             return x
+        misuse = getattr(type(x), "__kdsl_misuse__", None)
+        if isinstance(misuse, str):  # an object only some constructs accept (wp.adjoint)
+            raise self.error(KdslSyntaxError, misuse, node)
         if isinstance(x, np.generic) and x.dtype.kind in "biuf":
             from kdsl.ir.types import scalar_from_numpy
 

@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from kdsl.errors import KdslError, KdslNameError, KdslSyntaxError, KdslTypeError
+from kdsl.frontend import geometry, structs
 from kdsl.frontend.builtins import PYTHON_ALIASES, PYTHON_CASTS, Builtin, cast
 from kdsl.frontend.emitter import Emitter, component_count
 from kdsl.frontend.static import static
@@ -26,6 +27,7 @@ from kdsl.ir.types import (
     Type,
     VectorType,
 )
+from kdsl.runtime.indexed import is_indexed
 
 _BINOPS = {
     ast.Add: "add", ast.Sub: "sub", ast.Mult: "mul", ast.Div: "div", ast.FloorDiv: "floordiv",
@@ -84,11 +86,15 @@ class ExpressionLowering(Emitter):
         t = v.type
         if isinstance(t, ArrayType) and attr == "shape":
             return ShapeOf(v)
+        if geometry.has_part(t, attr):  # transform.p, transform.q
+            return geometry.part(self, v, attr, node)
         if isinstance(t, VectorType) and attr in _COMPONENTS:
             k = _COMPONENTS[attr]
             if k >= t.length:
                 raise self.error(KdslTypeError, f"a {t} has no component '.{attr}'", node)
             return self.emit("vec.extract", v, self.const(k, I32, node), node=node)
+        if is_indexed(t) and attr == "shape":
+            return structs.indexed_shape(self, v, node)
         if isinstance(t, StructType):
             return self.emit("struct.extract", v, node=node, field=attr)
         raise self.error(KdslTypeError, f"a {t} has no attribute '.{attr}'", node)
@@ -113,6 +119,9 @@ class ExpressionLowering(Emitter):
             isinstance(a, float) or isinstance(b, float)) and b != 0:  # fmt: skip
             return a / b
         x, y = self.coerce_pair(a, b, node)
+        special = geometry.binop(self, op, x, y, node)  # q1 * q2, t1 * t2
+        if special is not None:
+            return special
         if op == "matmul" or (op == "mul" and _is_matmul(x.type, y.type)):
             return self.emit("vec.matmul", x, y, node=node)
         return self.emit(f"arith.{op}", x, y, node=node)
@@ -238,6 +247,9 @@ class ExpressionLowering(Emitter):
             return self.emit("kd.load", base, *self.indices(base, idx, node), node=node)
         if isinstance(t, VectorType | MatrixType):
             return self.emit("vec.extract", base, *self.indices(base, idx, node), node=node)
+        if is_indexed(t):
+            data, ix = structs.indexed_element(self, base, idx, node)
+            return self.emit("kd.load", data, *ix, node=node)
         raise self.error(KdslTypeError, f"a value of type {t} cannot be indexed", node)
 
     # --- calls --------------------------------------------------------------------
@@ -248,16 +260,24 @@ class ExpressionLowering(Emitter):
             return self.eval_static(node)
         if any(isinstance(a, ast.Starred) for a in node.args):
             raise self.error(KdslSyntaxError, "starred arguments (*args) are not supported", node)
-        if node.keywords:
-            kw = node.keywords[0]
-            what = f"'{kw.arg}'" if kw.arg else "**kwargs"
-            raise self.error(
-                KdslTypeError, f"{_callee_name(fn)}() takes no keyword arguments (got {what})", node
-            )
+        # Keyword arguments go only to builtins that name them (``identity(n=3, dtype=float)``).
+        target = PYTHON_ALIASES.get(fn, fn) if _hashable(fn) else fn
+        allowed = (target.keywords if isinstance(target, Builtin)
+                   else getattr(target, "__kdsl_keywords__", ()))  # struct fields
+        for kw in node.keywords:
+            if kw.arg is None or kw.arg not in allowed:
+                what = f"'{kw.arg}'" if kw.arg else "**kwargs"
+                takes = f"only {', '.join(allowed)} as" if allowed else "no"
+                raise self.error(KdslTypeError, f"{_callee_name(fn)}() takes {takes} keyword "
+                                 f"arguments (got {what})", node)  # fmt: skip
+        lower_nodes = getattr(target, "lower_nodes", None)
+        if lower_nodes is not None:  # print/printf read string literals from the AST
+            return lower_nodes(self, node)
+        kwargs = {kw.arg: self.visit(kw.value) for kw in node.keywords}
         args = [self.visit(a) for a in node.args]
-        return self.call(fn, args, node)
+        return self.call(fn, args, node, kwargs)
 
-    def call(self, fn: Any, args: list[Any], node: ast.Call) -> Any:
+    def call(self, fn: Any, args: list[Any], node: ast.Call, kwargs: dict | None = None) -> Any:
         fn = PYTHON_ALIASES.get(fn, fn) if _hashable(fn) else fn
         if isinstance(fn, Builtin):
             lo, hi = fn.arity
@@ -268,7 +288,7 @@ class ExpressionLowering(Emitter):
                     f"{fn.name}() takes {want} arguments, got {len(args)}",
                     node,
                 )
-            return fn.lower(self, args, node)
+            return fn.lower(self, args, node, **kwargs) if kwargs else fn.lower(self, args, node)
         if _hashable(fn) and fn in PYTHON_CASTS:
             self.check_cast_args(fn.__name__, args, node)
             return cast(self, PYTHON_CASTS[fn], args, node)
@@ -278,6 +298,8 @@ class ExpressionLowering(Emitter):
             return cast(self, t, args, node)
         if isinstance(t, VectorType | MatrixType):
             return self.construct(t, args, node)
+        if isinstance(t, StructType):
+            return structs.construct(self, t, args, kwargs or {}, node)
         if hasattr(fn, "__kdsl_overloads__"):
             return self.call_user(fn, args, node)
         if fn is range:

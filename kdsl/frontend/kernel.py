@@ -10,6 +10,7 @@ from typing import Any
 
 from kdsl.errors import KdslError, full_tracebacks
 from kdsl.frontend.source import ParsedSource
+from kdsl.frontend.structs import register_structs
 from kdsl.ir import Module, verify_module
 from kdsl.ir.types import Type
 
@@ -38,6 +39,20 @@ class _Target:
             anns = self.fn.__annotations__
             self._arg_types = [resolve_annotation(self, a.arg, anns.get(a.arg), a) for a in args]
         return self._arg_types
+
+    def inout_params(self) -> tuple[int, ...]:
+        """Indices of the parameters annotated ``inout(T)`` (see ``inout.py``)."""
+        if not hasattr(self, "_inout"):
+            from kdsl.frontend.compiler import evaluate_annotation
+            from kdsl.frontend.inout import InOut
+
+            args = self.src.tree.args.args
+            anns = self.fn.__annotations__
+            self._inout = tuple(
+                k for k, a in enumerate(args)
+                if isinstance(evaluate_annotation(self, a.arg, anns.get(a.arg), a), InOut)
+            )  # fmt: skip
+        return self._inout
 
 
 class Kernel(_Target):
@@ -90,6 +105,7 @@ class Kernel(_Target):
         # The kernel goes first, then the functions in the order they were compiled.
         unit.module.body.ops.remove(func)
         unit.module.body.ops.insert(0, func)
+        register_structs(unit.module)
         verify_module(unit.module)
         self._tid_ndim = fc.tid_ndim or 1
         return unit.module
@@ -105,12 +121,18 @@ class Kernel(_Target):
 
 
 class Overload(_Target):
-    """One signature of a ``@kdsl.func``."""
+    """One signature of a ``@kdsl.func``.
+
+    ``custom_grad``/``custom_replay``: its ``@kdsl.func_grad``/``@kdsl.func_replay``
+    functions (``custom_grad.CustomTarget``), or None.
+    """
 
     def __init__(self, fn: Callable[..., Any], index: int) -> None:
         self.fn = fn
         self.name = fn.__name__
         self.key = _symbol(fn, f"#{index}")
+        self.custom_grad: Any = None
+        self.custom_replay: Any = None
 
 
 class Function:

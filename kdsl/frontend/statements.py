@@ -6,6 +6,7 @@ import ast
 from typing import Any
 
 from kdsl.errors import KdslNameError, KdslSyntaxError, KdslTypeError
+from kdsl.frontend import geometry, structs
 from kdsl.frontend.analysis import BREAK, CONTINUE, RETURN, always_exits, exits
 from kdsl.frontend.builtins import BUILTINS
 from kdsl.frontend.control import BRK, CONT, MAX_UNROLL, RET, ControlFlowLowering
@@ -14,6 +15,7 @@ from kdsl.frontend.static import static
 from kdsl.frontend.values import ShapeOf, describe, is_weak
 from kdsl.ir import Value
 from kdsl.ir.types import BOOL, I32, ArrayType, MatrixType, StructType, VectorType
+from kdsl.runtime.indexed import is_indexed
 
 
 class StatementLowering(ControlFlowLowering):
@@ -81,9 +83,31 @@ class StatementLowering(ControlFlowLowering):
         self.assign(node.target, v, node)
 
     def visit_AugAssign(self, node: ast.AugAssign) -> None:
+        if isinstance(node.op, ast.Add | ast.Sub) and self.atomic_update(node):
+            return
         current = self.visit(node.target)
         op = _BINOPS[type(node.op)]
         self.assign(node.target, self.binop(op, current, self.visit(node.value), node), node)
+
+    def atomic_update(self, node: ast.AugAssign) -> bool:
+        """``arr[i...] += x`` / ``-= x`` on an array element is an atomic add/sub, as in
+        Warp (other operators, and components of elements, read and write back)."""
+        target = node.target
+        # Only a named array (or a struct's array field): evaluating the base twice
+        # (here, then in the read-modify-write path) must have no effect.
+        if not (isinstance(target, ast.Subscript) and isinstance(target.value, ast.Name
+                                                                | ast.Attribute)):  # fmt: skip
+            return False
+        base = self.visit(target.value)
+        if not (isinstance(base, Value) and isinstance(base.type, ArrayType)):
+            return False
+        idx = self.index_list(target.slice)
+        if len(idx) != base.type.ndim:
+            return False
+        v = self.value(self.visit(node.value), node.value, want=base.type.dtype)
+        kind = "add" if isinstance(node.op, ast.Add) else "sub"
+        self.emit("kd.atomic_rmw", v, base, *self.indices(base, idx, target), node=node, kind=kind)
+        return True
 
     def assign(self, target: ast.expr, value: Any, node: ast.AST) -> None:
         """Bind ``value`` to ``target``: a name, a tuple, an element or a component."""
@@ -149,6 +173,14 @@ class StatementLowering(ControlFlowLowering):
             except TypeError as e:
                 raise self.error(KdslTypeError, str(e), target) from None
             return
+        if is_indexed(t):  # an indexedarray: store through its index arrays
+            data, ix = structs.indexed_element(self, base, idx, target)
+            v = self.value(value, target, want=data.type.dtype)
+            try:
+                self.b.create("kd.store", [v, data, *ix], loc=self.loc(target))
+            except TypeError as e:
+                raise self.error(KdslTypeError, str(e), target) from None
+            return
         if not isinstance(t, VectorType | MatrixType):
             raise self.error(KdslTypeError, f"a value of type {t} cannot be indexed", target)
         ix = self.indices(base, idx, target)
@@ -168,6 +200,8 @@ class StatementLowering(ControlFlowLowering):
                 raise self.error(KdslTypeError, f"a {t} has no component '.{target.attr}'", target)
             v = self.value(value, target, want=t.elem)
             new = self.emit("vec.insert", base, v, self.const(k, I32, target), node=target)
+        elif geometry.has_part(t, target.attr):  # transform.p = v, transform.q = q
+            new = geometry.with_part(self, base, target.attr, value, target)
         elif isinstance(t, StructType):
             v = self.value(value, target, want=t.field_type(target.attr))
             new = self.emit("struct.insert", base, v, node=target, field=target.attr)
@@ -277,7 +311,7 @@ class StatementLowering(ControlFlowLowering):
             raise self.error(KdslSyntaxError, "while/else is not supported", node)
         self.loop_depth += 1
         try:
-            carried, saved = self.loop_setup(node.body, None)
+            carried, saved = self.loop_setup(node.body, None, node.test)
 
             def cond(vals: dict[str, Value]) -> Value:
                 return self.to_bool(self.visit(node.test), node.test)

@@ -14,6 +14,8 @@ from kdsl.interop.jax import (
     from_jax,
     to_jax,
 )
+from kdsl.interop.jax_callable import jax_callable
+from kdsl.interop.jax_kernel import jax_kernel
 from kdsl.interop.paddle import (
     device_from_paddle,
     device_to_paddle,
@@ -38,7 +40,8 @@ __all__ = [
     "ArrayDescriptor", "device_from_jax", "device_from_paddle", "device_from_torch",
     "device_to_jax", "device_to_paddle", "device_to_torch", "dtype_from_jax",
     "dtype_from_paddle", "dtype_from_torch", "dtype_to_jax", "dtype_to_paddle",
-    "dtype_to_torch", "from_dlpack", "from_jax", "from_paddle", "from_torch",
+    "dtype_to_torch", "from_dlpack", "from_jax", "from_paddle", "from_torch", "jax_callable",
+    "jax_kernel",
     "stream_from_paddle", "stream_from_torch", "stream_to_torch", "to_dlpack", "to_jax",
     "to_paddle", "to_torch",
 ]  # fmt: skip

@@ -5,7 +5,17 @@ Import from here, not from the submodules::
     from kdsl.ir import Builder, CATALOG, Module, parse_module, print_module, types
 """
 
-from kdsl.ir import ops_arith, ops_debug, ops_func, ops_math, ops_mem, ops_scf, ops_vec, types
+from kdsl.ir import (
+    ops_arith,
+    ops_debug,
+    ops_func,
+    ops_math,
+    ops_mem,
+    ops_print,
+    ops_scf,
+    ops_vec,
+    types,
+)
 from kdsl.ir.builder import Builder, create_op, new_func
 from kdsl.ir.catalog import CATALOG, OpDef, OpRegistry
 from kdsl.ir.core import (

@@ -16,7 +16,7 @@ import numpy as np
 from kdsl.ir import semantics as sem
 from kdsl.ir.catalog import CATALOG, PURE, SPECULATABLE
 from kdsl.ir.ops_arith import is_numeric
-from kdsl.ir.types import BOOL, ScalarType, Type, elem_type
+from kdsl.ir.types import BOOL, I32, ScalarType, Type, elem_type
 
 _PURE = frozenset({PURE, SPECULATABLE})
 
@@ -156,3 +156,24 @@ for _name, (_fn, _doc) in BINARY_MATH.items():
         type_rule=_binary_rule(_name), interp=_binary_interp(_fn),
         example=f"%2 = math.{_name} %0, %1 : f32", group="math",
     )  # fmt: skip
+
+
+def _bit_count_rule(ts: Sequence[Type], attrs: dict[str, Any]) -> list[Type]:
+    (a,) = ts
+    if not (isinstance(a, ScalarType) and a.is_int):
+        raise TypeError(f"bit_count() needs an integer scalar, not {a}")
+    return [I32]
+
+
+def _bit_count_interp(ctx, op, a):
+    # Count the bits of the two's-complement pattern (byte view; numpy >= 1.24 has no
+    # bitwise_count).
+    return np.int32(np.unpackbits(np.ascontiguousarray(a).reshape(1).view(np.uint8)).sum())
+
+
+CATALOG.define(
+    "math.bit_count",
+    "Number of set bits in an integer's two's-complement representation (an i32).",
+    traits=_PURE, type_rule=_bit_count_rule, interp=_bit_count_interp,
+    example="%1 = math.bit_count %0 : i32", group="math",
+)  # fmt: skip

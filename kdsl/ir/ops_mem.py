@@ -191,11 +191,54 @@ def _atomic_interp(ctx, op, v, a, *idx):
 CATALOG.define(
     "kd.atomic_rmw",
     "Atomic read-modify-write of one array element with ``kind`` (add, sub, min, "
-    "max, and, or, xor, exch); gives the old value. Vectors work componentwise.",
+    "max, and, or, xor, exch); gives the old value. Vectors and matrices work "
+    "componentwise (each component is one atomic update). Integers wrap; float "
+    "min/max follow ``arith.min``/``arith.max`` (NaN loses, -0.0 < +0.0).",
     traits=frozenset({READS, WRITES}),
     type_rule=_atomic_rule,
     interp=_atomic_interp,
     required_attrs=("kind",),
     example='%3 = kd.atomic_rmw %2, %0, %1 {kind = "add"} : f32',
+    group="memory",
+)
+
+
+def _cas_rule(ts: Sequence[Type], attrs: dict[str, Any]) -> list[Type]:
+    compare, v, a = ts[0], ts[1], ts[2]
+    at = _check_access(a, ts[3:])
+    if v != at.dtype or compare != at.dtype:
+        raise TypeError(
+            f"atomic cas needs a compare value and a new value of the array's type "
+            f"{at.dtype}, got {compare} and {v}"
+        )
+    return [v]
+
+
+def _bits(x: np.ndarray) -> np.ndarray:
+    """The raw bits of ``x`` as unsigned integers of the same width."""
+    x = np.array(x)  # a contiguous copy that keeps 0-d values 0-d
+    return x.view(np.dtype(f"u{x.dtype.itemsize}"))
+
+
+def _cas_interp(ctx, op, compare, v, a, *idx):
+    ix = element_index(ctx, op, a, 2, idx)
+    t = op.results[0].type
+    old = to_value(a[ix], t)
+    old_arr, new_arr = np.array(old), np.array(v, dtype=np.asarray(old).dtype)
+    same = _bits(old_arr) == _bits(np.array(compare, dtype=old_arr.dtype))
+    a[ix] = sem.unwrap(np.where(same, new_arr, old_arr))
+    return old
+
+
+CATALOG.define(
+    "kd.atomic_cas",
+    "Atomic compare-and-swap of one array element: ``kd.atomic_cas %compare, %value, "
+    "%array, %i...`` stores ``value`` where the element's bits equal ``compare``'s and "
+    "gives the old value. Floats compare by bits (NaN can match, -0.0 does not match "
+    "+0.0), as the hardware does. Vectors and matrices work componentwise.",
+    traits=frozenset({READS, WRITES}),
+    type_rule=_cas_rule,
+    interp=_cas_interp,
+    example="%4 = kd.atomic_cas %2, %3, %0, %1 : i32",
     group="memory",
 )

@@ -253,3 +253,34 @@ def value_shape(t: Type) -> tuple[int, ...]:
     if isinstance(t, VectorType | MatrixType):
         return t.shape
     raise TypeError(f"{t} has no fixed shape")
+
+
+def storage_dtype(t: Type) -> np.dtype:
+    """The NumPy dtype of one value of ``t`` in memory (an array element).
+
+    Structs use C's natural layout: each field at the next multiple of its own
+    alignment, the struct aligned to its widest field and padded to a multiple
+    of that. The cpu backend's field offsets, the CUDA C structs and NumPy's
+    structured arrays all read their layout from here, so they agree. Raises
+    ``TypeError`` for types with no memory layout (arrays, handles, and structs
+    holding them).
+    """
+    if isinstance(t, ScalarType):
+        return t.np_dtype
+    if isinstance(t, VectorType | MatrixType):
+        return np.dtype((t.elem.np_dtype, t.shape))
+    if isinstance(t, StructType):
+        names, formats, offsets, off, align = [], [], [], 0, 1
+        for name, ft in t.fields:
+            fd = storage_dtype(ft)
+            a = fd.alignment
+            off = (off + a - 1) // a * a
+            names.append(name)
+            formats.append(fd)
+            offsets.append(off)
+            off += fd.itemsize
+            align = max(align, a)
+        size = (off + align - 1) // align * align
+        spec = {"names": names, "formats": formats, "offsets": offsets, "itemsize": size}
+        return np.dtype(spec, align=True)
+    raise TypeError(f"values of {t} cannot be stored in an array")

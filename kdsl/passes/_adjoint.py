@@ -36,7 +36,7 @@ from dataclasses import dataclass, field
 
 from kdsl.errors import KdslError, render_loc
 from kdsl.ir import Block, Builder, Module, Operation, Region, Value, new_func
-from kdsl.ir.types import BOOL, I8, I32, ArrayType, StructType, Type
+from kdsl.ir.types import BOOL, I8, I32, I64, ArrayType, StructType, Type
 from kdsl.ir.vjp import VjpContext, get_rule, is_differentiable
 
 ADJ_SUFFIX = "__adj"
@@ -534,7 +534,32 @@ class AdjointBuilder:
             now = b.value("kd.load", vmap[arr], *idx)
             g = b.value("arith.select", b.value("arith.cmp", now, vmap[v], pred="eq"), g,
                         self._zeros(v.type))  # fmt: skip
+        elif kind in ("store", "exch") and arr in self.fblock.args:
+            self._consume(grad, idx, self.fblock.args.index(arr), v.type)
         self._acc(adj, v, g)
+
+    def _consume(self, grad: Value, idx: list[Value], param: int, t: Type) -> None:
+        """Zero ``grad[idx]`` after a store's adjoint read it, if the runtime says so.
+
+        A store overwrites the element, so the gradient of its old value is zero: the
+        element's adjoint must be consumed for in-place updates to differentiate right.
+        The runtime sets bit ``param`` of the hidden ``grad_owned`` mask when the
+        gradient array is the array's own ``.grad`` (as Warp does); gradient buffers a
+        caller passes explicitly are left as they were.
+        """
+        b = self.b
+        if not hasattr(self, "grad_owned"):
+            self.grad_owned = self.body.add_arg(I64, "grad_owned")
+        bit = b.value("arith.and", b.value("arith.shr", self.grad_owned, b.constant(param, I64)),
+                      b.constant(1, I64))  # fmt: skip
+        owned = b.value("arith.cmp", bit, b.constant(0, I64), pred="ne")
+        then, other = Block(), Block()
+        with b.at_end(then):
+            b.create("kd.store", [self._zeros(t), grad, *idx])
+            b.create("scf.yield", [])
+        with b.at_end(other):
+            b.create("scf.yield", [])
+        b.create("scf.if", [owned], [], regions=[Region(then), Region(other)])
 
     def _reverse_if(self, op: Operation, vmap, adj) -> None:
         b = self.b

@@ -23,7 +23,7 @@ from kdsl.ir.ops_debug import next_site
 from kdsl.passes.manager import ModulePass
 
 #: Access op -> position of its array operand (indices follow it).
-ACCESSES = {"kd.load": 0, "kd.store": 1, "kd.atomic_rmw": 1}
+ACCESSES = {"kd.load": 0, "kd.store": 1, "kd.atomic_rmw": 1, "kd.atomic_cas": 2}
 
 
 def _already_checked(op: Operation, operands: list) -> bool:

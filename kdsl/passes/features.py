@@ -117,6 +117,8 @@ class _Collector:
             self.groups.add(op.opdef.group)
         if op.name == "kd.atomic_rmw":
             self.atomics.add(op.attrs["kind"])
+        elif op.name == "kd.atomic_cas":
+            self.atomics.add("cas")
         elif op.name == "kd.tid":
             self.tid.add(int(op.attrs["ndim"]))
         for v in op.results:

@@ -10,7 +10,13 @@ Assumes the frontend's shape: a function has a single ``func.return``, the last 
 of its body (early returns were turned into structured control flow). Recursion
 cannot be inlined and raises ``KdslError`` at the call.
 
-Options: ``drop_unused`` (default true).
+With ``keep_custom_grad``, calls to a function carrying ``custom_grad`` (a
+``@kdsl.func_grad`` primal) stay calls, so the ``adjoint`` pass can call its
+gradient function; everything else is still inlined. A function is dropped only
+when no kernel reaches it through calls or through the ``custom_grad`` and
+``custom_replay`` attributes of a function it reaches.
+
+Options: ``drop_unused`` (default true), ``keep_custom_grad`` (default false).
 """
 
 from __future__ import annotations
@@ -65,8 +71,10 @@ class InlinePass(ModulePass):
     """Inline function calls (see the module docstring)."""
 
     name: ClassVar[str] = "inline"
-    #: Drop ``kind = "func"`` functions that nothing calls any more.
+    #: Drop ``kind = "func"`` functions that no kernel reaches any more.
     drop_unused: bool = True
+    #: Keep calls to functions with a custom gradient (for the ``adjoint`` pass).
+    keep_custom_grad: bool = False
 
     def apply(self, module: Module) -> bool:
         changed = False
@@ -75,21 +83,34 @@ class InlinePass(ModulePass):
                 callee = module.get_func(call.attrs["callee"])
                 if callee.attrs.get("kind") != "func":
                     continue
+                if self.keep_custom_grad and callee.attrs.get("custom_grad"):
+                    continue
                 _inline_call(call, callee)
                 changed = True
         if self.drop_unused:
+            live = _reachable(module)
             for func in module.funcs:
-                if func.attrs.get("kind") == "func" and not self._referenced(module, func):
+                if func.attrs.get("kind") == "func" and func.attrs["sym_name"] not in live:
                     func.erase()
                     changed = True
         return changed
 
-    @staticmethod
-    def _referenced(module: Module, func: Operation) -> bool:
+
+#: Function attributes that name another function the module must keep.
+_REFERENCE_ATTRS = ("custom_grad", "custom_replay")
+
+
+def _reachable(module: Module) -> set[str]:
+    """Names of the functions reachable from the non-``func`` ones (kernels, adjoints)."""
+    live: set[str] = set()
+    work = [f for f in module.funcs if f.attrs.get("kind") != "func"]
+    while work:
+        func = work.pop()
         name = func.attrs["sym_name"]
-        return any(
-            op.name == "func.call" and op.attrs["callee"] == name
-            for other in module.funcs
-            if other is not func
-            for op in other.walk()
-        )
+        if name in live:
+            continue
+        live.add(name)
+        refs = [op.attrs["callee"] for op in _calls(func)]
+        refs += [func.attrs[a] for a in _REFERENCE_ATTRS if func.attrs.get(a)]
+        work += [module.get_func(r) for r in refs if r not in live and module.has_func(r)]
+    return live

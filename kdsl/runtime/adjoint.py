@@ -22,7 +22,7 @@ from kdsl.ir import types as T
 from kdsl.ir.vjp import is_differentiable
 
 _ADJ_ATTR = "_kdsl_adjoint"
-_INLINE = "inline"  # TODO(lead): inline{keep_custom_grad=true} once the option lands
+_INLINE = "inline{keep_custom_grad=true}"
 _COUNT_ATTR = "_kdsl_counter"
 
 
@@ -92,8 +92,8 @@ def adjoint_module(kernel: Any) -> Module:
     # Calls to functions with custom gradients stay calls until the adjoint exists.
     run_pipeline(module, DEFAULT_PIPELINE.replace("inline", _INLINE, 1))
     AdjointPass(kernel.key).apply(module)
-    # Simplify the adjoint, then drop the tapes its reverse sweep no longer reads.
-    run_pipeline(module, f"{CLEANUP_PIPELINE},tape-dce,{CLEANUP_PIPELINE}")
+    # Inline the custom gradients, simplify, then drop the tapes the reverse sweep never reads.
+    run_pipeline(module, f"inline,{CLEANUP_PIPELINE},tape-dce,{CLEANUP_PIPELINE}")
     return module
 
 
@@ -172,6 +172,9 @@ def launch_adjoint(
             adjoints.append(primal[i] if g is None else convs[n + i](g if g is not None else v))
     stream = _resolve_stream(dev, stream)
     hidden, status = _hidden_args(kernel, adj, dims, primal, dev, backend, stream)
+    for j, (name, _, _) in enumerate(adj.hidden):
+        if name == "grad_owned":
+            hidden[j] = _owned_mask(args, adj_args)
     converted = primal + adjoints + [convs[2 * n + i](h) for i, h in enumerate(hidden)]
     plan.backend.launch(plan.compiled, dims, converted, stream)
     if status is not None and int(status.numpy()[0]) != 0:
@@ -196,13 +199,16 @@ def _hidden_args(kernel, adj, dims, primal, dev, backend, stream) -> tuple[list,
     if not adj.hidden:
         return [], None
     threads = int(np.prod(dims))
-    used = [(name, t) for name, t, live in adj.hidden if live and name != "tape_status"]
+    used = [(name, t) for name, t, live in adj.hidden
+            if live and name not in ("tape_status", "grad_owned")]  # fmt: skip
     slots = _tape_slots(kernel, adj, dims, primal, dev, backend, stream, used)
     _check_budget(kernel, used, slots, adj.func.attrs["tape_sites"], threads)
     hidden: list[Any] = []
     status = None
     for name, t, live in adj.hidden:
-        if name == "tape_status":
+        if name == "grad_owned":
+            hidden.append(0)  # filled by the caller
+        elif name == "tape_status":
             status = alloc.zeros(1, dtype=class_of(T.I32), device=dev) if live else None
             hidden.append(status if live else alloc.empty(1, dtype=class_of(T.I32), device=dev))
         elif not live:
@@ -210,6 +216,16 @@ def _hidden_args(kernel, adj, dims, primal, dev, backend, stream) -> tuple[list,
         else:
             hidden.append(_tape_array(t, threads, max(slots[_tape_index(name)], 1), dev))
     return hidden, status
+
+
+def _owned_mask(args: Sequence[Any], adj_args: Sequence[Any]) -> int:
+    """Bit i set when gradient i is parameter i's own ``.grad`` and the array does not
+    ``retain_grad``: a store into it then consumes (zeroes) the gradient it read."""
+    mask = 0
+    for i, (a, g) in enumerate(zip(args[:63], adj_args)):
+        if g is not None and getattr(a, "grad", None) is g and not a.retain_grad:
+            mask |= 1 << i
+    return mask
 
 
 def _tape_array(t: T.ArrayType, threads: int, slots: int, dev: Any) -> Any:

@@ -11,17 +11,20 @@ from typing import Any
 import numpy as np
 
 from kdsl.errors import KdslError
+from kdsl.ir import types as T
 from kdsl.runtime import cuda_memory as mem
 from kdsl.runtime.array import array
 from kdsl.runtime.device import get_device
 from kdsl.runtime.dtypes import (
     dtype_of_value,
+    host_value,
     inner_shape,
     normalize_shape,
     np_dtype,
     resolve_dtype,
 )
 from kdsl.runtime.stream import Stream, get_stream
+from kdsl.runtime.tape import record_copy
 
 
 def _dims(shape: Any, length: Any) -> tuple[int, ...]:
@@ -37,10 +40,16 @@ def _make(
     t = resolve_dtype(dtype)
     dims = _dims(shape, length)
     dev = get_device(device)
+    if dev.is_cuda and isinstance(t, T.StructType):
+        # CuPy holds structured buffers but cannot fill them: fill on the host, upload once.
+        host = np.zeros(dims, np_dtype(t))
+        if init is not None:
+            host[...] = np.asarray(host_value(t, init), dtype=host.dtype)
+        return array._wrap(mem.from_host(host, dev), t, dev, requires_grad)
     buf = mem.empty(dims + inner_shape(t), np_dtype(t), dev)
     if init is not None:
         try:
-            value = np.asarray(init, dtype=buf.dtype)
+            value = np.asarray(host_value(t, init), dtype=buf.dtype)
         except ValueError as e:
             raise KdslError(f"cannot fill an array of {t} with {init!r}: {e}") from None
         with mem.scope(dev):
@@ -193,3 +202,5 @@ def copy(
         dest._buf, dest.device, dest_offset, src._buf, src.device, src_offset, n, dest._inner,
         stream,
     )  # fmt: skip
+    # On an active kdsl.Tape a copy between arrays with gradients is differentiable.
+    record_copy(dest, src, dest_offset, src_offset, n)

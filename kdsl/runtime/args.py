@@ -199,6 +199,14 @@ def _check_foreign(
 
     ``fix`` is the conversion to suggest, with ``{}`` for the wanted dtype's name.
     """
+    if isinstance(t.dtype, T.StructType):  # a structured array in the struct's exact layout
+        want_struct = T.storage_dtype(t.dtype)
+        if dtype != want_struct or len(shape) != t.ndim:
+            raise ArgError(
+                f"expected a {t.ndim}-d array of {t.dtype} (NumPy dtype {want_struct}), got a "
+                f"{what} {dtype} array of shape {tuple(shape)}"
+            )
+        return
     inner = T.value_shape(t.dtype)
     want = T.elem_type(t.dtype).np_dtype
     if dtype != want:
@@ -266,13 +274,29 @@ def _composite(t: T.Type, value: Any) -> np.ndarray:
 
 def _struct(t: T.StructType, value: Any, device: Device) -> tuple:
     vt = getattr(type(value), "__kdsl_type__", None)
+    if isinstance(vt, property):  # an indexedarray: its type depends on the instance
+        vt = value.__kdsl_type__
     if isinstance(value, tuple) and len(value) == len(t.fields):
         parts = value
     elif vt == t:
         parts = tuple(getattr(value, name) for name, _ in t.fields)
     else:
         raise ArgError(f"expected {t}, got {describe(value)}")
-    return tuple(convert(ft, v, device) for (_, ft), v in zip(t.fields, parts))
+    out = []
+    for (name, ft), v in zip(t.fields, parts):
+        if v is None and isinstance(ft, T.ArrayType):  # an unset array field: empty, as in Warp
+            v = _empty_array(ft, device)
+        try:
+            out.append(convert(ft, v, device))
+        except ArgError as e:
+            raise ArgError(f"field '{name}' of {t}: {e}") from None
+    return tuple(out)
+
+
+def _empty_array(t: T.ArrayType, device: Device) -> Any:
+    """A buffer with no elements for an array field left None."""
+    dt = T.storage_dtype(t.dtype)
+    return mem.empty((0,) * t.ndim + dt.shape, dt.base, device)
 
 
 def launch_error(kernel_name: str, index: int, param: str, message: str) -> KdslLaunchError:

@@ -22,6 +22,7 @@ from kdsl.ir import types as T
 from kdsl.runtime import cuda_memory as mem
 from kdsl.runtime.device import Device, get_device
 from kdsl.runtime.dtypes import (
+    host_value,
     inner_shape,
     normalize_shape,
     np_dtype,
@@ -89,6 +90,9 @@ class array:
         self._ndim = buf.ndim - len(self._inner)
         self._device = dev
         self._grad: array | None = None
+        #: Keep ``.grad`` when a backward pass goes through a store into this array
+        #: (by default the store consumes it, as in Warp; see docs/autodiff.md).
+        self.retain_grad = False
         self.requires_grad = requires_grad
 
     @classmethod
@@ -220,6 +224,8 @@ class array:
     def list(self) -> list:
         """The elements as a flat Python list (vector classes for vector dtypes)."""
         flat = np.ascontiguousarray(self.numpy()).reshape(-1, *self._inner)
+        if isinstance(self._t, T.StructType):
+            return [self.dtype.from_numpy(x) for x in flat]
         if not self._inner:
             return list(flat)
         cls = self.dtype
@@ -228,11 +234,13 @@ class array:
     def _device_value(self, value: Any) -> Any:
         # A fill/setitem value checked on the host, then placed on this array's device
         # (inside mem.scope, so the upload is on the device's stream).
-        host = np.asarray(value, dtype=self._buf.dtype)
+        host = np.asarray(host_value(self._t, value), dtype=self._buf.dtype)
         return mem.cupy().asarray(host) if self._device.is_cuda else host
 
     def fill_(self, value: Any) -> array:
         """Set every element to ``value`` (a scalar, or a vector for vector dtypes)."""
+        if self._device.is_cuda and isinstance(self._t, T.StructType):
+            return self._update_records(..., value)
         try:
             with mem.scope(self._device):
                 self._buf[...] = self._device_value(value)
@@ -245,7 +253,10 @@ class array:
     def zero_(self) -> array:
         """Set every element to zero."""
         with mem.scope(self._device):
-            self._buf.fill(0)
+            if self._device.is_cuda and isinstance(self._t, T.StructType):
+                self._buf.data.memset_async(0, self._buf.nbytes)  # CuPy cannot fill records
+            else:
+                self._buf.fill(0)
         return self
 
     def assign(self, src: Any) -> array:
@@ -271,6 +282,10 @@ class array:
                 raise KdslError(
                     f"cannot assign a {data.shape} array to a {self.shape} array: {e}"
                 ) from None
+        if isinstance(src, array):  # differentiable on an active Tape, like kdsl.copy
+            from kdsl.runtime.tape import record_copy
+
+            record_copy(self, src, 0, 0, self.size)
         return self
 
     def to(self, device: Any) -> array:
@@ -325,12 +340,25 @@ class array:
         if view.ndim == len(self._inner):  # one element
             if self._device.is_cuda:
                 view = mem.to_host(view, self._device)  # waits for the stream
+            if isinstance(self._t, T.StructType):
+                return self.dtype.from_numpy(view[()])
             if not self._inner:
                 return view[()]
             return self.dtype(view)
         return array._wrap(view, self._t, self._device)
 
+    def _update_records(self, key: Any, value: Any) -> array:
+        # CuPy copies structured buffers but cannot assign into them: update on the host.
+        host = mem.to_host(self._buf, self._device)
+        host[key] = np.asarray(host_value(self._t, value), dtype=host.dtype)
+        with mem.scope(self._device):
+            self._buf.set(host)
+        return self
+
     def __setitem__(self, key: Any, value: Any) -> None:
+        if self._device.is_cuda and isinstance(self._t, T.StructType):
+            self._update_records(self._key(key), value)
+            return
         with mem.scope(self._device):
             self._buf[self._key(key)] = self._device_value(value)
 
@@ -371,6 +399,8 @@ def _alloc(
         full, dtype = dims, np.dtype(np.float32)
     else:
         full, dtype = dims + inner_shape(t), np_dtype(t)
+    if dev.is_cuda and isinstance(t, T.StructType):  # CuPy cannot fill structured buffers
+        return mem.from_host(np.zeros(full, dtype), dev), t
     buf = mem.empty(full, dtype, dev)
     with mem.scope(dev):
         buf.fill(0)
@@ -382,6 +412,7 @@ def _from_data(
 ) -> tuple[Any, T.Type]:
     """``data`` as a buffer of ``xp`` (NumPy or CuPy, on the current device), checked."""
     want = np_dtype(t) if t is not None else None
+    data = host_value(t, data) if t is not None else data
     try:
         buf = xp.array(data, dtype=want, copy=True) if copy else xp.asarray(data, dtype=want)
     except (TypeError, ValueError) as e:

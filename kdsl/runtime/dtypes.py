@@ -18,26 +18,49 @@ def resolve_dtype(dtype: Any) -> T.Type:
         t = type_of(dtype)
     except TypeError as e:
         raise KdslError(f"{dtype!r} is not an array dtype kdsl knows: {e}") from None
-    if not isinstance(t, T.ScalarType | T.VectorType | T.MatrixType):
+    if isinstance(t, T.StructType):
+        try:
+            T.storage_dtype(t)
+        except TypeError:
+            raise KdslError(
+                f"arrays of {t} are not supported: a struct holding arrays or handles has no "
+                "memory layout for an array element"
+            ) from None
+    elif not isinstance(t, T.ScalarType | T.VectorType | T.MatrixType):
         raise KdslError(
-            f"arrays of {t} are not supported yet (use scalar, vector or matrix dtypes)"
+            f"arrays of {t} are not supported yet (use scalar, vector, matrix or struct dtypes)"
         )
     return t
 
 
 def np_dtype(t: T.Type) -> np.dtype:
-    """The NumPy dtype of one scalar component of ``t``."""
+    """The NumPy dtype of one scalar component of ``t`` (a struct: its structured dtype)."""
+    if isinstance(t, T.StructType):
+        return T.storage_dtype(t)
     return T.elem_type(t).np_dtype
 
 
 def inner_shape(t: T.Type) -> tuple[int, ...]:
-    """The trailing NumPy dims one element of ``t`` takes (``(3,)`` for vec3)."""
-    return T.value_shape(t)
+    """The trailing NumPy dims one element of ``t`` takes (``(3,)`` for vec3, ``()`` for structs)."""
+    return () if isinstance(t, T.StructType) else T.value_shape(t)
 
 
 def public_dtype(t: T.Type) -> type:
-    """The class users see as ``array.dtype`` (``kdsl.float32``, ``kdsl.vec3``...)."""
+    """The class users see as ``array.dtype`` (``kdsl.float32``, ``kdsl.vec3``, a struct...)."""
+    if isinstance(t, T.StructType):
+        from kdsl.frontend.structs import class_of_struct
+
+        return class_of_struct(t)
     return class_of(t)
+
+
+def host_value(t: T.Type, value: Any) -> Any:
+    """A fill or element value as NumPy takes it: struct instances become tuples."""
+    if isinstance(t, T.StructType) and hasattr(value, "numpy_value"):
+        return value.numpy_value()
+    if isinstance(t, T.StructType) and isinstance(value, list):  # a list of instances
+        return [host_value(t, v) for v in value]
+    return value
 
 
 def dtype_of_value(value: Any) -> T.Type:

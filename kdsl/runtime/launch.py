@@ -8,6 +8,7 @@ backend (and backend version and options).
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Sequence
 from typing import Any
 
@@ -18,6 +19,7 @@ from kdsl.backends.base import Backend, CompiledKernel
 from kdsl.backends.registry import get_backend, is_registered
 from kdsl.errors import KdslError, KdslLaunchError
 from kdsl.ir import types as T
+from kdsl.runtime import tape as _tape
 from kdsl.runtime.args import ArgError, convert, launch_error
 from kdsl.runtime.array import array
 from kdsl.runtime.device import Device, get_device
@@ -289,11 +291,12 @@ def launch(
     dim: Any,
     inputs: Sequence[Any] = (),
     outputs: Sequence[Any] = (),
-    adj_inputs: Sequence[Any] = (),
-    adj_outputs: Sequence[Any] = (),
+    adj_inputs: Sequence[Any] | None = None,
+    adj_outputs: Sequence[Any] | None = None,
     device: Any = None,
     stream: Any = None,
     adjoint: bool = False,
+    record_tape: bool = True,
     record_cmd: bool = False,
     max_blocks: int = 0,
     block_dim: int = 256,
@@ -304,9 +307,19 @@ def launch(
     ``dim`` is an int or a tuple of 1 to 4 ints. Arguments are checked against the
     kernel's parameters (count, dtype, ndim, device). With ``record_cmd=True`` the
     launch is not run but returned as a ``Launch`` to run (and rerun) later.
+
+    While a ``kdsl.Tape`` is active the launch is recorded on it, unless
+    ``record_tape=False``. ``adjoint=True`` runs the kernel's adjoint instead:
+    ``adj_inputs``/``adj_outputs`` hold one entry per input/output, the gradient
+    array of an array argument (input gradients receive +=, output gradients hold
+    the incoming gradient) or None for no gradient.
     """
     if adjoint:
-        raise KdslError(f"kernel '{_kernel_name(kernel)}': adjoint launches are not supported yet")
+        _launch_adjoint(
+            kernel, dim, inputs, outputs, adj_inputs, adj_outputs, device, stream, backend,
+            record_cmd,
+        )  # fmt: skip
+        return None
     if type(dim) is int and dim >= 0:
         dims: tuple[int, ...] = (dim,)
     else:
@@ -328,4 +341,51 @@ def launch(
     if record_cmd:
         return Launch(kernel, plan.backend, plan.compiled, dims, converted, dev, stream)
     plan.backend.launch(plan.compiled, dims, converted, stream)
+    if _tape.ACTIVE and record_tape:
+        caller = sys._getframe(1)
+        _tape.ACTIVE[-1].record_launch(
+            kernel, dims, inputs, outputs, dev, max_blocks, block_dim,
+            {"caller": {"file": caller.f_code.co_filename, "lineno": caller.f_lineno,
+                        "func": caller.f_code.co_name}},
+            backend, stream,
+        )  # fmt: skip
     return None
+
+
+def _adjoint_list(adj: Sequence[Any] | None, primal: Sequence[Any], what: str, name: str) -> list:
+    # No adjoints given means no gradient wanted for any of them.
+    if adj is None or (len(adj) == 0 and len(primal) > 0):
+        return [None] * len(primal)
+    if len(adj) != len(primal):
+        raise KdslLaunchError(
+            f"kernel '{name}': adjoint launch got {len(adj)} adj_{what} for {len(primal)} {what}; "
+            f"give one entry per {what[:-1]} (None for no gradient)"
+        )
+    return list(adj)
+
+
+def _launch_adjoint(
+    kernel: Any,
+    dim: Any,
+    inputs: Sequence[Any],
+    outputs: Sequence[Any],
+    adj_inputs: Sequence[Any] | None,
+    adj_outputs: Sequence[Any] | None,
+    device: Any,
+    stream: Any,
+    backend: Any,
+    record_cmd: bool,
+) -> None:
+    """``launch(adjoint=True)``: the adjoint of one launch (never recorded on a tape)."""
+    name = _kernel_name(kernel)
+    if record_cmd:
+        raise KdslLaunchError(
+            f"kernel '{name}': record_cmd=True is not supported with adjoint=True"
+        )
+    adj = _adjoint_list(adj_inputs, inputs, "inputs", name)
+    adj += _adjoint_list(adj_outputs, outputs, "outputs", name)
+    from kdsl.runtime.adjoint import launch_adjoint
+
+    launch_adjoint(
+        kernel, dim, [*inputs, *outputs], adj, device=device, stream=stream, backend=backend
+    )

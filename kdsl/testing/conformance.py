@@ -65,10 +65,13 @@ def _to_arg(value: Any, arg_type: Any, device: str) -> Any:
     """A kernel argument from a NumPy input, in the type the kernel declares."""
     import kdsl
     from kdsl.ir import types as T
+    from kdsl.runtime.dtypes import public_dtype
 
     if isinstance(arg_type, T.ArrayType):
-        dtype = kdsl.class_of(arg_type.dtype)
+        dtype = public_dtype(arg_type.dtype)  # structs too: a NumPy structured array
         return kdsl.from_numpy(np.array(value, copy=True), dtype=dtype, device=device)
+    if isinstance(arg_type, T.StructType):  # one structured NumPy element
+        return public_dtype(arg_type).from_numpy(value)
     return kdsl.class_of(arg_type)(value)
 
 

@@ -74,7 +74,7 @@ def build(wp: Any) -> dict[str, Any]:
         x = x0[i]
         v = f64(0.0)
         drag = k[0]
-        n = int(0)
+        n = int(0)  # noqa: UP018, RUF046 - Warp needs a typed variable to mutate in a loop
         while x > f64(0.0) and n < steps:
             v = v + (f64(-9.81) - drag * v) * dt
             x = x + v * dt

@@ -53,10 +53,15 @@ class Packed:
 
 
 def descriptor(t: T.ArrayType, buf: np.ndarray, index: int = 0) -> np.ndarray:
-    """The descriptor of a NumPy buffer: [data, shape..., strides in elements...]."""
-    item = T.elem_type(t.dtype).np_dtype.itemsize
+    """The descriptor of a NumPy buffer: [data, shape..., strides in elements...].
+
+    Arrays of structs count their strides in bytes (an element is a byte to the
+    generated code, which adds the fields' ``storage_dtype`` offsets).
+    """
+    is_struct = isinstance(t.dtype, T.StructType)
+    item = 1 if is_struct else T.elem_type(t.dtype).np_dtype.itemsize
     nd = t.ndim
-    inner = T.value_shape(t.dtype)
+    inner = () if is_struct else T.value_shape(t.dtype)
     want_inner, step = [], item
     for n in reversed(inner):
         want_inner.append(step)

@@ -15,7 +15,7 @@ from kdsl.backends.base import (
     optimize,
     source_version,
 )
-from kdsl.backends.cpu import checks, jit, pool
+from kdsl.backends.cpu import checks, jit, pool, printing
 from kdsl.backends.cpu.abi import ArgPacker, Packed
 from kdsl.backends.cpu.lower import kernel_names, kernel_symbol, lower_kernels, tid_ndims
 from kdsl.config import check_pipeline
@@ -120,9 +120,10 @@ class CpuBackend(Backend):
             key, build, lambda obj: jit.add_object(obj, [llname])[llname]
         )
         func = module.get_func(kernel_symbol_)
-        payload = CpuKernel(
-            RANGE_FN(addr), [a.type for a in func.regions[0].block.args], tid_ndims(func), llname
-        )
+        fn = RANGE_FN(addr)
+        if printing.uses_print(module):  # keep C's and Python's stdout in order
+            fn = printing.flushing(fn)
+        payload = CpuKernel(fn, [a.type for a in func.regions[0].block.args], tid_ndims(func), llname)
         if checked:
             payload.sites = debug_sites(module)
         meta = {"tid_ndims": sorted(payload.tid_ndims), "cache_key": key}

@@ -51,8 +51,6 @@ def _load_param(em: Emitter, ptr: ir.Value, t: T.Type) -> Any:
     """Load a kernel parameter of type ``t`` from ``ptr`` (vectors and structs as ``Parts``)."""
     B = em.b
     if isinstance(t, T.ArrayType):
-        if isinstance(t.dtype, T.StructType):
-            raise KdslCapabilityError(f"arrays of {t.dtype} are not supported by the cpu backend")
         return B.load(ptr, typ=LT.descriptor_type(t.ndim), align=8)
     if isinstance(t, T.StructType):
         fields = []

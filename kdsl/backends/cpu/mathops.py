@@ -93,6 +93,15 @@ def _copysign(em: Emitter, et: T.ScalarType, a: ir.Value, b: ir.Value) -> ir.Val
     return em.call_intrinsic("llvm.copysign", a, b)
 
 
+def _bit_count(em: Emitter, op: Operation) -> ir.Value:
+    (a,) = em.args(op)
+    n = em.call_intrinsic("llvm.ctpop", a)
+    width = a.type.width
+    if width > 32:
+        return em.b.trunc(n, LT.I32)
+    return em.b.zext(n, LT.I32) if width < 32 else n
+
+
 TABLE: dict[str, Lowering] = {
     **{f"math.{k}": _intrinsic(v) for k, v in INTRINSICS.items()},
     **{f"math.{k}": _libm(k) for k in LIBM},
@@ -103,4 +112,5 @@ TABLE: dict[str, Lowering] = {
     "math.isfinite": _isfinite,
     "math.atan2": _libm("atan2"),
     "math.copysign": _componentwise(_copysign),
+    "math.bit_count": _bit_count,
 }

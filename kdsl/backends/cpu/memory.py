@@ -49,14 +49,13 @@ def element_ptr(em: Emitter, arr: ir.Value, at: T.ArrayType, idx: list[Value]) -
         i = _index64(em, em.get(iv), iv.type)
         term = B.mul(i, B.extract_value(arr, [2, k]), flags=["nsw"])
         off = term if off is None else B.add(off, term, flags=["nsw"])
-    etype = LT.memory_scalar(T.elem_type(at.dtype))
+    # Struct arrays are addressed in bytes (their descriptor's strides are bytes).
+    etype = LT.I8 if isinstance(at.dtype, T.StructType) else LT.memory_scalar(T.elem_type(at.dtype))
     return B.gep(B.extract_value(arr, 0), [off], inbounds=True, source_etype=etype)
 
 
 def _components(em: Emitter, ptr: ir.Value, t: T.Type) -> list[ir.Value]:
     """The addresses of the scalar components of a value of ``t`` stored at ``ptr``."""
-    if isinstance(t, T.StructType):
-        raise KdslCapabilityError(f"arrays of {t} are not supported by the cpu backend yet")
     if isinstance(t, T.ScalarType):
         return [ptr]
     mt = LT.memory_scalar(T.elem_type(t))
@@ -66,12 +65,25 @@ def _components(em: Emitter, ptr: ir.Value, t: T.Type) -> list[ir.Value]:
     ]
 
 
+def _fields(em: Emitter, ptr: ir.Value, t: T.StructType) -> list[tuple[ir.Value, T.Type]]:
+    """(address, type) of each field of a struct stored at ``ptr`` (C layout, see types)."""
+    dt = T.storage_dtype(t)
+    out = []
+    for name, ft in t.fields:
+        off = ir.Constant(LT.I64, dt.fields[name][1])
+        out.append((em.b.gep(ptr, [off], inbounds=True, source_etype=LT.I8), ft))
+    return out
+
+
 def load_value(em: Emitter, ptr: ir.Value, t: T.Type) -> Any:
     """Load a value of IR type ``t`` from memory (bools are bytes there).
 
     A vector or matrix is loaded one scalar component at a time (consecutive
-    addresses), giving ``Parts``; LLVM's vectorizers merge the loads again.
+    addresses), giving ``Parts``; LLVM's vectorizers merge the loads again. A
+    struct is loaded field by field at its ``storage_dtype`` offsets.
     """
+    if isinstance(t, T.StructType):
+        return Parts(load_value(em, p, ft) for p, ft in _fields(em, ptr, t))
     et = T.elem_type(t)
     mt, align = LT.memory_scalar(et), et.np_dtype.itemsize
     out = []
@@ -85,6 +97,10 @@ def load_value(em: Emitter, ptr: ir.Value, t: T.Type) -> Any:
 
 def store_value(em: Emitter, value: Any, ptr: ir.Value, t: T.Type) -> None:
     """Store ``value`` of IR type ``t`` to memory, one scalar component at a time."""
+    if isinstance(t, T.StructType):
+        for part, (p, ft) in zip(value, _fields(em, ptr, t)):
+            store_value(em, part, p, ft)
+        return
     et = T.elem_type(t)
     for p, x in zip(_components(em, ptr, t), components(value)):
         if et.is_bool:
@@ -168,10 +184,38 @@ def _atomic(em: Emitter, op: Operation) -> Any:
     return out[0] if isinstance(at.dtype, T.ScalarType) else Parts(out)
 
 
+def _cas_scalar(em: Emitter, ptr: ir.Value, compare: ir.Value, value: ir.Value) -> ir.Value:
+    """One ``cmpxchg`` on the bits of a scalar (LLVM's cmpxchg takes integers only)."""
+    B = em.b
+    t = value.type
+    if isinstance(t, ir.IntType):
+        return B.extract_value(B.cmpxchg(ptr, compare, value, "monotonic", "monotonic"), 0)
+    bits = ir.IntType(_width(t))
+    pair = B.cmpxchg(ptr, B.bitcast(compare, bits), B.bitcast(value, bits), "monotonic", "monotonic")
+    return B.bitcast(B.extract_value(pair, 0), t)
+
+
+def _atomic_cas(em: Emitter, op: Operation) -> Any:
+    at = op.operands[2].type
+    et = T.elem_type(at.dtype)
+    ptr = element_ptr(em, em.get(op.operands[2]), at, op.operands[3:])
+    compares, values = components(em.get(op.operands[0])), components(em.get(op.operands[1]))
+    out = []
+    for p, c, x in zip(_components(em, ptr, at.dtype), compares, values):
+        if et.is_bool:  # bytes in memory
+            old = _cas_scalar(em, p, em.b.zext(c, LT.I8), em.b.zext(x, LT.I8))
+            old = em.b.icmp_unsigned("!=", old, em.const(old.type, 0))
+        else:
+            old = _cas_scalar(em, p, c, x)
+        out.append(old)
+    return out[0] if isinstance(at.dtype, T.ScalarType) else Parts(out)
+
+
 TABLE: dict[str, Lowering] = {
     "kd.tid": _tid,
     "kd.array_shape": _array_shape,
     "kd.load": _load,
     "kd.store": _store,
     "kd.atomic_rmw": _atomic,
+    "kd.atomic_cas": _atomic_cas,
 }

@@ -6,7 +6,7 @@ missing here is reported as a capability error naming the op.
 
 from __future__ import annotations
 
-from kdsl.backends.cpu import arith, checks, control, mathops, memory, vector
+from kdsl.backends.cpu import arith, checks, control, mathops, memory, printing, vector
 from kdsl.backends.cpu.emitter import Lowering
 
 TABLE: dict[str, Lowering] = {
@@ -16,4 +16,5 @@ TABLE: dict[str, Lowering] = {
     **memory.TABLE,
     **control.TABLE,
     **checks.TABLE,
+    **printing.TABLE,
 }

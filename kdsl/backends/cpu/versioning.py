@@ -30,7 +30,7 @@ from kdsl.ir import types as T
 from kdsl.ir.core import Operation, Value
 
 _LOOPS = ("scf.for", "scf.while")
-_MEMORY = {"kd.load": 0, "kd.store": 1, "kd.atomic_rmw": 1}  # op -> its array operand
+_MEMORY = {"kd.load": 0, "kd.store": 1, "kd.atomic_rmw": 1, "kd.atomic_cas": 2}  # array operand
 
 
 def arrays_to_version(loop: Operation) -> list[Value]:

@@ -308,15 +308,17 @@ def cast_scalar(src: Source, a: str, s: T.ScalarType, d: T.ScalarType) -> str:
     if s.is_float and d.is_float:
         return f"({dc}){a}"
     if s.is_float:
-        # The PTX cvt.rzi conversions saturate and give 0 for NaN, as kdsl casts do.
+        # The cvt.rzi conversions saturate, but on the GPU they give the type's lowest
+        # value (signed) or 2**(bits-1) (unsigned) for NaN; kdsl's cast gives 0.
         wide = 64 if d.bits == 64 else 32
         conv = _F2I[(s.bits, d.is_signed, wide)]
         if d.bits >= 32:
-            return f"{conv}({a})"
+            return f"(({a}) != ({a}) ? ({dc})0 : {conv}({a}))"
         info = np.iinfo(d.np_dtype)
         wc = "int" if d.is_signed else "unsigned int"
         low = f"{info.min}" if d.is_signed else "0u"
-        return f"({dc})kd_clamp<{wc}>({conv}({a}), {low}, {info.max}{'' if d.is_signed else 'u'})"
+        sat = f"kd_clamp<{wc}>({conv}({a}), {low}, {info.max}{'' if d.is_signed else 'u'})"
+        return f"({dc})(({a}) != ({a}) ? ({wc})0 : {sat})"
     return f"({dc}){a}"  # int to float rounds to nearest; int to int wraps
 
 

@@ -28,7 +28,6 @@ from dataclasses import dataclass
 from kdsl.backends.cuda.emitter import FuncEmitter, Source
 from kdsl.backends.cuda.ops import TABLE
 from kdsl.errors import KdslCapabilityError
-from kdsl.ir import types as T
 from kdsl.ir.core import Loc, Module, Operation
 
 #: Threads per block.
@@ -81,10 +80,6 @@ def generate(module: Module, kernels: list[str], debug: bool = False) -> CudaSou
 def _params(em: FuncEmitter, func: Operation) -> list[str]:
     out = []
     for a in func.regions[0].block.args:
-        if isinstance(a.type, T.ArrayType) and isinstance(a.type.dtype, T.StructType):
-            raise KdslCapabilityError(
-                f"arrays of {a.type.dtype} are not supported by the cuda backend", func.loc
-            )
         name = em.fresh()
         em.bind(a, name)
         out.append(f"{em.ctype(a.type)} {name}")

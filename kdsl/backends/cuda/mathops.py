@@ -77,6 +77,15 @@ def _predicate(fn: str) -> Lowering:
     return lower
 
 
+def _bit_count(em: FuncEmitter, op: Operation) -> str:
+    (a,) = em.args(op)
+    t = op.operands[0].type
+    # Count the two's-complement bits: reinterpret as unsigned of the same width first.
+    exact = {8: "unsigned char", 16: "unsigned short", 32: "unsigned int"}
+    u = f"({exact.get(t.bits, 'unsigned long long')}){a}"
+    return f"__popcll({u})" if t.bits == 64 else f"__popc((unsigned int){u})"
+
+
 TABLE: dict[str, Lowering] = {
     **{f"math.{k}": _elementwise(_libm(k)) for k in _FUNCS},
     "math.abs": _elementwise(_abs),
@@ -84,4 +93,5 @@ TABLE: dict[str, Lowering] = {
     "math.isnan": _predicate("isnan"),
     "math.isinf": _predicate("isinf"),
     "math.isfinite": _predicate("isfinite"),
+    "math.bit_count": _bit_count,
 }

@@ -40,8 +40,6 @@ def _array_shape(em: FuncEmitter, op: Operation) -> str:
 def element_ptr(em: FuncEmitter, arr: Value, idx: list[Value]) -> str:
     """C expression of the (``char *``) address of an element; no bounds check."""
     at: T.ArrayType = arr.type
-    if isinstance(at.dtype, T.StructType):
-        raise KdslCapabilityError(f"arrays of {at.dtype} are not supported by the cuda backend")
     fn = H.element_ptr(em.src, at.ndim)
     return f"{fn}({em.get(arr)}, {', '.join(em.get(i) for i in idx)})"
 
@@ -153,6 +151,60 @@ def atomic_helper(src: Source, kind: str, et: T.ScalarType) -> str:
     return name
 
 
+def cas_helper(src: Source, et: T.ScalarType) -> str:
+    """The name of ``kd_atomic_cas_<tag>(T *p, T compare, T v)``, which gives the old value.
+
+    ``atomicCAS`` on the value's bits (floats compare by bits); 8- and 16-bit types
+    loop on the aligned 32-bit word around them until the other bytes hold still.
+    """
+    c = src.ctype(et)
+    name = f"kd_atomic_cas_{CT.tag(et)}"
+
+    def make() -> str:
+        head = f"{_FI} {c} {name}({c} *p, {c} cmp, {c} v) {{\n"
+        if et.bits >= 32:
+            u = "unsigned long long" if et.bits == 64 else "unsigned int"
+            to, frm = _bits(et)
+            return head + (
+                f"  {u} old = atomicCAS(({u} *)p, {to.format('cmp')}, {to.format('v')});\n"
+                f"  return {frm.format('old')};\n}}"
+            )
+        to, frm = _small_bits(et)
+        mask = (1 << et.bits) - 1
+        return head + (
+            "  unsigned int *w = (unsigned int *)((unsigned long long)p & ~3ull);\n"
+            "  unsigned int shift = ((unsigned int)(unsigned long long)p & 3u) * 8u;\n"
+            f"  unsigned int mask = {mask:#x}u << shift;\n"
+            f"  unsigned int want = {to.format('cmp')} << shift;\n"
+            f"  unsigned int put = {to.format('v')} << shift;\n"
+            "  unsigned int old = *(volatile unsigned int *)w, seen;\n"
+            "  do {\n    seen = old;\n    if ((seen & mask) != want) break;\n"
+            "    old = atomicCAS(w, seen, (seen & ~mask) | put);\n"
+            "  } while (old != seen);\n"
+            f"  return {frm.format('((old & mask) >> shift)')};\n}}"
+        )
+
+    src.need(f"fn:{name}", make)
+    return name
+
+
+def _atomic_cas(em: FuncEmitter, op: Operation) -> str:
+    t = op.operands[1].type
+    et = T.elem_type(t)
+    p = element_ptr(em, op.operands[2], list(op.operands[3:]))
+    cmp, v = em.get(op.operands[0]), em.get(op.operands[1])
+    fn = cas_helper(em.src, et)
+    ec = em.ctype(et)
+    if isinstance(t, T.ScalarType):
+        return f"{fn}(({ec} *){p}, {cmp}, {v})"
+    base = em.fresh()
+    em.line(f"{ec} *{base} = ({ec} *){p};")
+    r = em.declare(t)
+    for j in range(CT.count(t)):
+        em.line(f"{r}.c[{j}] = {fn}({base} + {j}, {cmp}.c[{j}], {v}.c[{j}]);")
+    return r
+
+
 def _atomic(em: FuncEmitter, op: Operation) -> str:
     t = op.operands[0].type
     et = T.elem_type(t)
@@ -178,4 +230,5 @@ TABLE: dict[str, Lowering] = {
     "kd.load": _load,
     "kd.store": _store,
     "kd.atomic_rmw": _atomic,
+    "kd.atomic_cas": _atomic_cas,
 }

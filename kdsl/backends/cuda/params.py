@@ -66,8 +66,8 @@ def _flattener(t: T.Type, index: int, name: str) -> Callable[[Any, list, int], N
     """A function appending the fields of a launch value of ``t`` to a list."""
     if isinstance(t, T.ArrayType):
         nd = t.ndim
-        item = T.elem_type(t.dtype).np_dtype.itemsize
-        inner = T.value_shape(t.dtype)
+        dt = T.storage_dtype(t.dtype)  # a struct element is one opaque record: no inner dims
+        item, inner = dt.base.itemsize, dt.shape
         want = tuple(int(np.prod(inner[k + 1 :], dtype=np.int64)) * item for k in range(len(inner)))
 
         def array(a: Any, out: list, device: int) -> None:

@@ -283,3 +283,27 @@ CASES = [
     GradCase("grad_two_d", two_d, (3, 3), _xs("x", lo=-1.0, hi=1.0, shape=(3, 3),
                                               extra={"out": np.zeros((3, 3))}), ("x",), ("out",)),
 ]  # fmt: skip
+
+
+@wp.struct
+class GradState:
+    s: F
+    v: V3
+
+
+@wp.kernel
+def struct_values(a: wp.array(dtype=F), p: wp.array(dtype=V3), out: wp.array(dtype=V3)):
+    i = wp.tid()
+    st = GradState(s=a[i], v=p[i])
+    st.s = st.s * st.s + F(0.5)
+    st.v = st.v * st.s
+    st.v.y = st.v.y + wp.sin(st.s)
+    out[i] = st.v * a[i] + GradState().v
+
+
+# Gradients through struct values (construct, field reads, field updates).
+CASES.append(
+    GradCase("grad_struct_values", struct_values, 4,
+             lambda rng: {"a": rng.uniform(0.2, 1.2, 4), "p": rng.uniform(-1, 1, (4, 3)),
+                          "out": np.zeros((4, 3))}, ("a", "p"), ("out",))
+)  # fmt: skip

@@ -1,0 +1,153 @@
+"""The cost of handing PyTorch tensors to kernels: the interop guide's benchmark.
+
+    python benchmarks/bench_interop.py [--iters 1000] [--reps 7] [--n 1024] [--json PATH]
+
+Each iteration launches saxpy on two PyTorch tensors, getting the kernel arguments
+in one of four ways (Warp's ``benchmark_interop_torch`` compares the middle three):
+
+- ``reuse arrays``: ``from_torch`` once, before the loop (the recommended baseline);
+- ``from_torch(...)``: new ``array`` objects every iteration;
+- ``from_torch(..., return_ctype=True)``: new lightweight descriptors every iteration;
+- ``direct from torch``: the tensors themselves (``__cuda_array_interface__`` on a
+  GPU, DLPack / ``__array_interface__`` on the CPU).
+
+It runs for kdsl and, when it imports, Warp, on the CPU and (when PyTorch sees one)
+the first GPU, and prints microseconds per iteration (host overhead: the kernel is
+tiny). Results go to benchmarks/results/interop.json.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import torch
+from suite.harness import Cell, measure, print_table, to_json, write_json
+
+import kdsl
+
+RESULTS = Path(__file__).resolve().parent / "results" / "interop.json"
+METHODS = ("reuse arrays", "from_torch(...)", "from_torch(..., return_ctype=True)",
+           "direct from torch")  # fmt: skip
+
+
+@kdsl.kernel
+def saxpy(x: kdsl.array(dtype=float), y: kdsl.array(dtype=float), a: float):
+    i = kdsl.tid()
+    y[i] = a * x[i] + y[i]
+
+
+def _warp() -> tuple[Any, Any] | None:
+    """Warp and its saxpy kernel, or None when Warp is not usable here."""
+    try:
+        import warp
+    except Exception:  # not installed, or a broken install
+        return None
+    warp.config.quiet = True
+    warp.init()
+
+    @warp.kernel
+    def warp_saxpy(x: warp.array(dtype=float), y: warp.array(dtype=float), a: float):
+        i = warp.tid()
+        y[i] = a * x[i] + y[i]
+
+    return warp, warp_saxpy
+
+
+def _loop(wp: Any, kernel: Any, method: str, device: str, n: int, iters: int) -> Callable:
+    """One timed step: ``iters`` iterations of argument conversion + launch."""
+    tdev = "cpu" if device == "cpu" else "cuda:0"
+    x = torch.arange(n, dtype=torch.float32, device=tdev)
+    y = torch.ones(n, dtype=torch.float32, device=tdev)
+    sync = torch.cuda.synchronize if device != "cpu" else (lambda: None)
+    launch = wp.launch
+
+    if method == "reuse arrays":
+        xw, yw = wp.from_torch(x), wp.from_torch(y)
+
+        def step() -> None:
+            for _ in range(iters):
+                launch(kernel, dim=n, inputs=[xw, yw, 1.0], device=device)
+            sync()
+
+    elif method == "from_torch(...)":
+
+        def step() -> None:
+            for _ in range(iters):
+                xw, yw = wp.from_torch(x), wp.from_torch(y)
+                launch(kernel, dim=n, inputs=[xw, yw, 1.0], device=device)
+            sync()
+
+    elif method == "from_torch(..., return_ctype=True)":
+
+        def step() -> None:
+            for _ in range(iters):
+                xc = wp.from_torch(x, return_ctype=True)
+                yc = wp.from_torch(y, return_ctype=True)
+                launch(kernel, dim=n, inputs=[xc, yc, 1.0], device=device)
+            sync()
+
+    else:
+
+        def step() -> None:
+            for _ in range(iters):
+                launch(kernel, dim=n, inputs=[x, y, 1.0], device=device)
+            sync()
+
+    return step
+
+
+def run(iters: int, reps: int, n: int) -> dict[str, dict[str, Cell]]:
+    """Microbenchmark cells keyed by ``"method [device]"`` then framework."""
+    frameworks: dict[str, tuple[Any, Any] | None] = {"kdsl": (kdsl, saxpy), "warp": _warp()}
+    devices = ["cpu"] + (["cuda:0"] if torch.cuda.is_available() else [])
+    cells: dict[str, dict[str, Cell]] = {}
+    for device in devices:
+        for method in METHODS:
+            row = cells[f"{method} [{device}]"] = {}
+            for name, fw in frameworks.items():
+                if fw is None:
+                    row[name] = Cell(status="not installed")
+                    continue
+                try:
+                    step = _loop(fw[0], fw[1], method, device, n, iters)
+                    row[name] = Cell(stats=measure(step, reps, per_call=iters))
+                except Exception as e:  # one failing cell must not stop the table
+                    row[name] = Cell(status=f"error: {type(e).__name__}: {e}"[:60])
+    return cells
+
+
+def main() -> None:
+    """Run the benchmark, print the table, write JSON."""
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--iters", type=int, default=1000, help="iterations per timed sample")
+    ap.add_argument("--reps", type=int, default=7, help="timed samples per cell")
+    ap.add_argument("--n", type=int, default=1024, help="tensor length")
+    ap.add_argument("--json", type=Path, default=RESULTS)
+    args = ap.parse_args()
+    cells = run(args.iters, args.reps, args.n)
+    names = ["kdsl", "warp"]
+    rows = []
+    for key, row in cells.items():
+        rows.append([key] + [_us(row.get(f)) for f in names])
+    print(f"us per iteration (2 tensors of {args.n} float32 + one saxpy launch), median")
+    print_table(["method [device]", *names], rows)
+    meta = {"benchmark": "interop", "iters": args.iters, "reps": args.reps, "n": args.n,
+            "unit": "seconds per iteration", "torch": torch.__version__}  # fmt: skip
+    write_json(to_json(cells, meta), args.json)
+    print(f"wrote {args.json}")
+
+
+def _us(cell: Cell | None) -> str:
+    if cell is None or cell.stats is None:
+        return "-" if cell is None else cell.status
+    return f"{cell.stats.median * 1e6:.2f}"
+
+
+if __name__ == "__main__":
+    main()
