@@ -91,6 +91,11 @@ SCALARS: dict[str, ScalarType] = {
 }
 
 
+_BY_NP_NAME: dict[str, ScalarType] = {_NP_NAMES[t.name]: t for t in SCALARS.values()}
+_BY_NP: dict[object, ScalarType] = {
+    key: t for t in SCALARS.values() for key in (t.np_dtype, t.np_dtype.type)
+}
+
 #: Each scalar's ``struct`` module code (standard sizes, used with a ``<`` prefix),
 #: for backends that pack launch arguments.
 _STRUCT_CODES = {
@@ -106,11 +111,13 @@ def struct_code(t: ScalarType) -> str:
 
 def scalar_from_numpy(dtype: np.dtype | type) -> ScalarType:
     """The scalar type for a NumPy dtype; raises KeyError for ones kdsl lacks."""
-    name = np.dtype(dtype).name
-    for t in SCALARS.values():
-        if _NP_NAMES[t.name] == name:
-            return t
-    raise KeyError(name)
+    # Interop calls this per array: a dict hit on the dtype object itself first.
+    t = _BY_NP.get(dtype)
+    if t is None:
+        t = _BY_NP_NAME.get(np.dtype(dtype).name)
+        if t is None:
+            raise KeyError(np.dtype(dtype).name)
+    return t
 
 
 @dataclass(frozen=True)

@@ -9,6 +9,7 @@ the whole launch; ``Packed`` holds them.
 from __future__ import annotations
 
 import ctypes
+import functools
 import struct
 import threading
 import weakref
@@ -58,30 +59,39 @@ def descriptor(t: T.ArrayType, buf: np.ndarray, index: int = 0) -> np.ndarray:
     Arrays of structs count their strides in bytes (an element is a byte to the
     generated code, which adds the fields' ``storage_dtype`` offsets).
     """
+    return np.array(descriptor_words(t, buf, index), dtype=np.int64)
+
+
+@functools.lru_cache(maxsize=256)
+def _array_layout(t: T.ArrayType) -> tuple[int, int, tuple[int, ...]]:
+    """(element size for strides, ndim, the byte strides the element's components need)."""
     is_struct = isinstance(t.dtype, T.StructType)
     item = 1 if is_struct else T.elem_type(t.dtype).np_dtype.itemsize
-    nd = t.ndim
     inner = () if is_struct else T.value_shape(t.dtype)
-    want_inner, step = [], item
+    want, step = [], item
     for n in reversed(inner):
-        want_inner.append(step)
+        want.append(step)
         step *= n
-    if tuple(buf.strides[nd:]) != tuple(reversed(want_inner)) and buf.size:
+    return item, t.ndim, tuple(reversed(want))
+
+
+def descriptor_words(t: T.ArrayType, buf: np.ndarray, index: int = 0) -> tuple[int, ...]:
+    """``descriptor`` as a tuple of ints (what the argument packer writes)."""
+    item, nd, want = _array_layout(t)
+    all_strides = buf.strides
+    if all_strides[nd:] != want and buf.size:
         raise KdslLaunchError(
             f"argument {index}: the cpu backend needs the {t.dtype} components of each "
-            f"element to be contiguous (strides {buf.strides})"
+            f"element to be contiguous (strides {all_strides})"
         )
-    strides = buf.strides[:nd]
+    strides = all_strides[:nd]
     if any(s % item for s in strides):
         raise KdslLaunchError(
             f"argument {index}: strides {strides} are not multiples of the element "
             f"size {item}; the cpu backend cannot address this array"
         )
-    out = np.empty(1 + 2 * nd, dtype=np.int64)
-    out[0] = buf.__array_interface__["data"][0]
-    out[1 : 1 + nd] = buf.shape[:nd]
-    out[1 + nd :] = [s // item for s in strides]
-    return out
+    data = buf.__array_interface__["data"][0]
+    return (data, *buf.shape[:nd], *[s // item for s in strides])
 
 
 # --- the fast path: one struct.pack_into per launch -----------------------------------
@@ -96,7 +106,7 @@ def _cached_descriptor(t: T.ArrayType, buf: np.ndarray, index: int) -> tuple[int
     hit = _descriptors.get(id(buf))
     if hit is not None and hit[0]() is buf:
         return hit[1]
-    words = tuple(int(w) for w in descriptor(t, buf, index))
+    words = descriptor_words(t, buf, index)
     key = id(buf)
     try:
         ref = weakref.ref(buf, lambda _r, key=key: _descriptors.pop(key, None))
