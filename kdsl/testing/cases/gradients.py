@@ -105,6 +105,43 @@ def matrix_ops(m: wp.array(dtype=M33), p: wp.array(dtype=V3), out: wp.array(dtyp
     out[i] = r + a[1] * b[2, 0]
 
 
+@wp.kernel
+def scalar_library(a: wp.array(dtype=F), b: wp.array(dtype=F), out: wp.array(dtype=F)):
+    # Library (stdlib) builtins are differentiated through their kdsl code.
+    i = wp.tid()
+    x = a[i]
+    y = b[i]
+    out[i] = (wp.lerp(x, y, F(0.3)) + wp.smoothstep(F(0.0), F(2.0), x)
+              + wp.clamp(x * y, F(-0.5), F(0.8)) + wp.erfinv(x * F(0.5)))  # fmt: skip
+
+
+@wp.kernel
+def matrix_library(m: wp.array(dtype=M33), p: wp.array(dtype=V3), out: wp.array(dtype=V3)):
+    i = wp.tid()
+    a = m[i] + wp.identity(n=3, dtype=F) * F(3.0)  # well conditioned
+    v = p[i]
+    w = wp.inverse(a) * v * wp.determinant(a) + wp.cw_mul(v, wp.get_diag(a))
+    out[i] = w + V3(F(1.0), F(2.0), F(3.0)) * (wp.trace(a) * wp.norm_l2(v))
+
+
+@wp.kernel
+def geometry_library(q: wp.array(dtype=wp.quatd), p: wp.array(dtype=V3), out: wp.array(dtype=V3)):
+    i = wp.tid()
+    r = wp.normalize(q[i])
+    t = wp.transformation(p[i], r)
+    out[i] = (wp.quat_rotate(r, p[i]) + wp.transform_point(t, p[i] * F(2.0))
+              + wp.quat_rotate_inv(r * r, p[i]))  # fmt: skip
+
+
+@wp.kernel
+def spatial_library(a: wp.array(dtype=wp.spatial_vectord), b: wp.array(dtype=wp.spatial_vectord),
+                    out: wp.array(dtype=wp.spatial_vectord)):  # fmt: skip
+    i = wp.tid()
+    x = a[i]
+    y = b[i]
+    out[i] = wp.spatial_cross(x, y) + wp.spatial_cross_dual(y, x) * wp.spatial_dot(x, y)
+
+
 # -- control flow ----------------------------------------------------------------
 
 
@@ -258,6 +295,17 @@ CASES = [
     GradCase("grad_matrix_ops", matrix_ops, 3,
              lambda rng: {"m": rng.uniform(-1, 1, (3, 3, 3)), "p": rng.uniform(-1, 1, (3, 3)),
                           "out": np.zeros((3, 3))}, ("m", "p"), ("out",)),
+    GradCase("grad_scalar_library", scalar_library, N,
+             _xs("a", "b", lo=-0.9, hi=0.9, extra={"out": np.zeros(N)}), ("a", "b"), ("out",)),
+    GradCase("grad_matrix_library", matrix_library, 3,
+             lambda rng: {"m": rng.uniform(-1, 1, (3, 3, 3)), "p": rng.uniform(-1, 1, (3, 3)),
+                          "out": np.zeros((3, 3))}, ("m", "p"), ("out",)),
+    GradCase("grad_geometry_library", geometry_library, 4,
+             lambda rng: {"q": rng.uniform(-1, 1, (4, 4)), "p": rng.uniform(-1, 1, (4, 3)),
+                          "out": np.zeros((4, 3))}, ("q", "p"), ("out",)),
+    GradCase("grad_spatial_library", spatial_library, 4,
+             lambda rng: {"a": rng.uniform(-1, 1, (4, 6)), "b": rng.uniform(-1, 1, (4, 6)),
+                          "out": np.zeros((4, 6))}, ("a", "b"), ("out",)),
     GradCase("grad_branch", branch, N, _xs("x", lo=-1.0, hi=1.0, extra={"out": np.zeros(N)}),
              ("x",), ("out",)),
     GradCase("grad_static_loop", static_loop, N, _xs("x", extra={"out": np.zeros(N)}), ("x",),
