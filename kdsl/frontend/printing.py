@@ -292,8 +292,8 @@ def _print(em, arg_nodes: list[ast.expr], node: ast.Call, sep=None, end=None) ->
             _append_fstring(em, f, a)
         else:
             x = em.visit(a)
-            if is_weak(x):
-                f.text(str(x))  # a Python literal prints as Python prints it
+            if is_weak(x) or isinstance(x, str):
+                f.text(str(x))  # a Python constant prints as Python prints it
             elif isinstance(x, Value):
                 _append_value(em, f, x, a)
             else:

@@ -40,6 +40,9 @@ from kdsl.ir.types import BOOL, I8, I32, I64, ArrayType, StructType, Type
 from kdsl.ir.vjp import VjpContext, get_rule, is_differentiable
 
 ADJ_SUFFIX = "__adj"
+#: Ops the forward replay skips: their effects happened in the forward launch
+#: (``kd.atomic_cas`` and ``kd.print`` are not differentiable either).
+_SIDE_EFFECTS = frozenset({"kd.store", "kd.atomic_rmw", "kd.atomic_cas", "kd.print"})
 COUNT_SUFFIX = "__count"
 
 
@@ -192,13 +195,16 @@ class AdjointBuilder:
                 raise KdslError(
                     f"kdsl cannot differentiate a call to '{op.attrs['callee']}' that was not "
                     "inlined (recursive functions have no adjoint)", op.loc, self.sym)
-            if op.name == "kd.atomic_rmw" and op.results[0].uses:
+            if op.name in ("kd.atomic_rmw", "kd.atomic_cas") and op.results[0].uses:
+                kind = op.attrs.get("kind", "cas")
                 raise KdslError(
-                    f"the value returned by atomic_{op.attrs['kind']} is used, and the backward "
+                    f"the value returned by atomic_{kind} is used, and the backward "
                     "pass cannot replay it; launch this kernel with enable_backward=False or "
                     "stop using the returned value", op.loc, self.sym)  # fmt: skip
             if op.name in ("kd.store", "kd.atomic_rmw"):
                 written.add(op.operands[1])
+            elif op.name == "kd.atomic_cas":
+                written.add(op.operands[2])
             elif op.name == "kd.load" and op.operands[0] in written:
                 arr = op.operands[0]
                 if arr in self.fblock.args and is_differentiable(arr.type.dtype):
@@ -238,7 +244,7 @@ class AdjointBuilder:
 
     def replay_op(self, op: Operation, vmap: dict[Value, Value], record: bool) -> None:
         name = op.name
-        if name in ("kd.store", "kd.atomic_rmw"):
+        if name in _SIDE_EFFECTS:
             return
         b = self.b
         with b.at(op.loc):

@@ -57,7 +57,6 @@ def _cstring(em: Emitter, text: bytes) -> ir.Value:
 
 
 def _print(em: Emitter, op: Operation) -> None:
-    _register_printf()
     fnty = ir.FunctionType(LT.I32, [ir.PointerType(LT.I8)], var_arg=True)
     printf = em.state.declare("printf", fnty)
     args: list[Any] = [_cstring(em, c_format(op.attrs["format"]).encode())]
@@ -89,3 +88,7 @@ def flushing(fn: Callable[..., Any]) -> Callable[..., None]:
 
 
 TABLE: dict[str, Lowering] = {"kd.print": _print}
+
+# Registered on import, before any kernel object (built now or loaded from the kernel
+# cache) that calls printf is linked.
+_register_printf()
