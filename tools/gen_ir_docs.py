@@ -11,9 +11,7 @@ drift from the catalog.
 
 from __future__ import annotations
 
-import argparse
 import inspect
-import sys
 import textwrap
 from pathlib import Path
 from types import ModuleType
@@ -183,20 +181,9 @@ def render() -> str:
 
 def main(argv: list[str] | None = None) -> int:
     """Write docs/ir.md, or with ``--check`` report whether it is up to date."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--check", action="store_true", help="fail if docs/ir.md is stale")
-    parser.add_argument("--output", type=Path, default=DOCS)
-    args = parser.parse_args(argv)
-    text = render()
-    if args.check:
-        current = args.output.read_text() if args.output.exists() else ""
-        if current != text:
-            print(f"{args.output} is out of date: run python tools/gen_ir_docs.py", file=sys.stderr)
-            return 1
-        return 0
-    args.output.write_text(text)
-    print(f"wrote {args.output}")
-    return 0
+    from kdsl.tools.docgen import write_or_check
+
+    return write_or_check(argv, __doc__.splitlines()[0], DOCS, render, "python tools/gen_ir_docs.py")
 
 
 if __name__ == "__main__":

@@ -14,7 +14,6 @@ tests/cli/test_builtins_doc.py runs ``--check``.
 
 from __future__ import annotations
 
-import argparse
 import importlib
 import inspect
 import pkgutil
@@ -192,20 +191,9 @@ def render() -> str:
 
 def main(argv: list[str] | None = None) -> int:
     """Write (or with ``--check``, compare) docs/builtins.md; returns the exit status."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--check", action="store_true", help="fail if the page is stale")
-    parser.add_argument("--output", type=Path, default=DOCS)
-    args = parser.parse_args(argv)
-    text = render()
-    if args.check:
-        current = args.output.read_text() if args.output.exists() else ""
-        if current != text:
-            print(f"{args.output} is stale: run python -m kdsl.tools.builtins_doc", file=sys.stderr)
-            return 1
-        return 0
-    args.output.write_text(text)
-    print(f"wrote {args.output}")
-    return 0
+    from kdsl.tools.docgen import write_or_check
+
+    return write_or_check(argv, __doc__.splitlines()[0], DOCS, render, "python -m kdsl.tools.builtins_doc")
 
 
 if __name__ == "__main__":
