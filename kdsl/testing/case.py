@@ -43,6 +43,9 @@ class Case:
     requires: tuple[str, ...] = ()
     #: Overrides of the dtype tolerance: (rtol, atol).
     tol: tuple[float, float] | None = None
+    #: When set, float outputs must be within this many units in the last place of
+    #: the output's dtype (at the expected value) instead of (rtol, atol).
+    ulps: int | None = None
     #: Seed of the generator passed to ``make_inputs``.
     seed: int = 1234
 

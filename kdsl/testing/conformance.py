@@ -107,6 +107,10 @@ def compare(case: Case, name: str, actual: np.ndarray, expected: Any) -> None:
             f"{case.name}: output {name!r} has shape {actual.shape}, expected {expected.shape}"
         )
     tol = case.tolerance(actual.dtype)
+    ulps = getattr(case, "ulps", None)
+    if tol is not None and ulps is not None:
+        _compare_ulps(case, name, actual, expected, ulps)
+        return
     if tol is None:
         want = expected.astype(actual.dtype)
         bad = actual != want
@@ -125,6 +129,37 @@ def compare(case: Case, name: str, actual: np.ndarray, expected: Any) -> None:
             f"{case.name}: output {name!r} differs at {count} of {bad.size} elements; "
             f"first at index {idx}: got {actual[idx]!r}, expected {want[idx]!r}"
             + (f" (rtol={tol[0]}, atol={tol[1]})" if tol else " (exact)")
+        )
+
+
+def ulp_distance(actual: np.ndarray, expected: np.ndarray) -> np.ndarray:
+    """|actual - expected| in units in the last place of ``actual``'s dtype at ``expected``.
+
+    Equal values (infinities included) and two NaNs are 0 apart; a NaN against a number
+    is infinitely far.
+    """
+    want = expected.astype(actual.dtype)
+    with np.errstate(all="ignore"):
+        step = np.spacing(np.abs(want)).astype(np.float64)
+        dist = np.abs(actual.astype(np.float64) - expected.astype(np.float64)) / step
+    same = (actual == want) | (np.isnan(actual) & np.isnan(expected))
+    return np.where(same, 0.0, np.where(np.isnan(dist), np.inf, dist))
+
+
+def _compare_ulps(case, name: str, actual: np.ndarray, expected: Any, ulps: int) -> None:
+    expected = np.asarray(expected, dtype=np.float64)
+    if actual.shape != expected.shape:
+        raise AssertionError(
+            f"{case.name}: output {name!r} has shape {actual.shape}, expected {expected.shape}"
+        )
+    dist = ulp_distance(actual, expected)
+    bad = dist > ulps
+    if np.any(bad):
+        idx = tuple(int(i) for i in np.argwhere(bad)[0])
+        raise AssertionError(
+            f"{case.name}: output {name!r} differs at {int(np.count_nonzero(bad))} of "
+            f"{bad.size} elements; first at index {idx}: got {actual[idx]!r}, expected "
+            f"{expected[idx]!r} ({dist[idx]:.3g} ulps, {ulps} allowed)"
         )
 
 

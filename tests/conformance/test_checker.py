@@ -57,3 +57,17 @@ def test_capability_gating():
 def test_unknown_backend_is_named():
     with pytest.raises(KeyError, match="no backend named 'nope'"):
         targets(["nope"])
+
+
+def test_ulp_tolerance():
+    from kdsl.testing.conformance import ulp_distance
+
+    one = np.float32(1.0)
+    got = np.array([one, np.nextafter(one, np.float32(2)), np.nan, np.inf], np.float32)
+    want = np.array([1.0, 1.0, np.nan, np.inf])
+    np.testing.assert_array_equal(ulp_distance(got, want), [0.0, 1.0, 0.0, 0.0])
+    assert ulp_distance(np.array([np.nan], np.float32), np.array([1.0]))[0] == np.inf
+    case = _saxpy_case(lambda ins: {}, ulps=2)
+    compare(case, "y", np.array([np.nextafter(one, np.float32(2))], np.float32), [1.0])
+    with pytest.raises(AssertionError, match="ulps, 2 allowed"):
+        compare(case, "y", np.array([np.float32(1.0) + np.float32(1e-6)], np.float32), [1.0])
