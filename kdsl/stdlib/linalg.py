@@ -37,6 +37,7 @@ _SWEEPS = {16: 4, 32: 6, 64: 10}
 def _define_for(S, V2, V3, M22, M33, M44, sweeps):
     """Define every overload of this module for the scalar type ``S``."""
     global mat_determinant, mat_inverse, qr3, svd3, svd2, eig3
+    V6 = kt.vector(6, S)
 
     @func
     def mat_determinant(m: M22) -> S:
@@ -51,21 +52,25 @@ def _define_for(S, V2, V3, M22, M33, M44, sweeps):
                 + m[0, 2] * (m[1, 0] * m[2, 1] - m[1, 1] * m[2, 0]))  # fmt: skip
 
     @func
+    def _minors44(m: M44):
+        # The 2x2 minors of rows 0-1 (s) and of rows 2-3 (c), shared by det and inverse.
+        s = V6(m[0, 0] * m[1, 1] - m[1, 0] * m[0, 1], m[0, 0] * m[1, 2] - m[1, 0] * m[0, 2],
+               m[0, 0] * m[1, 3] - m[1, 0] * m[0, 3], m[0, 1] * m[1, 2] - m[1, 1] * m[0, 2],
+               m[0, 1] * m[1, 3] - m[1, 1] * m[0, 3], m[0, 2] * m[1, 3] - m[1, 2] * m[0, 3])
+        c = V6(m[2, 0] * m[3, 1] - m[3, 0] * m[2, 1], m[2, 0] * m[3, 2] - m[3, 0] * m[2, 2],
+               m[2, 0] * m[3, 3] - m[3, 0] * m[2, 3], m[2, 1] * m[3, 2] - m[3, 1] * m[2, 2],
+               m[2, 1] * m[3, 3] - m[3, 1] * m[2, 3], m[2, 2] * m[3, 3] - m[3, 2] * m[2, 3])
+        return s, c
+
+    @func
+    def _det44(s: V6, c: V6) -> S:
+        return s[0] * c[5] - s[1] * c[4] + s[2] * c[3] + s[3] * c[2] - s[4] * c[1] + s[5] * c[0]
+
+    @func
     def mat_determinant(m: M44) -> S:  # noqa: F811
         """Determinant of a 4x4 matrix (Laplace expansion by 2x2 minors of rows 0-1 and 2-3)."""
-        s0 = m[0, 0] * m[1, 1] - m[1, 0] * m[0, 1]
-        s1 = m[0, 0] * m[1, 2] - m[1, 0] * m[0, 2]
-        s2 = m[0, 0] * m[1, 3] - m[1, 0] * m[0, 3]
-        s3 = m[0, 1] * m[1, 2] - m[1, 1] * m[0, 2]
-        s4 = m[0, 1] * m[1, 3] - m[1, 1] * m[0, 3]
-        s5 = m[0, 2] * m[1, 3] - m[1, 2] * m[0, 3]
-        c5 = m[2, 2] * m[3, 3] - m[3, 2] * m[2, 3]
-        c4 = m[2, 1] * m[3, 3] - m[3, 1] * m[2, 3]
-        c3 = m[2, 1] * m[3, 2] - m[3, 1] * m[2, 2]
-        c2 = m[2, 0] * m[3, 3] - m[3, 0] * m[2, 3]
-        c1 = m[2, 0] * m[3, 2] - m[3, 0] * m[2, 2]
-        c0 = m[2, 0] * m[3, 1] - m[3, 0] * m[2, 1]
-        return s0 * c5 - s1 * c4 + s2 * c3 + s3 * c2 - s4 * c1 + s5 * c0
+        s, c = _minors44(m)
+        return _det44(s, c)
 
     @func
     def mat_inverse(m: M22) -> M22:
@@ -98,39 +103,28 @@ def _define_for(S, V2, V3, M22, M33, M44, sweeps):
     @func
     def mat_inverse(m: M44) -> M44:  # noqa: F811
         """Inverse of a 4x4 matrix (adjugate by 2x2 minors); zero when singular."""
-        s0 = m[0, 0] * m[1, 1] - m[1, 0] * m[0, 1]
-        s1 = m[0, 0] * m[1, 2] - m[1, 0] * m[0, 2]
-        s2 = m[0, 0] * m[1, 3] - m[1, 0] * m[0, 3]
-        s3 = m[0, 1] * m[1, 2] - m[1, 1] * m[0, 2]
-        s4 = m[0, 1] * m[1, 3] - m[1, 1] * m[0, 3]
-        s5 = m[0, 2] * m[1, 3] - m[1, 2] * m[0, 3]
-        c5 = m[2, 2] * m[3, 3] - m[3, 2] * m[2, 3]
-        c4 = m[2, 1] * m[3, 3] - m[3, 1] * m[2, 3]
-        c3 = m[2, 1] * m[3, 2] - m[3, 1] * m[2, 2]
-        c2 = m[2, 0] * m[3, 3] - m[3, 0] * m[2, 3]
-        c1 = m[2, 0] * m[3, 2] - m[3, 0] * m[2, 2]
-        c0 = m[2, 0] * m[3, 1] - m[3, 0] * m[2, 1]
-        det = s0 * c5 - s1 * c4 + s2 * c3 + s3 * c2 - s4 * c1 + s5 * c0
+        s, c = _minors44(m)
+        det = _det44(s, c)
         if det == S(0.0):
             return M44()
         inv = S(1.0) / det
         return M44(
-            (m[1, 1] * c5 - m[1, 2] * c4 + m[1, 3] * c3) * inv,
-            (-m[0, 1] * c5 + m[0, 2] * c4 - m[0, 3] * c3) * inv,
-            (m[3, 1] * s5 - m[3, 2] * s4 + m[3, 3] * s3) * inv,
-            (-m[2, 1] * s5 + m[2, 2] * s4 - m[2, 3] * s3) * inv,
-            (-m[1, 0] * c5 + m[1, 2] * c2 - m[1, 3] * c1) * inv,
-            (m[0, 0] * c5 - m[0, 2] * c2 + m[0, 3] * c1) * inv,
-            (-m[3, 0] * s5 + m[3, 2] * s2 - m[3, 3] * s1) * inv,
-            (m[2, 0] * s5 - m[2, 2] * s2 + m[2, 3] * s1) * inv,
-            (m[1, 0] * c4 - m[1, 1] * c2 + m[1, 3] * c0) * inv,
-            (-m[0, 0] * c4 + m[0, 1] * c2 - m[0, 3] * c0) * inv,
-            (m[3, 0] * s4 - m[3, 1] * s2 + m[3, 3] * s0) * inv,
-            (-m[2, 0] * s4 + m[2, 1] * s2 - m[2, 3] * s0) * inv,
-            (-m[1, 0] * c3 + m[1, 1] * c1 - m[1, 2] * c0) * inv,
-            (m[0, 0] * c3 - m[0, 1] * c1 + m[0, 2] * c0) * inv,
-            (-m[3, 0] * s3 + m[3, 1] * s1 - m[3, 2] * s0) * inv,
-            (m[2, 0] * s3 - m[2, 1] * s1 + m[2, 2] * s0) * inv,
+            (m[1, 1] * c[5] - m[1, 2] * c[4] + m[1, 3] * c[3]) * inv,
+            (-m[0, 1] * c[5] + m[0, 2] * c[4] - m[0, 3] * c[3]) * inv,
+            (m[3, 1] * s[5] - m[3, 2] * s[4] + m[3, 3] * s[3]) * inv,
+            (-m[2, 1] * s[5] + m[2, 2] * s[4] - m[2, 3] * s[3]) * inv,
+            (-m[1, 0] * c[5] + m[1, 2] * c[2] - m[1, 3] * c[1]) * inv,
+            (m[0, 0] * c[5] - m[0, 2] * c[2] + m[0, 3] * c[1]) * inv,
+            (-m[3, 0] * s[5] + m[3, 2] * s[2] - m[3, 3] * s[1]) * inv,
+            (m[2, 0] * s[5] - m[2, 2] * s[2] + m[2, 3] * s[1]) * inv,
+            (m[1, 0] * c[4] - m[1, 1] * c[2] + m[1, 3] * c[0]) * inv,
+            (-m[0, 0] * c[4] + m[0, 1] * c[2] - m[0, 3] * c[0]) * inv,
+            (m[3, 0] * s[4] - m[3, 1] * s[2] + m[3, 3] * s[0]) * inv,
+            (-m[2, 0] * s[4] + m[2, 1] * s[2] - m[2, 3] * s[0]) * inv,
+            (-m[1, 0] * c[3] + m[1, 1] * c[1] - m[1, 2] * c[0]) * inv,
+            (m[0, 0] * c[3] - m[0, 1] * c[1] + m[0, 2] * c[0]) * inv,
+            (-m[3, 0] * s[3] + m[3, 1] * s[1] - m[3, 2] * s[0]) * inv,
+            (m[2, 0] * s[3] - m[2, 1] * s[1] + m[2, 2] * s[0]) * inv,
         )
 
     @func
