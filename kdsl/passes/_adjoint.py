@@ -155,6 +155,8 @@ class AdjointBuilder:
         body = func.regions[0].block
         self.func, self.body = func, body
         n = len(args)
+        # Hidden parameters (tapes, flags) follow the 2n parameters and adjoints.
+        func.attrs["hidden_from"] = 2 * n
         vmap: dict[Value, Value] = {a: body.args[i] for i, a in enumerate(args)}
         for i, a in enumerate(args):
             if isinstance(a.type, ArrayType) and is_differentiable(a.type.dtype):
@@ -223,16 +225,11 @@ class AdjointBuilder:
                 is_differentiable(r.type) for r in op.results
             ) or any(
                 inner.name in ("kd.load", "kd.store", "kd.atomic_rmw")
-                and inner.operands[0 if inner.name == "kd.load" else 1] in self.adj_arrays_fwd
+                and inner.operands[0 if inner.name == "kd.load" else 1] in self.adj_arrays
                 for inner in op.walk()
             )  # fmt: skip
             self._matters[op] = hit
         return hit
-
-    @property
-    def adj_arrays_fwd(self) -> set[Value]:
-        return {a for a in self.fblock.args
-                if isinstance(a.type, ArrayType) and is_differentiable(a.type.dtype)}  # fmt: skip
 
     def replay(self, block: Block, vmap: dict[Value, Value], record: bool) -> list[Value]:
         """Clone ``block``'s ops at the builder (no side effects); give the terminator's operands."""

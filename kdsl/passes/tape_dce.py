@@ -11,16 +11,20 @@ counting pass.
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from typing import ClassVar
 
 from kdsl.ir import Module, Operation
 from kdsl.passes.manager import ModulePass
 
+_TAPE = re.compile(r"tape\d+_\d+")
 
-def _is_tape(arg) -> bool:
-    name = arg.name_hint or ""
-    return name.startswith("tape") and name != "tape_status" and name != "tape_slots"
+
+def _tapes(func) -> list:
+    """The adjoint's tape parameters: hidden ones (past ``hidden_from``) named ``tape<L>_<j>``."""
+    args = func.regions[0].block.args[func.attrs["hidden_from"] :]
+    return [a for a in args if _TAPE.fullmatch(a.name_hint or "")]
 
 
 def _read(arg) -> bool:
@@ -39,8 +43,8 @@ class TapeDCEPass(ModulePass):
         for func in module.funcs:
             if "adjoint_of" not in func.attrs:
                 continue
-            for arg in func.regions[0].block.args:
-                if _is_tape(arg) and not _read(arg):
+            for arg in _tapes(func):
+                if not _read(arg):
                     for op, _ in list(arg.uses):
                         if op.name == "kd.store":
                             op.erase()

@@ -169,7 +169,8 @@ def launch_adjoint(
                 g = alloc.zeros_like(v, device=dev) if isinstance(v, array) else v
             adjoints.append(convs[n + i](g))
         else:
-            adjoints.append(primal[i] if g is None else convs[n + i](g if g is not None else v))
+            # A scalar's adjoint is an unused input of the adjoint kernel (as in Warp).
+            adjoints.append(primal[i] if g is None else convs[n + i](g))
     stream = _resolve_stream(dev, stream)
     hidden, status = _hidden_args(kernel, adj, dims, primal, dev, backend, stream)
     for j, (name, _, _) in enumerate(adj.hidden):

@@ -107,7 +107,7 @@ def compare(case: Case, name: str, actual: np.ndarray, expected: Any) -> None:
             f"{case.name}: output {name!r} has shape {actual.shape}, expected {expected.shape}"
         )
     tol = case.tolerance(actual.dtype)
-    ulps = getattr(case, "ulps", None)
+    ulps = case.ulps
     if tol is not None and ulps is not None:
         _compare_ulps(case, name, actual, expected, ulps)
         return
