@@ -20,6 +20,7 @@ import numpy as np
 from kdsl.errors import KdslError
 from kdsl.ir import types as T
 from kdsl.runtime import cuda_memory as mem
+from kdsl.runtime.annotation import ArrayAnnotation, subscript
 from kdsl.runtime.device import Device, get_device
 from kdsl.runtime.dtypes import (
     host_value,
@@ -38,6 +39,15 @@ def _is_any(dtype: Any) -> bool:
 
 class array:
     """A typed, strided array (see the module docstring)."""
+
+    def __class_getitem__(cls, params: Any) -> ArrayAnnotation:
+        """``array[dtype]`` or ``array[dtype, ndim]``: the annotation Warp 1.19 writes."""
+        return subscript(array, params, cls.__dict__.get("_fixed_ndim"))
+
+    @staticmethod
+    def annotation_type(dtype: Any, ndim: int) -> T.ArrayType:
+        """The kernel type of an ``ndim``-d array of ``dtype`` (for ``ArrayAnnotation``)."""
+        return T.ArrayType(resolve_dtype(dtype), ndim)
 
     def __init__(
         self,
@@ -379,8 +389,10 @@ def _subclass(ndim: int) -> type:
         kwargs["ndim"] = ndim
         array.__init__(self, *args, **kwargs)
 
-    doc = f"A {ndim}-d ``array``: ``array{ndim}d(dtype=float)`` annotates a kernel parameter."
-    return type(f"array{ndim}d", (array,), {"__init__": __init__, "__doc__": doc})
+    doc = (f"A {ndim}-d ``array``: ``array{ndim}d[float]`` (or ``array{ndim}d(dtype=float)``) "
+           "annotates a kernel parameter.")
+    return type(f"array{ndim}d", (array,),
+                {"__init__": __init__, "__doc__": doc, "_fixed_ndim": ndim})  # fmt: skip
 
 
 array1d, array2d, array3d, array4d = (_subclass(n) for n in (1, 2, 3, 4))

@@ -18,6 +18,7 @@ import numpy as np
 
 from kdsl.errors import KdslError
 from kdsl.ir import types as T
+from kdsl.runtime.annotation import ArrayAnnotation, subscript
 from kdsl.runtime.array import array
 from kdsl.runtime.dtypes import resolve_dtype
 
@@ -42,7 +43,16 @@ def is_indexed(t: T.Type) -> bool:
 
 class indexedarray:
     """An array viewed through per-dimension index arrays; ``indexedarray(dtype=float)``
-    with no data annotates a kernel parameter."""
+    with no data (or ``indexedarray[float]``) annotates a kernel parameter."""
+
+    def __class_getitem__(cls, params: Any) -> ArrayAnnotation:
+        """``indexedarray[dtype]`` or ``indexedarray[dtype, ndim]`` (Warp 1.19's syntax)."""
+        return subscript(indexedarray, params, cls.__dict__.get("_fixed_ndim"))
+
+    @staticmethod
+    def annotation_type(dtype: Any, ndim: int) -> T.StructType:
+        """The kernel type of an ``ndim``-d indexed array of ``dtype`` (for ``ArrayAnnotation``)."""
+        return indexed_type(resolve_dtype(dtype), ndim)
 
     def __init__(
         self, data: array | None = None, indices: Any = None, dtype: Any = Any, ndim: int = 1
@@ -118,7 +128,8 @@ def _annotation(ndim: int) -> type:
         indexedarray.__init__(self, *args, **kwargs)
 
     doc = f"A {ndim}-d ``indexedarray``."
-    return type(f"indexedarray{ndim}d", (indexedarray,), {"__init__": __init__, "__doc__": doc})
+    return type(f"indexedarray{ndim}d", (indexedarray,),
+                {"__init__": __init__, "__doc__": doc, "_fixed_ndim": ndim})  # fmt: skip
 
 
 indexedarray1d, indexedarray2d, indexedarray3d, indexedarray4d = (

@@ -154,5 +154,8 @@ def test_versioned_thread_loop_dense_and_strided(step: int) -> None:
 def test_thread_loop_over_vector_arrays_vectorizes() -> None:
     text = CPU.lower(parse_module(THREADS), "llvm-ir")
     assert "dense.loop" in text or "vector.body" in text
-    # The dense copy of the thread loop works on several threads' components at once.
-    assert re.search(r"fmul <(4|8|16|32|48) x float>", text), "the thread loop was not vectorized"
+    # The dense copy of the thread loop works on several threads' components at once. The
+    # width is the host's choice (8 or 16 with AVX2, 24 or 48 with AVX-512): wider than a
+    # single vec3 is what matters.
+    widths = [int(w) for w in re.findall(r"fmul <(\d+) x float>", text)]
+    assert max(widths, default=0) >= 4, "the thread loop was not vectorized"
