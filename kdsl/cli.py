@@ -182,13 +182,13 @@ def _kernel_ir(kernel: Any, args: argparse.Namespace, backend: Any, pipeline: st
     from kdsl.passes import run_pipeline
 
     if args.stage == ADJOINT:
-        from kdsl.runtime.adjoint import adjoint_module
+        from kdsl.compiler import adjoint_module
 
         ir = adjoint_module(kernel)
         ir.get_func(kernel.key).erase()
         run_pipeline(ir, pipeline, print_after_all=args.print_after_all,
                      time_passes=args.time_passes, out=sys.stdout, debuginfo=args.debuginfo)  # fmt: skip
-        return print_module(ir, debuginfo=args.debuginfo)
+        return _features(ir) if args.features else print_module(ir, debuginfo=args.debuginfo)
     ir = kernel.build_module()
     if args.stage == KIR and not args.features:
         return print_module(ir, debuginfo=args.debuginfo)
@@ -196,13 +196,20 @@ def _kernel_ir(kernel: Any, args: argparse.Namespace, backend: Any, pipeline: st
         run_pipeline(ir, pipeline, print_after_all=args.print_after_all,
                      time_passes=args.time_passes, out=sys.stdout, debuginfo=args.debuginfo)  # fmt: skip
     if args.features:
-        from kdsl.passes.features import analyze_features
-
-        return analyze_features(ir).summary().rstrip("\n") + "\n"
+        return _features(ir)
     if args.stage == KIR_OPT:
         return print_module(ir, debuginfo=args.debuginfo)
-    text = backend.lower(ir, args.stage)
+    from kdsl.compiler import lower
+
+    text = lower(backend, ir, args.stage, prepared=True)
     return text if text.endswith("\n") else text + "\n"
+
+
+def _features(ir: Any) -> str:
+    """The feature analysis of ``ir``, as ``kdsl ir --features`` prints it."""
+    from kdsl.passes.features import analyze_features
+
+    return analyze_features(ir).summary()
 
 
 def cmd_opt(args: argparse.Namespace) -> int:
@@ -289,7 +296,7 @@ def cmd_conformance(args: argparse.Namespace) -> int:
 
 def cmd_cache(args: argparse.Namespace) -> int:
     """``kdsl cache info|clear``: show or empty the kernel cache directory."""
-    from kdsl.runtime.cache import DiskCache, cache_dir, check_directory, disk_cache_enabled
+    from kdsl.compiler.cache import DiskCache, cache_dir, check_directory, disk_cache_enabled
 
     directory = cache_dir()
     # An unsafe directory (not ours, or writable by others) is never emptied.
@@ -328,7 +335,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--print-after-all", action="store_true", help="dump the IR after each pass")
     p.add_argument("--debuginfo", action="store_true", help="print source locations")
     p.add_argument("--time-passes", action="store_true", help="print the time of each pass")
-    p.add_argument("--features", action="store_true", help="print the feature analysis")
+    p.add_argument(
+        "--features", action="store_true", help="print the feature analysis (what backends emit)"
+    )
     p.set_defaults(run=cmd_ir)
 
     p = sub.add_parser("opt", help="run a pass pipeline over an IR file")

@@ -6,10 +6,17 @@ that no NaN or Inf is stored to memory. A kernel's own options win over these:
 ``@kdsl.kernel(debug=True)``, ``@kdsl.kernel(mode="release")``,
 ``@kdsl.kernel(verify_fp=True)``. Settings are read at each launch, and they are
 part of the compile options, so debug and release builds are cached apart.
+
+``verify_passes`` says when the pass manager verifies the IR (docs/passes.md):
+``"each"`` (after every pass), ``"end"`` (once, after the last pass of a pipeline)
+or ``"auto"`` (the default: ``"each"`` in debug mode, ``"end"`` in release). The
+environment variable ``KDSL_VERIFY_PASSES`` sets its initial value; the test suite
+sets ``"each"``.
 """
 
 from __future__ import annotations
 
+import os
 from collections.abc import Mapping
 from typing import Any
 
@@ -22,8 +29,11 @@ verify_fp: bool = False
 #: The most memory (bytes) the backward pass of one launch may take for the tapes of
 #: its dynamic loops (see docs/autodiff.md); above it the adjoint launch is refused.
 max_tape_bytes: int = 2 * 1024**3
+#: When the pass manager verifies the IR: "auto", "each" or "end" (see above).
+verify_passes: str = os.environ.get("KDSL_VERIFY_PASSES") or "auto"
 
 _MODES = ("release", "debug")
+_VERIFY_POLICIES = ("auto", "each", "end")
 #: Kernel options that ``compile_options`` resolves into ``debug`` / ``verify_fp``.
 _DEBUG_KEYS = ("debug", "mode", "verify_fp")
 
@@ -32,6 +42,21 @@ def _check_mode(value: Any, where: str) -> str:
     if value not in _MODES:
         raise KdslError(f"{where} must be 'release' or 'debug', not {value!r}")
     return value
+
+
+def verify_each_pass() -> bool:
+    """Whether the pass manager verifies after every pass (``verify_passes`` resolved).
+
+    Otherwise it verifies once, after the last pass of each pipeline it runs.
+    """
+    if verify_passes not in _VERIFY_POLICIES:
+        raise KdslError(
+            "kdsl.config.verify_passes (KDSL_VERIFY_PASSES) must be 'auto', 'each' or "
+            f"'end', not {verify_passes!r}"
+        )
+    if verify_passes == "auto":
+        return _check_mode(mode, "kdsl.config.mode") == "debug"
+    return verify_passes == "each"
 
 
 def compile_options(options: Mapping[str, Any]) -> dict[str, Any]:
@@ -58,13 +83,3 @@ def compile_options(options: Mapping[str, Any]) -> dict[str, Any]:
     if fp:
         out["verify_fp"] = True
     return out
-
-
-def check_pipeline(options: Mapping[str, Any]) -> str:
-    """The passes that instrument a module compiled with (resolved) ``options``."""
-    passes = []
-    if options.get("debug"):
-        passes.append("bounds-check")
-    if options.get("verify_fp"):
-        passes.append("fp-check")
-    return ",".join(passes)

@@ -20,8 +20,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from kdsl.errors import KdslLaunchError
+from kdsl.errors import KdslError, KdslLaunchError
 from kdsl.ir.core import Module
+from kdsl.passes import DEFAULT_PIPELINE
 
 
 @dataclass
@@ -40,23 +41,61 @@ class CompiledKernel:
     metadata: dict[str, Any] = field(default_factory=dict)
 
 
+@dataclass
+class Job:
+    """One kernel on its way through a backend, as the compile driver hands it over.
+
+    ``module`` is optimized and instrumented; ``checked`` says instrumentation (bounds
+    or NaN/Inf checks) was inserted, so launches must read an error record.
+    ``artifact(target)`` is the loaded binary for ``target``, which the driver takes
+    from the kernel cache or has the backend ``build``; ``key(target)`` is its cache key
+    (a digest: equal keys are equal code, so it can name symbols uniquely).
+    """
+
+    module: Module
+    symbol: str
+    options: dict[str, Any]
+    checked: bool
+    artifact: Callable[[str], Any]
+    key: Callable[[str], str]
+    #: The backend's own notes on this job (e.g. generated source that ``load`` made and
+    #: ``build`` reuses on a cache miss).
+    notes: dict[str, Any] = field(default_factory=dict)
+
+
 class Backend(ABC):
     """A code generator plus launcher for some devices. Subclass it in a plugin.
 
-    Class attributes to set: ``name`` (the registry key, also the entry-point
-    name), ``version`` (a string that goes into kernel cache keys; bump it when
-    generated code changes) and ``capabilities`` ("fp64", "fp16", "atomics",
-    "int64", ...), which passes, capability errors and the conformance suite read.
+    A backend declares what it is and implements emission, loading and launching; the
+    compile driver (``kdsl.compiler``) runs the passes, keys the kernel cache and calls
+    these methods in order (see docs/backends.md):
+
+    - ``pipeline``: the pass pipeline run on a module before emission (data).
+    - ``emit(module, stage, options, checked)``: the text of one of ``emit_stages``.
+    - ``build(job, target) -> bytes``: the binary of ``job`` for ``target`` (a cache miss).
+    - ``load_artifact(job, target, data)``: bytes to something runnable, once per process.
+    - ``load(job) -> CompiledKernel``: the launchable kernel; it asks ``job.artifact(target)``.
+    - ``launch`` / ``prepare``: run a compiled kernel over a grid.
+
+    Class attributes to set: ``name`` (the registry key, also the entry-point name),
+    ``version`` (a string that goes into kernel cache keys; bump it when generated code
+    changes), ``capabilities`` ("fp64", "fp16", "atomics", "int64", ...), which passes,
+    capability errors and the conformance suite read, and ``emit_stages``.
     """
 
     name: str = ""
     version: str = "0"
     capabilities: frozenset[str] = frozenset()
-
-    @property
-    def pipeline(self) -> str:
-        """The pass pipeline run on a module before lowering (the standard one)."""
-        return default_pipeline()
+    #: The pass pipeline run on a module before emission (the standard one by default).
+    pipeline: str = DEFAULT_PIPELINE
+    #: The stages ``emit`` prints, in pipeline order, after the driver's "kir", "kir-opt".
+    emit_stages: tuple[str, ...] = ()
+    #: False for a backend with no binary to cache (an interpreter): ``load`` then never
+    #: calls ``job.artifact``.
+    cacheable: bool = True
+    #: Options that select the target rather than change the code (left out of cache keys
+    #: as options; the target itself is in the key).
+    target_options: tuple[str, ...] = ()
 
     @abstractmethod
     def devices(self) -> list[str]:
@@ -67,19 +106,33 @@ class Backend(ABC):
         kinds = set(self.devices())
         return device in kinds or device.split(":")[0] in kinds
 
-    @abstractmethod
     def stages(self) -> list[str]:
-        """Names of the stages ``lower`` can dump, in pipeline order."""
+        """Every stage ``kdsl ir`` can print for this backend, in pipeline order."""
+        return ["kir", "kir-opt", *self.emit_stages]
+
+    def code_version(self) -> str:
+        """The version that keys the kernel cache (``version``; see ``source_version``)."""
+        return self.version
+
+    def cache_target(self, target: str) -> str:
+        """``target`` as the cache key names it (add compiler versions here)."""
+        return target
+
+    def emit(self, module: Module, stage: str, options: dict[str, Any], checked: bool) -> str:
+        """The prepared ``module`` as text at ``stage`` (one of ``emit_stages``)."""
+        raise KdslError(f"the {self.name} backend has no stage {stage!r}")
+
+    def build(self, job: Job, target: str) -> bytes:
+        """The binary of ``job`` for ``target``."""
+        raise NotImplementedError(f"the {self.name} backend builds no binaries")
+
+    def load_artifact(self, job: Job, target: str, data: bytes) -> Any:
+        """``data`` (from ``build`` or the disk cache) made runnable; the bytes by default."""
+        return data
 
     @abstractmethod
-    def lower(self, module: Module, stage: str) -> str:
-        """The module as text at ``stage`` (one of ``stages()``)."""
-
-    @abstractmethod
-    def compile(
-        self, module: Module, kernel_symbol: str, options: dict[str, Any] | None = None
-    ) -> CompiledKernel:
-        """Optimize and compile the kernel ``kernel_symbol`` of ``module``."""
+    def load(self, job: Job) -> CompiledKernel:
+        """The launchable kernel of ``job``: its binary comes from ``job.artifact(target)``."""
 
     @abstractmethod
     def launch(
@@ -150,28 +203,3 @@ def source_version(version: str, sources: Iterable[Path]) -> str:
     for path in sorted(sources):
         h.update(path.name.encode() + b"\0" + path.read_bytes())
     return f"{version}+{h.hexdigest()[:16]}"
-
-
-def default_pipeline() -> str:
-    """The standard pipeline string, or "" while kdsl.passes has none."""
-    try:
-        from kdsl import passes
-    except ImportError:  # pragma: no cover - passes is part of kdsl
-        return ""
-    return getattr(passes, "DEFAULT_PIPELINE", "")
-
-
-def optimize(module: Module, pipeline: str) -> Module:
-    """``module`` after ``pipeline``; unchanged when the pass manager is not there.
-
-    The pass manager may rewrite the module in place or return a new one.
-    """
-    if not pipeline:
-        return module
-    from kdsl import passes
-
-    run = getattr(passes, "run_pipeline", None)
-    if run is None:
-        return module
-    out = run(module, pipeline)
-    return module if out is None else out

@@ -11,12 +11,11 @@ from kdsl.frontend.custom_grad import adjoint, func_grad, func_replay
 from kdsl.frontend.inout import inout
 from kdsl.frontend.kernel import Function, Kernel, func, kernel
 from kdsl.frontend.static import constant, static
-from kdsl.frontend.structs import Struct, struct
 
 globals().update(BUILTINS)
 
 __all__ = [
     "Builtin", "Function", "Kernel", "adjoint", "constant", "func", "func_grad", "func_replay",
-    "inout", "kernel", "static", "Struct", "struct",
+    "inout", "kernel", "static",
     *sorted(BUILTINS),
 ]  # fmt: skip

@@ -27,7 +27,7 @@ from kdsl.ir.types import (
     Type,
     VectorType,
 )
-from kdsl.runtime.indexed import is_indexed
+from kdsl.frontend.structs import is_indexed
 
 _BINOPS = {
     ast.Add: "add", ast.Sub: "sub", ast.Mult: "mul", ast.Div: "div", ast.FloorDiv: "floordiv",

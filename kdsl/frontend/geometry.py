@@ -22,6 +22,7 @@ from typing import Any
 
 from kdsl.errors import KdslTypeError
 from kdsl.frontend.builtins import BUILTINS, PYTHON_ALIASES, Builtin, Lower
+from kdsl.frontend.library import library_function
 from kdsl.frontend.values import is_weak
 from kdsl.ir import Value
 from kdsl.ir.types import (
@@ -41,13 +42,6 @@ _PARTS = {
 }
 
 
-def _stdlib(name: str) -> Any:
-    # Imported on use: the stdlib is kdsl code that imports the frontend itself.
-    from kdsl.stdlib import quat, transform
-
-    return getattr(quat, name, None) or getattr(transform, name)
-
-
 def binop(em, op: str, x: Value, y: Value, node: ast.AST) -> Value | None:
     """``x op y`` for quaternion and transform operands, or None for the generic rule."""
     geometric = (QuatType, TransformType)
@@ -60,7 +54,7 @@ def binop(em, op: str, x: Value, y: Value, node: ast.AST) -> Value | None:
     if op != "mul" or x.type != y.type:
         return None  # componentwise (scaling, +, -) or a type error from the arith rule
     fn = "quat_multiply" if isinstance(x.type, QuatType) else "transform_multiply"
-    return em.call_user(_stdlib(fn), [x, y], node)
+    return em.call_user(library_function(fn), [x, y], node)
 
 
 def has_part(t: Type, attr: str) -> bool:
@@ -70,12 +64,12 @@ def has_part(t: Type, attr: str) -> bool:
 
 def part(em, v: Value, attr: str, node: ast.AST) -> Value:
     """``t.p`` (the translation) or ``t.q`` (the rotation) of transform ``v``."""
-    return em.call_user(_stdlib(_PARTS[attr][0]), [v], node)
+    return em.call_user(library_function(_PARTS[attr][0]), [v], node)
 
 
 def with_part(em, v: Value, attr: str, value: Any, node: ast.AST) -> Value:
     """A copy of transform ``v`` with part ``attr`` replaced by ``value``."""
-    return em.call_user(_stdlib(_PARTS[attr][1]), [v, value], node)
+    return em.call_user(library_function(_PARTS[attr][1]), [v, value], node)
 
 
 def _dtype_arg(em, args: list[Any], kwargs: dict[str, Any], node: ast.AST, name: str) -> ScalarType:
@@ -170,7 +164,7 @@ def _normalize_quats(generic: Lower) -> Lower:
     def lower(em, args, node):
         x = args[0]
         if isinstance(x, Value) and isinstance(x.type, QuatType):
-            return em.call_user(_stdlib("quat_normalize"), [x], node)
+            return em.call_user(library_function("quat_normalize"), [x], node)
         return generic(em, args, node)
 
     return lower

@@ -15,7 +15,7 @@ from kdsl.frontend.static import static
 from kdsl.frontend.values import ShapeOf, describe, is_weak
 from kdsl.ir import Value
 from kdsl.ir.types import BOOL, I32, ArrayType, MatrixType, StructType, VectorType
-from kdsl.runtime.indexed import is_indexed
+from kdsl.frontend.structs import is_indexed
 
 
 class StatementLowering(ControlFlowLowering):

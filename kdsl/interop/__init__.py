@@ -3,6 +3,6 @@
 The public functions live in ``kdsl.interop.api`` (star-imported by ``kdsl``).
 This package imports no framework at import time: torch, jax and paddle are
 imported inside the functions that need them, so ``import kdsl`` stays light.
-Keep this file free of imports: ``kdsl.runtime.args`` imports
-``kdsl.interop.descriptor`` while the runtime itself is being imported.
+The runtime, one layer below, reaches this package only through the adapters that
+``kdsl.interop.api`` registers (``kdsl.runtime.adapters``).
 """

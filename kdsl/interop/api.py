@@ -4,7 +4,7 @@
 and ``kdsl.types``; everything here imports its framework only when called.
 """
 
-from kdsl.interop.descriptor import ArrayDescriptor
+from kdsl.interop import dlpack
 from kdsl.interop.dlpack import from_dlpack, to_dlpack
 from kdsl.interop.jax import (
     device_from_jax,
@@ -35,6 +35,7 @@ from kdsl.interop.torch import (
     stream_to_torch,
     to_torch,
 )
+from kdsl.runtime.descriptor import ArrayDescriptor
 
 __all__ = [
     "ArrayDescriptor", "device_from_jax", "device_from_paddle", "device_from_torch",
@@ -45,3 +46,13 @@ __all__ = [
     "stream_from_paddle", "stream_from_torch", "stream_to_torch", "to_dlpack", "to_jax",
     "to_paddle", "to_torch",
 ]  # fmt: skip
+
+# isort: split
+# The runtime reaches the code above only through its adapter registry (it sits below).
+from kdsl.interop.foreign import foreign_buffer
+from kdsl.interop.jax import tracer_message_or_none
+from kdsl.runtime.adapters import register_adapter
+
+register_adapter("foreign_buffer", foreign_buffer)
+register_adapter("tracer_message", tracer_message_or_none)
+register_adapter("dlpack_export", dlpack.export)

@@ -29,8 +29,8 @@ from kdsl.runtime.device import Device, get_device
 
 # DLDeviceType codes (dlpack.h)
 KDL_CPU, KDL_CUDA, KDL_CUDA_HOST, KDL_CUDA_MANAGED = 1, 2, 3, 13
-_HOST_TYPES = (KDL_CPU, KDL_CUDA_HOST)
-_CUDA_TYPES = (KDL_CUDA, KDL_CUDA_MANAGED)
+HOST_TYPES = (KDL_CPU, KDL_CUDA_HOST)
+CUDA_TYPES = (KDL_CUDA, KDL_CUDA_MANAGED)
 
 _LEGACY, _VERSIONED = b"dltensor", b"dltensor_versioned"
 # Byte offset of DLTensor.device inside the managed struct each capsule points at:
@@ -101,12 +101,12 @@ def buffer_from_dlpack(source: Any) -> tuple[Any, Device]:
     kind, index = dlpack_device(source)
     producer = _Capsule(source, (kind, index)) if is_capsule(source) else source
     try:
-        if kind in _HOST_TYPES:
+        if kind in HOST_TYPES:
             host = np.from_dlpack(producer)
             if producer is not source and _capi.PyCapsule_IsValid(source, b"used_" + _LEGACY):
                 host = _writable(host)
             return host, get_device("cpu")
-        if kind in _CUDA_TYPES:
+        if kind in CUDA_TYPES:
             dev = cuda_device(index)
             with mem.scope(dev):  # CuPy hands the producer kdsl's stream to wait on
                 return mem.cupy().from_dlpack(producer), dev

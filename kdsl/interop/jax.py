@@ -54,6 +54,11 @@ def tracer_message(value: Any) -> str:
     )
 
 
+def tracer_message_or_none(value: Any) -> str | None:
+    """``tracer_message(value)`` for a JAX tracer, None for anything else."""
+    return tracer_message(value) if is_tracer(value) else None
+
+
 def device_from_jax(jax_device: Any) -> Device:
     """The kdsl device of a JAX device (``cpu`` or ``cuda:N``)."""
     platform = getattr(jax_device, "platform", None)
@@ -98,9 +103,7 @@ def dtype_from_jax(jax_dtype: Any) -> type:
 
 def dtype_to_jax(warp_dtype: Any) -> Any:
     """The JAX scalar type (``jax.numpy.float32``...) of a kdsl scalar type."""
-    name = kdsl_scalar(warp_dtype, "JAX").np_dtype.name
-    jnp = _jax().numpy
-    return jnp.bool_ if name == "bool" else getattr(jnp, name)
+    return getattr(_jax().numpy, kdsl_scalar(warp_dtype, "JAX").jax)
 
 
 def from_jax(jax_array: Any, dtype: Any = None) -> array:

@@ -16,7 +16,7 @@ import numpy as np
 
 from kdsl.interop import jax_ffi as F
 from kdsl.interop import xla_ffi
-from kdsl.interop.descriptor import ArrayDescriptor
+from kdsl.runtime.descriptor import ArrayDescriptor
 from kdsl.runtime.device import get_device
 
 

@@ -13,7 +13,6 @@ from __future__ import annotations
 from typing import Any
 
 from kdsl.errors import KdslError
-from kdsl.interop.descriptor import ArrayDescriptor
 from kdsl.interop.dlpack import buffer_from_dlpack, to_dlpack
 from kdsl.interop.dtypes import (
     InteropDeviceError,
@@ -21,12 +20,12 @@ from kdsl.interop.dtypes import (
     kdsl_scalar,
     public_scalar,
     scalar_from_name,
-    signed_twin,
 )
 from kdsl.interop.views import describe_buffer, view_buffer
 from kdsl.ir import types as T
 from kdsl.runtime import cuda_memory as mem
 from kdsl.runtime.array import array
+from kdsl.runtime.descriptor import ArrayDescriptor
 from kdsl.runtime.device import Device, get_device
 from kdsl.runtime.stream import Stream, get_stream
 
@@ -89,8 +88,7 @@ def _scalar_of(paddle_dtype: Any) -> T.ScalarType:
 
 def dtype_to_paddle(warp_dtype: Any) -> Any:
     """The Paddle dtype of a kdsl scalar type; uint16/32/64 map to the signed type of their width."""
-    t = signed_twin(kdsl_scalar(warp_dtype, "Paddle"))
-    return getattr(_paddle(), t.np_dtype.name)
+    return getattr(_paddle(), kdsl_scalar(warp_dtype, "Paddle").paddle)
 
 
 def _view(t: Any, dtype: Any) -> tuple[Any, T.Type, Device]:
@@ -141,7 +139,7 @@ def from_paddle(
 def _tensor_of(a: array) -> Any:
     paddle = _paddle()
     et = T.elem_type(a._t)
-    twin = signed_twin(et)
+    twin = scalar_from_name(et.paddle, "Paddle")
     src = a
     if twin != et:  # Paddle has no uint16/32/64: same bits, signed
         with mem.scope(a.device):

@@ -16,7 +16,6 @@ from typing import Any
 import numpy as np
 
 from kdsl.errors import KdslError
-from kdsl.interop.descriptor import ArrayDescriptor
 from kdsl.interop.dlpack import Exporter
 from kdsl.interop.dtypes import (
     InteropDeviceError,
@@ -24,12 +23,12 @@ from kdsl.interop.dtypes import (
     kdsl_scalar,
     public_scalar,
     scalar_from_name,
-    signed_twin,
 )
 from kdsl.interop.views import describe_buffer, view_buffer
 from kdsl.ir import types as T
 from kdsl.runtime import cuda_memory as mem
 from kdsl.runtime.array import array
+from kdsl.runtime.descriptor import ArrayDescriptor
 from kdsl.runtime.device import Device, get_device
 from kdsl.runtime.stream import Stream, get_stream
 
@@ -85,8 +84,7 @@ def scalar_of(torch_dtype: Any) -> T.ScalarType:
 
 def dtype_to_torch(warp_dtype: Any) -> Any:
     """The torch dtype of a kdsl scalar type; uint16/32/64 map to the signed type of their width."""
-    t = signed_twin(kdsl_scalar(warp_dtype, "torch"))
-    return getattr(_torch(), t.np_dtype.name)
+    return getattr(_torch(), kdsl_scalar(warp_dtype, "torch").torch)
 
 
 def _tensor_buffer(t: Any, dev: Device) -> Any:
@@ -165,7 +163,7 @@ def from_torch(
 
 def _tensor_of(buf: Any, t: T.Type, dev: Device) -> Any:
     et = T.elem_type(t)
-    twin = signed_twin(et)
+    twin = scalar_from_name(et.torch, "torch")
     if twin != et:  # torch has no full uint16/32/64 support: same bits, signed
         with mem.scope(dev):
             buf = buf.view(twin.np_dtype)

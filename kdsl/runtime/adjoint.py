@@ -16,13 +16,13 @@ from typing import Any
 import numpy as np
 
 from kdsl import config
+from kdsl.compiler import adjoint_module
 from kdsl.errors import KdslError, KdslLaunchError, KdslRuntimeError
 from kdsl.ir import Module, Operation
 from kdsl.ir import types as T
 from kdsl.ir.vjp import is_differentiable
 
 _ADJ_ATTR = "_kdsl_adjoint"
-_INLINE = "inline{keep_custom_grad=true}"
 _COUNT_ATTR = "_kdsl_counter"
 
 
@@ -80,23 +80,6 @@ class DerivedKernel:
         return self._arg_types
 
 
-def adjoint_module(kernel: Any) -> Module:
-    """``kernel``'s optimized module with its adjoint (and tape counter) functions added.
-
-    The adjoint functions are simplified and stripped of unread tapes (``tape-dce``).
-    """
-    from kdsl.passes import CLEANUP_PIPELINE, DEFAULT_PIPELINE, run_pipeline
-    from kdsl.passes.adjoint import AdjointPass
-
-    module = kernel.build_module()
-    # Calls to functions with custom gradients stay calls until the adjoint exists.
-    run_pipeline(module, DEFAULT_PIPELINE.replace("inline", _INLINE, 1))
-    AdjointPass(kernel.key).apply(module)
-    # Inline the custom gradients, simplify, then drop the tapes the reverse sweep never reads.
-    run_pipeline(module, f"inline,{CLEANUP_PIPELINE},tape-dce,{CLEANUP_PIPELINE}")
-    return module
-
-
 def adjoint_kernel(kernel: Any) -> DerivedKernel:
     """The (cached) adjoint of ``kernel``; raises when the kernel disabled its backward pass."""
     if not (getattr(kernel, "options", None) or {}).get("enable_backward", True):
@@ -106,7 +89,7 @@ def adjoint_kernel(kernel: Any) -> DerivedKernel:
         )
     adj = getattr(kernel, _ADJ_ATTR, None)
     if adj is None:
-        from kdsl.passes._adjoint import ADJ_SUFFIX
+        from kdsl.passes.adjoint import ADJ_SUFFIX
 
         adj = DerivedKernel(kernel, ADJ_SUFFIX, "adjoint")
         setattr(kernel, _ADJ_ATTR, adj)
@@ -116,7 +99,7 @@ def adjoint_kernel(kernel: Any) -> DerivedKernel:
 def _counter(kernel: Any) -> DerivedKernel:
     c = getattr(kernel, _COUNT_ATTR, None)
     if c is None:
-        from kdsl.passes._adjoint import COUNT_SUFFIX
+        from kdsl.passes.adjoint import COUNT_SUFFIX
 
         c = DerivedKernel(kernel, COUNT_SUFFIX, "tape counter")
         setattr(kernel, _COUNT_ATTR, c)

@@ -49,15 +49,17 @@ from kdsl.runtime.stream import (
     wait_event,
     wait_stream,
 )
+from kdsl.runtime.structs import Struct, struct
 from kdsl.runtime.tape import Tape
 
 __all__ = [
-    "Device", "Event", "Launch", "ScopedDevice", "ScopedStream", "Stream", "Tape", "array", "array1d",
+    "Device", "Event", "Launch", "ScopedDevice", "ScopedStream", "Stream", "Struct", "Tape",
+    "array", "array1d",
     "array2d", "array3d", "array4d", "clone", "context", "copy", "default_backend_for", "empty",
     "empty_like", "from_numpy", "full", "full_like", "get_cuda_device_count",
     "get_cuda_devices", "get_device", "get_event_elapsed_time", "get_preferred_device",
     "get_stream", "indexedarray", "indexedarray1d", "indexedarray2d", "indexedarray3d",
     "indexedarray4d", "init", "is_cuda_available", "launch", "ones", "ones_like", "record_event",
-    "set_device", "set_stream", "synchronize", "synchronize_device", "synchronize_event",
+    "set_device", "set_stream", "struct", "synchronize", "synchronize_device", "synchronize_event",
     "synchronize_stream", "wait_event", "wait_stream", "zeros", "zeros_like",
 ]  # fmt: skip

@@ -5,7 +5,7 @@ backends take: arrays as their buffers with element dims appended (NumPy on the
 CPU, ``cupy.ndarray`` on a CUDA device, where any ``__cuda_array_interface__``
 object on that device is also taken zero-copy; DLPack producers and
 ``__array_interface__`` objects such as PyTorch CPU tensors and JAX arrays are
-read zero-copy too, see ``_foreign``), scalars as
+read zero-copy too, through the interop layer's ``foreign_buffer``), scalars as
 NumPy scalars of the exact type, vectors/matrices as NumPy arrays, structs as
 tuples. Python numbers get Warp's leniency (an int for a float parameter is
 fine); NumPy data must match exactly, so a float64 array or scalar is never
@@ -20,11 +20,12 @@ from typing import Any
 
 import numpy as np
 
-from kdsl.errors import KdslError, KdslLaunchError
-from kdsl.interop.descriptor import ArrayDescriptor
+from kdsl.errors import KdslLaunchError
 from kdsl.ir import types as T
 from kdsl.runtime import cuda_memory as mem
+from kdsl.runtime.adapters import adapter
 from kdsl.runtime.array import array
+from kdsl.runtime.descriptor import ArrayDescriptor
 from kdsl.runtime.device import Device
 
 
@@ -54,16 +55,18 @@ def describe(value: Any) -> str:
 
 def convert(t: T.Type, value: Any, device: Device) -> Any:
     """``value`` as the backend value of IR type ``t``; raises ``ArgError``."""
-    if _is_tracer(value):
-        from kdsl.interop.jax import tracer_message
-
-        raise ArgError(tracer_message(value))
+    # A JAX tracer exists only once JAX is loaded; never import it here.
+    if "jax" in sys.modules:
+        message = adapter("tracer_message")
+        why = message(value) if message is not None else None
+        if why is not None:
+            raise ArgError(why)
     if isinstance(t, T.ArrayType):
         return _array(t, value, device)
     if isinstance(t, T.ScalarType):
-        return _scalar(t, value)
+        return convert_scalar(t, value)
     if isinstance(t, T.VectorType | T.MatrixType):
-        return _composite(t, value)
+        return convert_composite(t, value)
     if isinstance(t, T.StructType):
         return _struct(t, value, device)
     if isinstance(t, T.HandleType):
@@ -96,7 +99,7 @@ def _array(t: T.ArrayType, value: Any, device: Device) -> Any:
                 f"expected an array on device '{device}', got a CUDA {type(value).__name__} "
                 f"on '{where}'"
             )
-        _check_foreign(t, buf.dtype, buf.shape, f"CUDA {type(value).__name__}")
+        check_foreign(t, buf.dtype, buf.shape, f"CUDA {type(value).__name__}")
         return buf
     if isinstance(value, np.ndarray):
         if not device.is_cpu:
@@ -104,29 +107,21 @@ def _array(t: T.ArrayType, value: Any, device: Device) -> Any:
                 f"a NumPy array lives on the cpu, but the launch is on '{device}'; "
                 f"move it with kdsl.array(data, device='{device}')"
             )
-        _check_foreign(t, value.dtype, value.shape, "NumPy")
+        check_foreign(t, value.dtype, value.shape, "NumPy")
         return value
-    if _has(value, "__dlpack__") or _has(value, "__array_interface__"):
-        return _foreign(t, value, device)
+    if has_attribute(value, "__dlpack__") or has_attribute(value, "__array_interface__"):
+        read = adapter("foreign_buffer")
+        if read is not None:
+            return read(t, value, device)
     raise ArgError(f"expected an array of {t.dtype}, got {describe(value)}")
 
 
-def _has(value: Any, name: str) -> bool:
+def has_attribute(value: Any, name: str) -> bool:
+    """``hasattr``, where a property that raises counts as a "no"."""
     try:
         return hasattr(value, name)
     except Exception:  # a property that raises (a CUDA object's __array_interface__) is a "no"
         return False
-
-
-def _is_tracer(value: Any) -> bool:
-    # Never imports JAX: a tracer exists only once JAX is loaded.
-    return "jax" in sys.modules and _jax_tracer(value)
-
-
-def _jax_tracer(value: Any) -> bool:
-    from kdsl.interop.jax import is_tracer
-
-    return is_tracer(value)
 
 
 def _descriptor(t: T.ArrayType, value: ArrayDescriptor, device: Device) -> Any:
@@ -139,60 +134,7 @@ def _descriptor(t: T.ArrayType, value: ArrayDescriptor, device: Device) -> Any:
     return value.buf
 
 
-def _foreign(t: T.ArrayType, value: Any, device: Device) -> Any:
-    """A DLPack or ``__array_interface__`` producer (not NumPy, not CUDA-interface) as a buffer.
-
-    PyTorch tensors that require grad are read through ``detach()`` (same memory);
-    host data becomes a NumPy view, CUDA data a CuPy view, both zero-copy.
-    """
-    from kdsl.interop import dlpack
-    from kdsl.interop.torch import is_tensor
-
-    # what: for dtype messages ("a torch float64 array"); label: for device messages
-    what = label = type(value).__name__
-    fix = ".astype(np.{})"
-    if is_tensor(value):
-        from kdsl.interop.dtypes import InteropTypeError
-        from kdsl.interop.torch import scalar_of
-
-        what, label, fix = "torch", f"{value.dtype} tensor", ".to(torch.{})"
-        try:
-            scalar_of(value.dtype)
-        except InteropTypeError as e:
-            raise ArgError(
-                f"expected an array of {t.dtype}, got a {value.dtype} tensor: {e}"
-            ) from None
-        value = value.detach()
-    if _has(value, "__dlpack__"):
-        try:
-            kind, _ = dlpack.dlpack_device(value)
-        except Exception as e:  # a producer that cannot say where its data is
-            raise ArgError(f"expected an array of {t.dtype}, got a {label} ({e})") from None
-        if kind in dlpack._CUDA_TYPES and device.is_cpu:
-            raise ArgError(f"expected an array on device 'cpu', got a CUDA {label} (device memory)")
-        if kind in dlpack._HOST_TYPES and not device.is_cpu:
-            raise ArgError(
-                f"a {label} in host memory cannot be used by a launch on '{device}'; "
-                f"move it to '{device}' first"
-            )
-        try:
-            buf, where = dlpack.buffer_from_dlpack(value)
-        except KdslError as e:
-            raise ArgError(f"expected an array of {t.dtype}, got a {label}: {e.message}") from None
-        if where != device:
-            raise ArgError(f"expected an array on device '{device}', got a {label} on '{where}'")
-    else:
-        if not device.is_cpu:
-            raise ArgError(
-                f"a {label} (__array_interface__, host memory) cannot be used by a launch on "
-                f"'{device}'; move it to '{device}' first"
-            )
-        buf = np.asarray(value)
-    _check_foreign(t, buf.dtype, buf.shape, what, fix)
-    return buf
-
-
-def _check_foreign(
+def check_foreign(
     t: T.ArrayType, dtype: np.dtype, shape: tuple, what: str, fix: str = ".astype(np.{})"
 ) -> None:
     """Check a NumPy or CUDA-interface array: exact dtype, array dims + element dims.
@@ -223,7 +165,7 @@ def _check_foreign(
         )
 
 
-def _scalar(t: T.ScalarType, value: Any) -> Any:
+def convert_scalar(t: T.ScalarType, value: Any) -> Any:
     if isinstance(value, np.ndarray) and value.ndim == 0:
         value = value[()]
     if isinstance(value, np.generic):
@@ -250,7 +192,7 @@ def _scalar(t: T.ScalarType, value: Any) -> Any:
     raise ArgError(f"expected {t}, got {describe(value)}")
 
 
-def _composite(t: T.Type, value: Any) -> np.ndarray:
+def convert_composite(t: T.Type, value: Any) -> np.ndarray:
     shape = T.value_shape(t)
     et = T.elem_type(t)
     vt = getattr(type(value), "__kdsl_type__", None)

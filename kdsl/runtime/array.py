@@ -20,6 +20,7 @@ import numpy as np
 from kdsl.errors import KdslError
 from kdsl.ir import types as T
 from kdsl.runtime import cuda_memory as mem
+from kdsl.runtime.adapters import adapter
 from kdsl.runtime.annotation import ArrayAnnotation, subscript
 from kdsl.runtime.device import Device, get_device
 from kdsl.runtime.dtypes import (
@@ -219,8 +220,9 @@ class array:
         dims are appended (a ``vec3`` array exports an ``(n, 3)`` tensor). On a GPU
         the consumer's ``stream`` is made to wait for this device's kdsl stream.
         """
-        from kdsl.interop.dlpack import export
-
+        export = adapter("dlpack_export")
+        if export is None:
+            raise KdslError("DLPack export needs kdsl.interop (import kdsl)")
         return export(
             self._buf, self._device, stream=stream, max_version=max_version,
             dl_device=dl_device, copy=copy,

@@ -131,18 +131,14 @@ _CPU = Device("cpu")
 _DEVICES: dict[str, Device] = {"cpu": _CPU}
 _default: Device = _CPU
 _current_cuda = 0  # the ordinal "cuda" means
-_cuda_count: int | None = None
 
 
 def cuda_device_count() -> int:
     """Number of CUDA devices CuPy sees (0 without CuPy or a driver). Cached."""
-    global _cuda_count
-    if _cuda_count is None:
-        try:
-            _cuda_count = int(_cupy().cuda.runtime.getDeviceCount())
-        except Exception:  # no cupy, no driver, no device: all mean "no CUDA"
-            _cuda_count = 0
-    return _cuda_count
+    # Imported here: ``import kdsl`` loads no backend package.
+    from kdsl.backends.cuda.devices import device_count
+
+    return device_count()
 
 
 def cuda_initialized() -> bool:

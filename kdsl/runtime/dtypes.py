@@ -48,7 +48,7 @@ def inner_shape(t: T.Type) -> tuple[int, ...]:
 def public_dtype(t: T.Type) -> type:
     """The class users see as ``array.dtype`` (``kdsl.float32``, ``kdsl.vec3``, a struct...)."""
     if isinstance(t, T.StructType):
-        from kdsl.frontend.structs import class_of_struct
+        from kdsl.runtime.structs import class_of_struct
 
         return class_of_struct(t)
     return class_of(t)

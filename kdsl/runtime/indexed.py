@@ -3,42 +3,22 @@
 ``indexedarray(data, [idx0, None])`` views element ``(i, j)`` as
 ``data[idx0[i], j]``: a dimension with an index array has its length, one with
 None keeps the data's. No IR type or op is added for it: its kernel type is a
-struct (``indexed_type``) holding the data array, one int32 index array per
-dimension (empty where the dimension is not indexed) and the view's shape; the
-frontend (``kdsl.frontend.structs``) lowers ``a[i, j]`` to loads of the index
-arrays and the data (``kd.load``), so every backend runs it unchanged.
+struct (``kdsl.frontend.structs.indexed_type``) that the frontend lowers to loads of
+the index arrays and the data, so every backend runs it unchanged.
 """
 
 from __future__ import annotations
 
-from functools import cache
 from typing import Any
 
 import numpy as np
 
 from kdsl.errors import KdslError
+from kdsl.frontend.structs import indexed_type
 from kdsl.ir import types as T
 from kdsl.runtime.annotation import ArrayAnnotation, subscript
 from kdsl.runtime.array import array
 from kdsl.runtime.dtypes import resolve_dtype
-
-#: Name prefix of the struct types that stand for indexed arrays.
-PREFIX = "indexedarray_"
-
-
-@cache
-def indexed_type(dtype: T.Type, ndim: int) -> T.StructType:
-    """The struct type of an ``ndim``-d indexed array of ``dtype`` (see the module docstring)."""
-    fields: list[tuple[str, T.Type]] = [("data", T.ArrayType(dtype, ndim))]
-    fields += [(f"idx{k}", T.ArrayType(T.I32, 1)) for k in range(ndim)]
-    fields += [(f"shape{k}", T.I32) for k in range(ndim)]
-    name = f"{PREFIX}{str(dtype).replace('<', '_').replace('>', '').replace(', ', '_')}_{ndim}d"
-    return T.StructType(name, tuple(fields))
-
-
-def is_indexed(t: T.Type) -> bool:
-    """True for the struct types of indexed arrays."""
-    return isinstance(t, T.StructType) and t.name.startswith(PREFIX)
 
 
 class indexedarray:

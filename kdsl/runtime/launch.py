@@ -17,6 +17,7 @@ import numpy as np
 from kdsl import config
 from kdsl.backends.base import Backend, CompiledKernel
 from kdsl.backends.registry import get_backend, is_registered
+from kdsl.compiler import compile_kernel
 from kdsl.errors import KdslError, KdslLaunchError
 from kdsl.ir import types as T
 from kdsl.runtime import tape as _tape
@@ -95,7 +96,7 @@ def _compiled(kernel: Any, backend: Backend, options: dict[str, Any]) -> Compile
     key = (backend.name, backend.version, repr(sorted(options.items())))
     compiled = cache.get(key)
     if compiled is None:
-        compiled = backend.compile(kernel.build_module(), kernel.key, options)
+        compiled = compile_kernel(backend, kernel, options=options)
         compiled.metadata.setdefault("name", _kernel_name(kernel))
         cache[key] = compiled
     return compiled

@@ -17,7 +17,7 @@ Every function that draws takes ``state`` as an in-out parameter
 import kdsl as wp
 from kdsl.frontend.inout import inout
 from kdsl.frontend.kernel import func
-from kdsl.runtime.array import array
+from kdsl.ir.types import F32, ArrayType
 from kdsl.types import float32, int32, uint32, vec2, vec3, vec4
 
 __kdsl_group__ = "random"
@@ -106,7 +106,7 @@ def randn(state: inout(uint32)) -> float32:
 
 
 @func
-def sample_cdf(state: inout(uint32), cdf: array(dtype=float32)) -> int32:
+def sample_cdf(state: inout(uint32), cdf: ArrayType(F32, 1)) -> int32:
     """``sample_cdf(state, cdf)``: the first index ``i`` with ``cdf[i] >= randf(state)``."""
     u = randf(state)
     lower = 0

@@ -20,6 +20,7 @@ import numpy as np
 import pytest
 
 from kdsl.backends.interp.program import Program, ThreadContext
+from kdsl.compiler import compile_kernel
 from kdsl.ir import CATALOG, Builder, Module, new_func, verify_module
 from kdsl.ir.types import (
     BOOL,
@@ -570,7 +571,7 @@ def test_rules_run_the_same_on_cpu():
         for h, args in zip(hs, inputs):
             flat += [a.copy() for a in args]
             flat += [_array_value(rng, t, n) * 0 for t in h.func.attrs["res_types"]]
-        backend.launch(backend.compile(m, "k", {"optimize": False}), (n,), flat)
+        backend.launch(compile_kernel(backend, m, "k", {"optimize": False}), (n,), flat)
         return flat
 
     got, want = run(CPU), run(INTERP)

@@ -5,13 +5,14 @@ import pytest
 
 from kdsl.backends import get_backend
 from kdsl.backends.interp import InterpBackend
+from kdsl.compiler import compile_kernel, lower
 from kdsl.errors import KdslError, KdslLaunchError, KdslRuntimeError
 from kdsl.ir import parse_module
 
 
 def run(src: str, dims, *args, kernel: str = "k"):
     backend = get_backend("interp")
-    compiled = backend.compile(parse_module(src), kernel)
+    compiled = compile_kernel(backend, parse_module(src), kernel)
     backend.launch(compiled, tuple(dims), list(args))
     return compiled
 
@@ -32,10 +33,10 @@ def test_backend_identity():
 def test_lower_stages_print_ir():
     src = kernel("%a: array<f32, 1>", "  %i = kd.tid {dim = 0, ndim = 1} : i32")
     b = get_backend("interp")
-    assert "kd.tid" in b.lower(parse_module(src), "kir")
-    assert "func.func @k" in b.lower(parse_module(src), "kir-opt")
+    assert "kd.tid" in lower(b, parse_module(src), "kir")
+    assert "func.func @k" in lower(b, parse_module(src), "kir-opt")
     with pytest.raises(KdslError, match="no stage 'ptx'"):
-        b.lower(parse_module(src), "ptx")
+        lower(b, parse_module(src), "ptx")
 
 
 def test_scf_if_picks_region_per_thread():

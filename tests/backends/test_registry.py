@@ -29,14 +29,8 @@ class FakeBackend(Backend):
     def devices(self):
         return ["cpu"]
 
-    def stages(self):
-        return ["kir"]
-
-    def lower(self, module, stage):
-        return "fake"
-
-    def compile(self, module, kernel_symbol, options=None):
-        return CompiledKernel(self.name, kernel_symbol, module)
+    def load(self, job):
+        return CompiledKernel(self.name, job.symbol, job.module)
 
     def launch(self, compiled, dims, args, stream=None):
         pass

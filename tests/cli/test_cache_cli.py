@@ -9,8 +9,8 @@ from pathlib import Path
 import pytest
 
 from kdsl.cli import main
-from kdsl.runtime import cache
-from kdsl.runtime.cache import DiskCache
+from kdsl.compiler import cache
+from kdsl.compiler.cache import DiskCache
 
 
 @pytest.fixture(autouse=True)

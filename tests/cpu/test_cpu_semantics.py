@@ -10,6 +10,7 @@ import pytest
 
 from kdsl.backends.cpu import BACKEND as CPU
 from kdsl.backends.interp import BACKEND as INTERP
+from kdsl.compiler import compile_kernel
 from kdsl.ir.parser import parse_module
 from kdsl.ir.types import SCALARS
 
@@ -45,7 +46,7 @@ FLOATS = [
 
 def _run(backend, text: str, args: list, n: int) -> None:
     module = parse_module(text)
-    compiled = backend.compile(module, "k", {"optimize": False})
+    compiled = compile_kernel(backend, module, "k", {"optimize": False})
     backend.launch(compiled, (n,), args)
 
 

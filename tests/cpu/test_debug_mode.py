@@ -8,6 +8,7 @@ import pytest
 import kdsl as wp
 from kdsl import config
 from kdsl.backends.cpu.lower import lower_kernels
+from kdsl.compiler import compile_kernel, lower
 from kdsl.errors import KdslRuntimeError
 from kdsl.ir import parse_module
 from kdsl.passes import run_pipeline
@@ -178,7 +179,7 @@ def test_compile_options_resolution(monkeypatch):
 
 def test_release_llvm_ir_has_no_checks(cpu_backend):
     module = plain_read_past.build_module()
-    release = cpu_backend.lower(module, "llvm-ir")
+    release = lower(cpu_backend, module, "llvm-ir")
     assert "cmpxchg" not in release and "bounds." not in release
     debug_module = run_pipeline(plain_read_past.build_module(), "inline,dce,bounds-check")
     text = str(lower_kernels(debug_module, [plain_read_past.key], debug=True).llmod)
@@ -265,7 +266,7 @@ func.func @f(%b: array<f32, 1>, %m: i32) -> () {kind = "func"} {
 def test_check_in_called_function_stops_the_caller(cpu_backend):
     # optimize=False keeps the call (the inliner refuses recursion).
     options = {"debug": True, "optimize": False}
-    compiled = cpu_backend.compile(parse_module(RECURSIVE), "k", options)
+    compiled = compile_kernel(cpu_backend, parse_module(RECURSIVE), "k", options)
     buf = np.zeros(4, dtype=np.float32)
     cpu_backend.launch(compiled, (2,), [buf, np.int32(3)])
     assert buf.tolist() == [1, 1, 2, 2]

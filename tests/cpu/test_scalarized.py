@@ -10,6 +10,7 @@ import pytest
 from kdsl.backends.cpu import BACKEND as CPU
 from kdsl.backends.cpu.lower import lower_kernels
 from kdsl.backends.interp import BACKEND as INTERP
+from kdsl.compiler import compile_kernel, lower
 from kdsl.ir.parser import parse_module
 
 # A function taking and giving vectors, a matrix and a struct holding a vector, called
@@ -75,7 +76,7 @@ def _run(text: str, args_for, n: int) -> list[np.ndarray]:
     outs = []
     for backend in (CPU, INTERP):
         args = args_for()
-        compiled = backend.compile(parse_module(text), "k", {"optimize": False})
+        compiled = compile_kernel(backend, parse_module(text), "k", {"optimize": False})
         backend.launch(compiled, (n,), args)
         outs.append(args[-1])
     return outs
@@ -124,7 +125,7 @@ def test_versioned_loop_dense_and_strided(step: int) -> None:
 
 
 def test_loop_is_versioned_and_scalar() -> None:
-    text = CPU.lower(parse_module(LOOP), "llvm-ir-unopt")
+    text = lower(CPU, parse_module(LOOP), "llvm-ir-unopt")
     assert "dense.loop" in text and "strided.loop" in text
     assert "<3 x float>" not in text
 
@@ -152,7 +153,7 @@ def test_versioned_thread_loop_dense_and_strided(step: int) -> None:
 
 
 def test_thread_loop_over_vector_arrays_vectorizes() -> None:
-    text = CPU.lower(parse_module(THREADS), "llvm-ir")
+    text = lower(CPU, parse_module(THREADS), "llvm-ir")
     assert "dense.loop" in text or "vector.body" in text
     # The dense copy of the thread loop works on several threads' components at once. The
     # width is the host's choice (8 or 16 with AVX2, 24 or 48 with AVX-512): wider than a

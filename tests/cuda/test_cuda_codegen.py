@@ -19,6 +19,7 @@ import kdsl as wp
 from kdsl.backends.cuda import BACKEND, nvrtc, ops
 from kdsl.backends.cuda.lower import generate
 from kdsl.backends.cuda.params import Packer
+from kdsl.compiler import compile_kernel, lower
 from kdsl.errors import KdslError
 from kdsl.ir import parse_module
 from kdsl.ir import types as T
@@ -101,7 +102,7 @@ def _line_of(marker: str) -> int:
 
 
 def test_saxpy_holds_only_what_it_uses():
-    src = BACKEND.lower(saxpy.build_module(), "cuda-c")
+    src = lower(BACKEND, saxpy.build_module(), "cuda-c")
     assert "kd_vec" not in src and "kd_mat" not in src
     assert "atomic" not in src and "kd_f16" not in src and "#include" not in src
     assert "kd_fmin" not in src and "kd_idiv" not in src and "kd_err" not in src
@@ -109,7 +110,7 @@ def test_saxpy_holds_only_what_it_uses():
 
 
 def test_line_directives_point_at_python_source():
-    src = BACKEND.lower(saxpy.build_module(), "cuda-c")
+    src = lower(BACKEND, saxpy.build_module(), "cuda-c")
     lines = src.splitlines()
     store = next(i for i, t in enumerate(lines) if "*(float *)kd_at1(" in t and "= " in t)
     # The nearest #line above the store names this file; counting lines from it gives
@@ -194,7 +195,7 @@ def adds(x: wp.array(dtype=float)):
 def test_nvrtc_error_names_python_line(monkeypatch):
     monkeypatch.setitem(ops.TABLE, "arith.add", lambda em, op: "kd_no_such_helper()")
     with pytest.raises(KdslError) as info:
-        BACKEND.compile(adds.build_module(), adds.key, {"arch": ARCH})
+        compile_kernel(BACKEND, adds.build_module(), adds.key, {"arch": ARCH})
     text = str(info.value)
     assert "kd_no_such_helper" in text
     assert f'File "{__file__}", line {_line_of("ADD-LINE")}' in text
@@ -212,20 +213,20 @@ def test_nvrtc_error_in_generated_code_quotes_it():
 
 
 def test_compile_without_gpu_for_a_given_arch_uses_the_cache():
-    k1 = BACKEND.compile(saxpy.build_module(), saxpy.key, {"arch": ARCH})
+    k1 = compile_kernel(BACKEND, saxpy.build_module(), saxpy.key, {"arch": ARCH})
     assert k1.payload.cubins[ARCH][:4] == b"\x7fELF"
-    k2 = BACKEND.compile(saxpy.build_module(), saxpy.key, {"arch": ARCH})
+    k2 = compile_kernel(BACKEND, saxpy.build_module(), saxpy.key, {"arch": ARCH})
     assert k2.payload.cubins[ARCH] == k1.payload.cubins[ARCH]
 
 
 def test_stages_and_ptx():
     assert BACKEND.stages() == ["kir", "kir-opt", "cuda-c", "ptx"]
-    ptx = BACKEND.lower(saxpy.build_module(), "ptx", {"arch": ARCH})
+    ptx = lower(BACKEND, saxpy.build_module(), "ptx", {"arch": ARCH})
     assert ".entry" in ptx and "sm_90" in ptx
-    fast = BACKEND.lower(saxpy.build_module(), "ptx", {"arch": ARCH, "fast_math": True})
+    fast = lower(BACKEND, saxpy.build_module(), "ptx", {"arch": ARCH, "fast_math": True})
     assert ".entry" in fast
     with pytest.raises(KdslError, match="no stage"):
-        BACKEND.lower(saxpy.build_module(), "llvm-ir")
+        lower(BACKEND, saxpy.build_module(), "llvm-ir")
 
 
 def test_cli_prints_cuda_c(capsys):

@@ -21,9 +21,9 @@ import pytest
 
 import kdsl as wp
 from kdsl.backends.cpu import BACKEND
+from kdsl.compiler import cache, compile_kernel
+from kdsl.compiler.cache import CacheWarning, DiskCache
 from kdsl.ir import print_module
-from kdsl.runtime import cache
-from kdsl.runtime.cache import CacheWarning, DiskCache
 
 POSIX = os.name == "posix"
 
@@ -90,7 +90,7 @@ def test_constants_are_keyed_at_full_width(tmp_path, name, dtype):
         ns = {"__name__": "consts", "VALUE": value}
         exec(code, ns)
         kernel = ns[name]
-        compiled = BACKEND.compile(kernel.build_module(), kernel.key, kernel.options)
+        compiled = compile_kernel(BACKEND, kernel.build_module(), kernel.key, kernel.options)
         keys.append(compiled.metadata["cache_key"])
         texts.append(print_module(compiled.module, debuginfo=True))
         out = wp.zeros(5, dtype=dtype)
@@ -302,7 +302,7 @@ RUN = """\
 import json, sys, time
 import kdsl as wp
 from kdsl.backends.cpu import BACKEND
-from kdsl.runtime import cache
+from kdsl.compiler import cache
 from kern import triple_plus
 
 start = float(sys.argv[1])
@@ -371,8 +371,8 @@ def test_concurrent_processes_share_one_entry(program):
 
 def test_same_kernel_twice_in_one_process_is_a_memory_hit(saxpy):
     before = (cache.STATS.builds, cache.STATS.memory_hits)
-    a = BACKEND.compile(saxpy.build_module(), "saxpy", {"tag": "memory-test"})
-    b = BACKEND.compile(saxpy.build_module(), "saxpy", {"tag": "memory-test"})
+    a = compile_kernel(BACKEND, saxpy.build_module(), "saxpy", {"tag": "memory-test"})
+    b = compile_kernel(BACKEND, saxpy.build_module(), "saxpy", {"tag": "memory-test"})
     assert a.metadata["cache_key"] == b.metadata["cache_key"]
     assert a.payload.llvm_name == b.payload.llvm_name
     assert cache.STATS.memory_hits >= before[1] + 1
@@ -384,6 +384,6 @@ def test_same_kernel_twice_in_one_process_is_a_memory_hit(saxpy):
 
 
 def test_debug_and_release_builds_are_cached_apart(saxpy):
-    release = BACKEND.compile(saxpy.build_module(), "saxpy", {})
-    debug = BACKEND.compile(saxpy.build_module(), "saxpy", {"debug": True})
+    release = compile_kernel(BACKEND, saxpy.build_module(), "saxpy", {})
+    debug = compile_kernel(BACKEND, saxpy.build_module(), "saxpy", {"debug": True})
     assert release.metadata["cache_key"] != debug.metadata["cache_key"]

@@ -8,22 +8,12 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from kdsl.backends.base import (
-    Backend,
-    CompiledKernel,
-    launch_size,
-    optimize,
-    source_version,
-)
+from kdsl.backends.base import Backend, CompiledKernel, Job, launch_size, source_version
 from kdsl.backends.cpu import checks, jit, pool, printing
 from kdsl.backends.cpu.abi import ArgPacker, Packed
 from kdsl.backends.cpu.lower import kernel_names, kernel_symbol, lower_kernels, tid_ndims
-from kdsl.config import check_pipeline
-from kdsl.errors import KdslError
 from kdsl.ir.core import Module
 from kdsl.ir.ops_debug import debug_sites
-from kdsl.ir.printer import print_module
-from kdsl.runtime import cache as kernel_cache
 
 #: The C type of every range function: (start, end, args, dims).
 RANGE_FN = ctypes.CFUNCTYPE(None, ctypes.c_int64, ctypes.c_int64, ctypes.c_void_p, ctypes.c_void_p)
@@ -34,6 +24,12 @@ RANGE_FN = ctypes.CFUNCTYPE(None, ctypes.c_int64, ctypes.c_int64, ctypes.c_void_
 def _code_version(version: str) -> str:
     """``version`` plus a digest of this backend's sources (``base.source_version``)."""
     return source_version(version, Path(__file__).parent.glob("*.py"))
+
+
+def _llvm_name(job: Job, target: str) -> str:
+    """The kernel's LLVM symbol. It derives from the cache key: equal keys are equal code,
+    and the kernel cache loads each key once per process, so names never clash."""
+    return f"{kernel_symbol(job.symbol)}_{job.key(target)[:24]}"
 
 
 class CpuKernel:
@@ -65,69 +61,55 @@ class CpuBackend(Backend):
         {"fp16", "fp32", "fp64", "int8", "int16", "int64", "atomics", "recursion"}
     )
 
+    emit_stages = ("llvm-ir-unopt", "llvm-ir", "asm")
+
     def devices(self) -> list[str]:
         return ["cpu"]
 
-    def stages(self) -> list[str]:
-        return ["kir", "kir-opt", "llvm-ir-unopt", "llvm-ir", "asm"]
+    def code_version(self) -> str:
+        return _code_version(self.version)
 
-    def lower(self, module: Module, stage: str, options: dict[str, Any] | None = None) -> str:
+    def emit(self, module: Module, stage: str, options: dict[str, Any], checked: bool) -> str:
         """The module at ``stage``; "llvm-ir" is after LLVM's -O3, "llvm-ir-unopt" before.
 
-        ``options`` are kernel options as ``compile`` takes them; ``fast_math`` changes
-        the LLVM stages.
+        ``fast_math`` changes the LLVM stages.
         """
-        if stage not in self.stages():
-            raise KdslError(f"the cpu backend has no stage {stage!r} (stages: {self.stages()})")
-        if stage == "kir":
-            return print_module(module)
-        module = optimize(module, self.pipeline)
-        if stage == "kir-opt":
-            return print_module(module)
-        fast = bool((options or {}).get("fast_math", False))
+        fast = bool(options.get("fast_math", False))
         text = str(lower_kernels(module, kernel_names(module), fast_math=fast).llmod)
         if stage == "llvm-ir-unopt":
             return text
         mod = jit.optimize(jit.parse(text))
         return str(mod) if stage == "llvm-ir" else jit.assembly(mod)
 
-    def compile(
-        self, module: Module, kernel_symbol_: str, options: dict[str, Any] | None = None
-    ) -> CompiledKernel:
-        opts = dict(options or {})
-        if opts.get("optimize", True):
-            module = optimize(module, self.pipeline)
-        checked = check_pipeline(opts)
-        module = optimize(module, checked)
-        # The LLVM name derives from the cache key: equal keys are equal code, and the
-        # kernel cache loads each key once per process, so names never clash.
-        key = kernel_cache.kernel_key(
-            print_module(module, debuginfo=True), self.name, _code_version(self.version),
-            {**opts, "kernel": kernel_symbol_}, jit.target_id(),
+    def build(self, job: Job, target: str) -> bytes:
+        """Object code for the host (the only target) at -O3 (-O0 with ``optimize=False``)."""
+        opts = job.options
+        state = lower_kernels(
+            job.module, [job.symbol], {job.symbol: _llvm_name(job, target)}, debug=job.checked,
+            fast_math=bool(opts.get("fast_math", False)),
         )  # fmt: skip
-        llname = f"{kernel_symbol(kernel_symbol_)}_{key[:24]}"
+        mod = jit.parse(str(state.llmod))
+        jit.optimize(mod, 3 if opts.get("optimize", True) else 0)
+        return jit.emit_object(mod)
 
-        def build() -> bytes:
-            state = lower_kernels(
-                module, [kernel_symbol_], {kernel_symbol_: llname}, debug=bool(checked),
-                fast_math=bool(opts.get("fast_math", False)),
-            )  # fmt: skip
-            mod = jit.parse(str(state.llmod))
-            jit.optimize(mod, 3 if opts.get("optimize", True) else 0)
-            return jit.emit_object(mod)
+    def load_artifact(self, job: Job, target: str, data: bytes) -> int:
+        """The address of the kernel's range function, once the object is in the JIT."""
+        name = _llvm_name(job, target)
+        return jit.add_object(data, [name])[name]
 
-        addr = kernel_cache.get_or_build(
-            key, build, lambda obj: jit.add_object(obj, [llname])[llname]
-        )
-        func = module.get_func(kernel_symbol_)
-        fn = RANGE_FN(addr)
+    def load(self, job: Job) -> CompiledKernel:
+        target = jit.target_id()
+        fn = RANGE_FN(job.artifact(target))
+        module, symbol = job.module, job.symbol
         if printing.uses_print(module):  # keep C's and Python's stdout in order
             fn = printing.flushing(fn)
-        payload = CpuKernel(fn, [a.type for a in func.regions[0].block.args], tid_ndims(func), llname)
-        if checked:
+        func = module.get_func(symbol)
+        payload = CpuKernel(fn, [a.type for a in func.regions[0].block.args], tid_ndims(func),
+                            _llvm_name(job, target))  # fmt: skip
+        if job.checked:
             payload.sites = debug_sites(module)
-        meta = {"tid_ndims": sorted(payload.tid_ndims), "cache_key": key}
-        return CompiledKernel(self.name, kernel_symbol_, module, payload, meta)
+        meta = {"tid_ndims": sorted(payload.tid_ndims), "cache_key": job.key(target)}
+        return CompiledKernel(self.name, symbol, module, payload, meta)
 
     def launch(
         self,

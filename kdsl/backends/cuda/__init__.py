@@ -15,12 +15,22 @@ Choices (see docs/backends.md, section "cuda"):
 - Debug builds (``debug`` / ``verify_fp``) get a device error record; the launch
   synchronizes its stream and raises the cpu backend's ``KdslRuntimeError``.
 
-Importing this package imports neither CuPy nor NVRTC.
+Importing this package imports neither CuPy nor NVRTC, nor the code generator: the
+runtime reads ``devices`` (the device count) without loading the backend, which loads
+when ``BACKEND`` is first asked for.
 """
 
-from kdsl.backends.cuda.backend import CudaBackend
-
-#: The instance the ``kdsl.backends`` entry point names.
-BACKEND = CudaBackend()
+from typing import Any
 
 __all__ = ["BACKEND", "CudaBackend"]
+
+
+def __getattr__(name: str) -> Any:
+    if name not in __all__:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    from kdsl.backends.cuda.backend import CudaBackend
+
+    globals()["CudaBackend"] = CudaBackend
+    #: The instance the ``kdsl.backends`` entry point names.
+    globals()["BACKEND"] = CudaBackend()
+    return globals()[name]

@@ -13,22 +13,13 @@ from pathlib import Path
 from typing import Any
 
 from kdsl.backends import checks_common
-from kdsl.backends.base import (
-    Backend,
-    CompiledKernel,
-    launch_size,
-    optimize,
-    source_version,
-)
+from kdsl.backends.base import Backend, CompiledKernel, Job, launch_size, source_version
 from kdsl.backends.cuda import nvrtc
+from kdsl.backends.cuda.devices import device_count
 from kdsl.backends.cuda.lower import BLOCK, generate, kernel_names, tid_ndims
 from kdsl.backends.cuda.params import Packer
-from kdsl.config import check_pipeline
-from kdsl.errors import KdslError
 from kdsl.ir.core import Module
 from kdsl.ir.ops_debug import debug_sites
-from kdsl.ir.printer import print_module
-from kdsl.runtime import cache as kernel_cache
 
 
 @functools.cache
@@ -47,9 +38,7 @@ def device_arch(ordinal: int) -> str:
 
 def current_arch() -> str:
     """The current CUDA device's architecture, or ``nvrtc.DEFAULT_ARCH`` without a GPU."""
-    from kdsl.runtime.device import cuda_device_count
-
-    if cuda_device_count() == 0:
+    if device_count() == 0:
         return nvrtc.DEFAULT_ARCH
     import cupy
 
@@ -59,14 +48,10 @@ def current_arch() -> str:
 class CudaKernel:
     """The payload of a compiled cuda kernel: source, cubins per arch, functions per GPU."""
 
-    def __init__(self, source: str, entry: str, ir_text: str, options: dict, symbol: str) -> None:
+    def __init__(self, job: Job, source: str, entry: str) -> None:
+        self.job = job
         self.source = source
         self.entry = entry
-        self.ir_text = ir_text
-        self.options = options
-        self.symbol = symbol
-        self.module: Module | None = None
-        self.cubins: dict[str, bytes] = {}
         #: device ordinal -> (cupy Module, CUfunction pointer, Function); kept so it stays loaded.
         self.functions: dict[int, tuple[Any, int, Any]] = {}
         self.tid_ndims: set[int] = set()
@@ -74,23 +59,9 @@ class CudaKernel:
         #: Debug builds: the check sites (``kdsl.ir.ops_debug``); None in release builds.
         self.sites: dict | None = None
 
-    def cache_key(self, arch: str) -> str:
-        return kernel_cache.kernel_key(
-            self.ir_text, "cuda", _code_version(CudaBackend.version),
-            {**self.options, "kernel": self.symbol}, f"{arch}/nvrtc-{nvrtc.version()}",
-        )  # fmt: skip
-
     def cubin(self, arch: str) -> bytes:
         """The cubin for ``arch``, from the kernel cache or compiled now."""
-        out = self.cubins.get(arch)
-        if out is None:
-            fast = bool(self.options.get("fast_math", False))
-
-            def build() -> bytes:
-                return nvrtc.compile_source(self.source, arch, fast, self.module, self.symbol).cubin
-
-            out = self.cubins[arch] = kernel_cache.get_or_build(self.cache_key(arch), build, bytes)
-        return out
+        return self.job.artifact(arch)
 
     def function(self, ordinal: int) -> int:
         """The ``CUfunction`` of this kernel on device ``ordinal``, loaded on first use."""
@@ -118,59 +89,49 @@ class CudaBackend(Backend):
     version = "1"
     capabilities = frozenset({"fp16", "fp32", "fp64", "int8", "int16", "int64", "atomics"})
 
+    emit_stages = ("cuda-c", "ptx")
+    target_options = ("arch",)
+
     def devices(self) -> list[str]:
-        from kdsl.runtime.device import cuda_device_count
+        return [f"cuda:{i}" for i in range(device_count())]
 
-        return [f"cuda:{i}" for i in range(cuda_device_count())]
+    def code_version(self) -> str:
+        return _code_version(self.version)
 
-    def stages(self) -> list[str]:
-        return ["kir", "kir-opt", "cuda-c", "ptx"]
+    def cache_target(self, target: str) -> str:
+        return f"{target}/nvrtc-{nvrtc.version()}"
 
-    def lower(self, module: Module, stage: str, options: dict[str, Any] | None = None) -> str:
+    def emit(self, module: Module, stage: str, options: dict[str, Any], checked: bool) -> str:
         """The module at ``stage``. "cuda-c" needs no GPU; "ptx" needs NVRTC only."""
-        if stage not in self.stages():
-            raise KdslError(f"the cuda backend has no stage {stage!r} (stages: {self.stages()})")
-        if stage == "kir":
-            return print_module(module)
-        opts = dict(options or {})
-        module = optimize(module, self.pipeline)
-        checked = check_pipeline(opts)
-        module = optimize(module, checked)
-        if stage == "kir-opt":
-            return print_module(module)
-        src = generate(module, kernel_names(module), debug=bool(checked)).text
+        src = generate(module, kernel_names(module), debug=checked).text
         if stage == "cuda-c":
             return src
-        arch = opts.get("arch") or current_arch()
-        return nvrtc.compile_source(src, arch, bool(opts.get("fast_math")), module).ptx
+        arch = options.get("arch") or current_arch()
+        return nvrtc.compile_source(src, arch, bool(options.get("fast_math")), module).ptx
 
-    def compile(
-        self, module: Module, kernel_symbol: str, options: dict[str, Any] | None = None
-    ) -> CompiledKernel:
-        opts = dict(options or {})
-        if opts.get("optimize", True):
-            module = optimize(module, self.pipeline)
-        checked = check_pipeline(opts)
-        module = optimize(module, checked)
-        gen = generate(module, [kernel_symbol], debug=bool(checked))
-        func = module.get_func(kernel_symbol)
-        payload = CudaKernel(
-            gen.text, gen.entries[kernel_symbol], print_module(module, debuginfo=True),
-            {k: v for k, v in opts.items() if k != "arch"}, kernel_symbol,
-        )  # fmt: skip
-        payload.module = module
+    def build(self, job: Job, target: str) -> bytes:
+        """The cubin of ``job`` for the architecture ``target`` ("sm_90")."""
+        fast = bool(job.options.get("fast_math", False))
+        source = _source(job).text
+        return nvrtc.compile_source(source, target, fast, job.module, job.symbol).cubin
+
+    def load(self, job: Job) -> CompiledKernel:
+        module, symbol = job.module, job.symbol
+        gen = _source(job)
+        func = module.get_func(symbol)
+        payload = CudaKernel(job, gen.text, gen.entries[symbol])
         payload.tid_ndims = tid_ndims(func)
         args = func.regions[0].block.args
         payload.packer = Packer(
             [a.type for a in args], [a.name_hint or f"arg{i}" for i, a in enumerate(args)],
-            bool(checked),
+            job.checked,
         )  # fmt: skip
-        if checked:
+        if job.checked:
             payload.sites = debug_sites(module)
-        arch = opts.get("arch") or current_arch()
+        arch = job.options.get("arch") or current_arch()
         payload.cubin(arch)  # compile errors surface here, not at the first launch
         meta = {"tid_ndims": sorted(payload.tid_ndims), "arch": arch, "source": gen.text}
-        return CompiledKernel(self.name, kernel_symbol, module, payload, meta)
+        return CompiledKernel(self.name, symbol, module, payload, meta)
 
     def launch(
         self,
@@ -240,6 +201,14 @@ class CudaBackend(Backend):
 
         run.keep = (buf, params, args)  # type: ignore[attr-defined]
         return run
+
+
+def _source(job: Job) -> Any:
+    """The CUDA C of ``job``'s kernel, generated once per job."""
+    gen = job.notes.get("cuda-c")
+    if gen is None:
+        gen = job.notes["cuda-c"] = generate(job.module, [job.symbol], debug=job.checked)
+    return gen
 
 
 _API: tuple[Any, Any] | None = None

@@ -1,0 +1,10 @@
+"""The compiler: the only place that builds pipelines, keys the kernel cache and calls
+a backend's stages (see ``driver``). It sits above the frontend and the backends and
+below the runtime, which asks it for compiled kernels.
+"""
+
+from kdsl.compiler.adjoint import adjoint_module
+from kdsl.compiler.driver import compile_kernel, lower, prepare_module
+from kdsl.compiler.pipelines import check_pipeline
+
+__all__ = ["adjoint_module", "check_pipeline", "compile_kernel", "lower", "prepare_module"]

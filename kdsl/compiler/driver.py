@@ -1,0 +1,138 @@
+"""The compile driver: the one place that runs pipelines, keys the cache and calls backends.
+
+``compile_kernel(backend, kernel_or_module, symbol, options)`` is the path of every kernel:
+
+1. the frontend builds the module (``kernel.build_module()``), unless a module is given;
+2. the backend's declared ``pipeline`` optimizes it (unless ``optimize=False``);
+3. the instrumentation the options ask for (``check_pipeline``) is inserted;
+4. a ``Job`` carries the result to the backend, whose ``load`` asks ``job.artifact(target)``
+   for its binary: the driver keys the kernel cache on the optimized IR, the backend's
+   name and code version, the options and the target, and calls the backend's ``build``
+   only on a miss (``load_artifact`` turns the bytes into something runnable, once per
+   key per process).
+
+``lower(backend, module, stage, options)`` prints any stage ``kdsl ir`` shows: ``kir``
+(the frontend's output), ``kir-opt`` (after step 3), then the backend's own stages.
+A backend never runs passes, never touches the cache, and never imports the runtime.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from typing import Any
+
+from kdsl.backends.base import Backend, CompiledKernel, Job
+from kdsl.compiler import cache as kernel_cache
+from kdsl.compiler.pipelines import check_pipeline
+from kdsl.errors import KdslError
+from kdsl.ir import Module, print_module
+from kdsl.passes import run_pipeline
+
+#: The stages every backend has, printed by the driver itself.
+KIR, KIR_OPT = "kir", "kir-opt"
+
+
+class _Artifacts:
+    """A job's binaries per target, through the kernel cache (see the module docstring)."""
+
+    def __init__(self, backend: Backend, options: dict[str, Any], symbol: str, ir_text: str):
+        self.backend = backend
+        self.options = {k: v for k, v in options.items() if k not in backend.target_options}
+        self.symbol = symbol
+        self.ir_text = ir_text
+        self.loaded: dict[str, Any] = {}
+        self.job: Job | None = None
+
+    def key(self, target: str) -> str:
+        b = self.backend
+        return kernel_cache.kernel_key(
+            self.ir_text, b.name, b.code_version(), {**self.options, "kernel": self.symbol},
+            b.cache_target(target),
+        )  # fmt: skip
+
+    def artifact(self, target: str) -> Any:
+        hit = self.loaded.get(target)
+        if hit is None:
+            b, job = self.backend, self.job
+            hit = self.loaded[target] = kernel_cache.get_or_build(
+                self.key(target),
+                lambda: b.build(job, target),
+                lambda data: b.load_artifact(job, target, data),
+            )
+        return hit
+
+
+def prepare_module(backend: Backend, module: Module, options: Mapping[str, Any]) -> bool:
+    """Optimize ``module`` in place with ``backend``'s pipeline and instrument it.
+
+    Returns whether instrumentation (debug checks) was inserted.
+    """
+    if options.get("optimize", True) and backend.pipeline:
+        run_pipeline(module, backend.pipeline)
+    checks = check_pipeline(options)
+    if checks:
+        run_pipeline(module, checks)
+    return bool(checks)
+
+
+def compile_kernel(
+    backend: Backend,
+    target: Any,
+    symbol: str | None = None,
+    options: Mapping[str, Any] | None = None,
+) -> CompiledKernel:
+    """Compile the kernel ``target`` (a frontend kernel, or a module plus ``symbol``).
+
+    ``options`` are resolved kernel options (``kdsl.config.compile_options``).
+    """
+    module, symbol = _module_of(target, symbol)
+    if not symbol:
+        raise KdslError("compile_kernel: name the kernel (symbol=...) to compile from a module")
+    opts = dict(options or {})
+    checked = prepare_module(backend, module, opts)
+    ir_text = print_module(module, debuginfo=True) if backend.cacheable else ""
+    binaries = _Artifacts(backend, opts, symbol, ir_text)
+    job = binaries.job = Job(module, symbol, opts, checked, binaries.artifact, binaries.key)
+    return backend.load(job)
+
+
+def lower(
+    backend: Backend,
+    target: Any,
+    stage: str,
+    options: Mapping[str, Any] | None = None,
+    *,
+    prepared: bool = False,
+) -> str:
+    """``target`` (a kernel or a module) as text at ``stage`` of ``backend``.
+
+    ``prepared=True`` says the module has been optimized already (``kdsl ir`` runs the
+    pipeline itself, to print after each pass).
+    """
+    if stage not in backend.stages():
+        raise KdslError(
+            f"the {backend.name} backend has no stage {stage!r} (stages: {backend.stages()})"
+        )
+    module, _ = _module_of(target, None)
+    if stage == KIR:
+        return print_module(module)
+    opts = dict(options or {})
+    if prepared:
+        checks = check_pipeline(opts)
+        if checks:
+            run_pipeline(module, checks)
+        checked = bool(checks)
+    else:
+        checked = prepare_module(backend, module, opts)
+    if stage == KIR_OPT:
+        return print_module(module)
+    return backend.emit(module, stage, opts, checked)
+
+
+def _module_of(target: Any, symbol: str | None) -> tuple[Module, str]:
+    if isinstance(target, Module):
+        return target, symbol or ""
+    build: Callable[[], Module] | None = getattr(target, "build_module", None)
+    if build is None:
+        raise KdslError(f"cannot compile {target!r}: expected a kernel or an IR module")
+    return build(), symbol or target.key
