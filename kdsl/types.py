@@ -42,29 +42,28 @@ class Scalar:
         return cls.__kdsl_type__.np_dtype.type(value)
 
 
-def _scalar(name: str, t: T.ScalarType) -> type:
+def _scalar(t: T.ScalarType) -> type:
+    name = t.np_dtype.name  # Warp names its scalars as NumPy does
     return type(name, (Scalar,), {"__kdsl_type__": t, "__doc__": f"The {t} scalar type."})
 
 
-bool = _scalar("bool", T.BOOL)  # noqa: A001 - Warp's name
-int8 = _scalar("int8", T.I8)
-int16 = _scalar("int16", T.I16)
-int32 = _scalar("int32", T.I32)
-int64 = _scalar("int64", T.I64)
-uint8 = _scalar("uint8", T.U8)
-uint16 = _scalar("uint16", T.U16)
-uint32 = _scalar("uint32", T.U32)
-uint64 = _scalar("uint64", T.U64)
-float16 = _scalar("float16", T.F16)
-float32 = _scalar("float32", T.F32)
-float64 = _scalar("float64", T.F64)
-half = float16
+#: The public class of each scalar type, one per row of the IR's scalar table.
+SCALAR_CLASSES: dict[T.ScalarType, type] = {t: _scalar(t) for t in T.SCALARS.values()}
 
-SCALAR_CLASSES: dict[T.ScalarType, type] = {
-    c.__kdsl_type__: c
-    for c in (bool, int8, int16, int32, int64, uint8, uint16, uint32, uint64,
-              float16, float32, float64)
-}  # fmt: skip
+# The public names, spelled out so that tools and readers see them.
+bool = SCALAR_CLASSES[T.BOOL]  # noqa: A001 - Warp's name
+int8 = SCALAR_CLASSES[T.I8]
+int16 = SCALAR_CLASSES[T.I16]
+int32 = SCALAR_CLASSES[T.I32]
+int64 = SCALAR_CLASSES[T.I64]
+uint8 = SCALAR_CLASSES[T.U8]
+uint16 = SCALAR_CLASSES[T.U16]
+uint32 = SCALAR_CLASSES[T.U32]
+uint64 = SCALAR_CLASSES[T.U64]
+float16 = SCALAR_CLASSES[T.F16]
+float32 = SCALAR_CLASSES[T.F32]
+float64 = SCALAR_CLASSES[T.F64]
+half = float16
 
 
 class Composite(np.ndarray):
@@ -89,8 +88,6 @@ class Composite(np.ndarray):
 
 
 _COMPOSITE_CACHE: dict[T.Type, type] = {}
-_SUFFIX = {T.F16: "h", T.F32: "f", T.F64: "d", T.I32: "i", T.U32: "ui", T.I64: "l",
-           T.I8: "b", T.U8: "ub", T.I16: "s", T.U16: "us", T.U64: "ul"}  # fmt: skip
 
 
 def _composite(t: T.Type, name: str) -> type:
@@ -111,29 +108,33 @@ def _scalar_type(dtype: Any) -> T.ScalarType:
 def vector(length: int, dtype: Any = float32) -> type:
     """The vector class of ``length`` components of ``dtype``."""
     et = _scalar_type(dtype)
-    return _composite(T.VectorType(length, et), f"vec{length}{_SUFFIX.get(et, '')}")
+    return _composite(T.VectorType(length, et), f"vec{length}{et.suffix}")
 
 
 def matrix(shape: tuple[int, int], dtype: Any = float32) -> type:
     """The matrix class of ``shape`` (rows, cols) of ``dtype``."""
     et = _scalar_type(dtype)
     r, c = shape
-    return _composite(T.MatrixType(r, c, et), f"mat{r}{c}{_SUFFIX.get(et, '')}")
+    return _composite(T.MatrixType(r, c, et), f"mat{r}{c}{et.suffix}")
 
 
 def quaternion(dtype: Any = float32) -> type:
     """The quaternion class of ``dtype``."""
     et = _scalar_type(dtype)
-    return _composite(T.QuatType(et), f"quat{_SUFFIX.get(et, '')}")
+    return _composite(T.QuatType(et), f"quat{et.suffix}")
 
 
 def transformation(dtype: Any = float32) -> type:
     """The rigid transform class of ``dtype``."""
     et = _scalar_type(dtype)
-    return _composite(T.TransformType(et), f"transform{_SUFFIX.get(et, '')}")
+    return _composite(T.TransformType(et), f"transform{et.suffix}")
 
 
-_PY_BUILTINS: dict[Any, T.Type] = {builtins.float: T.F32, builtins.int: T.I32, builtins.bool: T.BOOL}
+_PY_BUILTINS: dict[Any, T.Type] = {
+    builtins.float: T.F32,
+    builtins.int: T.I32,
+    builtins.bool: T.BOOL,
+}
 
 
 def type_of(annotation: Any) -> T.Type:

@@ -2,8 +2,9 @@
 
 No second table lives here: a framework dtype is matched to a kdsl scalar through
 its NumPy name (``torch.float32`` -> ``"float32"`` -> ``kdsl.ir.types`` ``f32``),
-and back through ``ScalarType.np_dtype.name``. A dtype kdsl has no scalar for
-(bfloat16, complex, strings) is an ``InteropTypeError``.
+and back through the scalar table's name for that framework (``ScalarType.torch``,
+``.paddle``, ``.jax``). A dtype kdsl has no scalar for (bfloat16, complex, strings)
+is an ``InteropTypeError``.
 """
 
 from __future__ import annotations
@@ -71,13 +72,6 @@ def kdsl_scalar(dtype: Any, target: str) -> T.ScalarType:
             f"{class_of(t).__name__} has no {target} dtype: an array of it converts to a "
             f"tensor of {et.np_dtype.name} with extra inner dims (..., {dims})"
         )
-    return t
-
-
-def signed_twin(t: T.ScalarType) -> T.ScalarType:
-    """int16/32/64 for uint16/32/64 (frameworks without those unsigned types); else ``t``."""
-    if t.kind == "uint" and t.bits > 8:
-        return T.ScalarType("int", t.bits)
     return t
 
 

@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from kdsl.interop.dtypes import InteropTypeError
+from kdsl.ir import types as T
 
 c_size_t, c_int, c_int64, c_void_p = ctypes.c_size_t, ctypes.c_int, ctypes.c_int64, ctypes.c_void_p
 
@@ -28,13 +29,9 @@ ERROR_INTERNAL = 13
 TRAIT_COMMAND_BUFFER_COMPATIBLE = 1
 ATTR_ARRAY, ATTR_DICTIONARY, ATTR_SCALAR, ATTR_STRING = 1, 2, 3, 4
 
-# XLA_FFI_DataType -> NumPy dtype; XLA types NumPy lacks (bf16, fp8, complex...) are absent.
-_NP_OF_XLA = {
-    1: np.dtype(np.bool_), 2: np.dtype(np.int8), 3: np.dtype(np.int16),
-    4: np.dtype(np.int32), 5: np.dtype(np.int64), 6: np.dtype(np.uint8),
-    7: np.dtype(np.uint16), 8: np.dtype(np.uint32), 9: np.dtype(np.uint64),
-    10: np.dtype(np.float16), 11: np.dtype(np.float32), 12: np.dtype(np.float64),
-}  # fmt: skip
+# XLA_FFI_DataType -> NumPy dtype, from the scalar table; XLA types kdsl lacks (bf16, fp8,
+# complex...) are absent.
+_NP_OF_XLA = {t.xla_ffi: t.np_dtype for t in T.SCALARS.values()}
 _XLA_NAMES = {15: "complex64", 16: "bfloat16", 18: "complex128"}
 
 

@@ -1,8 +1,11 @@
 """IR types: immutable, hashable, and printed in the text form.
 
-This module is the one dtype table of kdsl. Every scalar type is listed once in
-``SCALARS`` with its NumPy dtype; the public ``kdsl.float32``-style names, the
-runtime's array dtypes and every backend read their facts from here.
+This module is the one dtype table of kdsl. Every scalar type is one row of the
+scalar table below, and its ``ScalarType`` carries all its facts as fields: the IR
+name, NumPy dtype, ``struct`` code, CUDA C and LLVM spellings, Warp's vector suffix,
+and the torch, Paddle, JAX, DLPack and XLA FFI names. The public ``kdsl.float32``
+classes, the runtime's array dtypes, every backend and the interop modules derive
+their lists from here; none keeps a second one.
 
 Text forms::
 
@@ -35,18 +38,54 @@ class Type:
         return isinstance(self, ScalarType | VectorType | MatrixType | StructType)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, init=False)
 class ScalarType(Type):
-    """A scalar: ``kind`` is one of bool, int, uint, float; ``bits`` its width."""
+    """A scalar type, carrying every fact kdsl, its backends and its interop read about it.
+
+    Each scalar is one row of the table below (``BOOL``, ``I8`` ... ``F64``), the only
+    place its names and codes are spelled. ``ScalarType(kind, bits)`` returns that row's
+    object, so two instances of one type never disagree; equality and hashing use
+    ``kind`` and ``bits`` only. Framework names are strings (``"float32"``), never
+    framework objects, so ``kdsl.ir`` imports no torch, JAX or llvmlite.
+    """
 
     kind: str
+    """One of ``bool``, ``int``, ``uint``, ``float``."""
     bits: int
+    """The width in bits (8 for bool: its size in memory)."""
+    name: str = field(compare=False, repr=False)
+    """The IR text name: ``bool``, ``i8`` ... ``u64``, ``f16`` ... ``f64``."""
+    np_dtype: np.dtype = field(compare=False, repr=False)
+    """The NumPy dtype. Its name is also the public class name (``kdsl.float32``, as in Warp)."""
+    struct: str = field(compare=False, repr=False)
+    """The ``struct`` module code, standard size (for ``<`` formats): packed launch arguments."""
+    c: str = field(compare=False, repr=False)
+    """The CUDA C spelling (float16 is ``kd_f16``, a struct of the half's bits)."""
+    llvm: str = field(compare=False, repr=False)
+    """The LLVM register type (bool is ``i1`` in registers, a byte in memory)."""
+    suffix: str = field(compare=False, repr=False)
+    """Warp's suffix for vector and matrix classes of this type (``vec3d``); ``""`` for none."""
+    torch: str = field(compare=False, repr=False)
+    """The ``torch`` dtype attribute kdsl converts to: uint16/32/64 become the signed type of
+    their width (torch supports those unsigned types only partly; as Warp does)."""
+    paddle: str = field(compare=False, repr=False)
+    """The ``paddle`` dtype attribute kdsl converts to (Paddle has no uint16/32/64: signed)."""
+    jax: str = field(compare=False, repr=False)
+    """The ``jax.numpy`` dtype attribute (``bool_`` for bool)."""
+    dlpack: tuple[int, int] = field(compare=False, repr=False)
+    """DLPack's ``DLDataType`` (type code, bits), one lane: kDLInt 0, kDLUInt 1, kDLFloat 2,
+    kDLBool 6 (``dlpack.h``)."""
+    xla_ffi: int = field(compare=False, repr=False)
+    """The ``XLA_FFI_DataType`` code (``xla/ffi/api/c_api.h``): PRED 1, S8 2 ... F64 12."""
 
-    @property
-    def name(self) -> str:
-        if self.kind == "bool":
-            return "bool"
-        return {"int": "i", "uint": "u", "float": "f"}[self.kind] + str(self.bits)
+    def __new__(cls, kind: str, bits: int) -> ScalarType:
+        try:
+            return _BY_KIND_BITS[kind, bits]
+        except KeyError:
+            raise ValueError(f"kdsl has no {kind} scalar of {bits} bits") from None
+
+    def __reduce__(self) -> tuple[type, tuple[str, int]]:
+        return ScalarType, (self.kind, self.bits)
 
     @property
     def is_float(self) -> bool:
@@ -65,48 +104,75 @@ class ScalarType(Type):
     def is_bool(self) -> bool:
         return self.kind == "bool"
 
-    @property
-    def np_dtype(self) -> np.dtype:
-        return np.dtype(_NP_NAMES[self.name])
-
     def __str__(self) -> str:
         return self.name
 
 
-BOOL = ScalarType("bool", 8)
-I8, I16, I32, I64 = (ScalarType("int", b) for b in (8, 16, 32, 64))
-U8, U16, U32, U64 = (ScalarType("uint", b) for b in (8, 16, 32, 64))
-F16, F32, F64 = (ScalarType("float", b) for b in (16, 32, 64))
-
-_NP_NAMES = {
-    "bool": "bool",
-    "i8": "int8", "i16": "int16", "i32": "int32", "i64": "int64",
-    "u8": "uint8", "u16": "uint16", "u32": "uint32", "u64": "uint64",
-    "f16": "float16", "f32": "float32", "f64": "float64",
-}  # fmt: skip
-
-#: Every scalar type by its text name. The single dtype table.
-SCALARS: dict[str, ScalarType] = {
-    t.name: t for t in (BOOL, I8, I16, I32, I64, U8, U16, U32, U64, F16, F32, F64)
-}
+_IR_PREFIX = {"int": "i", "uint": "u", "float": "f"}
+_DLPACK_CODE = {"int": 0, "uint": 1, "float": 2, "bool": 6}  # DLDataTypeCode, by kind
 
 
-_BY_NP_NAME: dict[str, ScalarType] = {_NP_NAMES[t.name]: t for t in SCALARS.values()}
+def _scalar(
+    kind: str,
+    bits: int,
+    numpy: str,
+    struct: str,
+    c: str,
+    llvm: str,
+    suffix: str,
+    torch: str,
+    jax: str,
+    xla_ffi: int,
+) -> ScalarType:
+    """One row of the scalar table. The IR name and the DLPack type follow from kind and
+    bits; torch and Paddle lack the same unsigned types, so one name serves both."""
+    t = object.__new__(ScalarType)
+    facts = {
+        "kind": kind,
+        "bits": bits,
+        "name": "bool" if kind == "bool" else f"{_IR_PREFIX[kind]}{bits}",
+        "np_dtype": np.dtype(numpy),
+        "struct": struct,
+        "c": c,
+        "llvm": llvm,
+        "suffix": suffix,
+        "torch": torch,
+        "paddle": torch,
+        "jax": jax,
+        "dlpack": (_DLPACK_CODE[kind], bits),
+        "xla_ffi": xla_ffi,
+    }
+    for k, v in facts.items():
+        object.__setattr__(t, k, v)
+    return t
+
+
+#: The scalar table: every scalar type, once, by its IR text name. Every other list of
+#: scalars derives from it. "st" is the struct code, "sfx" Warp's vector suffix; the torch
+#: name is Paddle's too.
+# fmt: off
+SCALARS: dict[str, ScalarType] = {t.name: t for t in (_scalar(*row) for row in (
+    # kind  bits  NumPy      st   C                     LLVM      sfx   torch      JAX       XLA
+    ("bool",   8, "bool",    "?", "bool",               "i1",     "",   "bool",    "bool_",    1),
+    ("int",    8, "int8",    "b", "signed char",        "i8",     "b",  "int8",    "int8",     2),
+    ("int",   16, "int16",   "h", "short",              "i16",    "s",  "int16",   "int16",    3),
+    ("int",   32, "int32",   "i", "int",                "i32",    "i",  "int32",   "int32",    4),
+    ("int",   64, "int64",   "q", "long long",          "i64",    "l",  "int64",   "int64",    5),
+    ("uint",   8, "uint8",   "B", "unsigned char",      "i8",     "ub", "uint8",   "uint8",    6),
+    ("uint",  16, "uint16",  "H", "unsigned short",     "i16",    "us", "int16",   "uint16",   7),
+    ("uint",  32, "uint32",  "I", "unsigned int",       "i32",    "ui", "int32",   "uint32",   8),
+    ("uint",  64, "uint64",  "Q", "unsigned long long", "i64",    "ul", "int64",   "uint64",   9),
+    ("float", 16, "float16", "e", "kd_f16",             "half",   "h",  "float16", "float16", 10),
+    ("float", 32, "float32", "f", "float",              "float",  "f",  "float32", "float32", 11),
+    ("float", 64, "float64", "d", "double",             "double", "d",  "float64", "float64", 12),
+))}
+# fmt: on
+BOOL, I8, I16, I32, I64, U8, U16, U32, U64, F16, F32, F64 = SCALARS.values()
+_BY_KIND_BITS: dict[tuple[str, int], ScalarType] = {(t.kind, t.bits): t for t in SCALARS.values()}
+_BY_NP_NAME: dict[str, ScalarType] = {t.np_dtype.name: t for t in SCALARS.values()}
 _BY_NP: dict[object, ScalarType] = {
     key: t for t in SCALARS.values() for key in (t.np_dtype, t.np_dtype.type)
 }
-
-#: Each scalar's ``struct`` module code (standard sizes, used with a ``<`` prefix),
-#: for backends that pack launch arguments.
-_STRUCT_CODES = {
-    "bool": "?", "i8": "b", "i16": "h", "i32": "i", "i64": "q",
-    "u8": "B", "u16": "H", "u32": "I", "u64": "Q", "f16": "e", "f32": "f", "f64": "d",
-}  # fmt: skip
-
-
-def struct_code(t: ScalarType) -> str:
-    """The ``struct`` format code of scalar ``t`` (standard size, for ``<`` formats)."""
-    return _STRUCT_CODES[t.name]
 
 
 def scalar_from_numpy(dtype: np.dtype | type) -> ScalarType:

@@ -208,7 +208,7 @@ def _layout(t: T.Type) -> tuple[int, str, str]:
     if isinstance(t, T.HandleType):
         return 8, "Q", "handle"
     et = T.elem_type(t)
-    code = T.struct_code(et)
+    code = et.struct
     n = 1 if isinstance(t, T.ScalarType) else _component_count(t)
     size = n * et.np_dtype.itemsize
     return size, code * n, "scalar" if n == 1 and isinstance(t, T.ScalarType) else "vector"

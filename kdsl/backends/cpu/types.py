@@ -26,16 +26,21 @@ I64 = ir.IntType(64)
 F32 = ir.FloatType()
 VOID = ir.VoidType()
 
-_FLOATS = {16: ir.HalfType(), 32: ir.FloatType(), 64: ir.DoubleType()}
+
+def _parse(spelling: str) -> ir.Type:
+    """The llvmlite type of an LLVM scalar type spelling (``i32``, ``half``, ``double``)."""
+    if spelling.startswith("i"):
+        return ir.IntType(int(spelling[1:]))
+    return {"half": ir.HalfType, "float": ir.FloatType, "double": ir.DoubleType}[spelling]()
+
+
+#: The register type of each scalar, parsed from the scalar table's LLVM spellings.
+_REGISTER: dict[T.ScalarType, ir.Type] = {t: _parse(t.llvm) for t in T.SCALARS.values()}
 
 
 def scalar_type(t: T.ScalarType) -> ir.Type:
     """The register type of a scalar."""
-    if t.is_bool:
-        return I1
-    if t.is_float:
-        return _FLOATS[t.bits]
-    return ir.IntType(t.bits)
+    return _REGISTER[t]
 
 
 def count(t: T.Type) -> int:

@@ -18,31 +18,15 @@ import re
 from kdsl.errors import KdslCapabilityError
 from kdsl.ir import types as T
 
-#: C spelling of each scalar type (bool is C++ ``bool``, one byte).
-_SCALAR_C = {
-    ("bool", 8): "bool",
-    ("int", 8): "signed char", ("int", 16): "short", ("int", 32): "int", ("int", 64): "long long",
-    ("uint", 8): "unsigned char", ("uint", 16): "unsigned short", ("uint", 32): "unsigned int",
-    ("uint", 64): "unsigned long long",
-    ("float", 16): "kd_f16", ("float", 32): "float", ("float", 64): "double",
-}  # fmt: skip
-
-#: Short tag of each scalar type, used in generated type names.
-_TAG = {
-    ("bool", 8): "b", ("int", 8): "i8", ("int", 16): "i16", ("int", 32): "i32",
-    ("int", 64): "i64", ("uint", 8): "u8", ("uint", 16): "u16", ("uint", 32): "u32",
-    ("uint", 64): "u64", ("float", 16): "f16", ("float", 32): "f32", ("float", 64): "f64",
-}  # fmt: skip
-
 
 def scalar_c(t: T.ScalarType) -> str:
-    """The C type of a scalar."""
-    return _SCALAR_C[(t.kind, t.bits)]
+    """The C type of a scalar (bool is C++ ``bool``, one byte)."""
+    return t.c
 
 
 def tag(t: T.ScalarType) -> str:
-    """The short tag (``f32``...) of a scalar type."""
-    return _TAG[(t.kind, t.bits)]
+    """The short tag of a scalar type in generated type names: its IR name, bool ``b``."""
+    return "b" if t.is_bool else t.name
 
 
 def unsigned_c(t: T.ScalarType) -> str:
@@ -81,7 +65,7 @@ def array_name(ndim: int) -> str:
 def layout(t: T.Type) -> tuple[int, int]:
     """(size, alignment) in bytes of a by-value kernel parameter of type ``t``."""
     if isinstance(t, T.ScalarType):
-        n = max(1, t.bits // 8)
+        n = t.np_dtype.itemsize
         return n, n
     if isinstance(t, T.VectorType | T.MatrixType):
         s, a = layout(t.elem)

@@ -81,8 +81,7 @@ def _bit_count(em: FuncEmitter, op: Operation) -> str:
     (a,) = em.args(op)
     t = op.operands[0].type
     # Count the two's-complement bits: reinterpret as unsigned of the same width first.
-    exact = {8: "unsigned char", 16: "unsigned short", 32: "unsigned int"}
-    u = f"({exact.get(t.bits, 'unsigned long long')}){a}"
+    u = f"({CT.scalar_c(T.ScalarType('uint', t.bits))}){a}"
     return f"__popcll({u})" if t.bits == 64 else f"__popc((unsigned int){u})"
 
 

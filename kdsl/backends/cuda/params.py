@@ -52,9 +52,9 @@ class _Layout:
             if end > self.offset:  # trailing padding of the struct
                 self.fmt.append(f"{end - self.offset}x")
         elif isinstance(t, T.ScalarType):
-            self.fmt.append(T.struct_code(t))
+            self.fmt.append(t.struct)
         elif isinstance(t, T.VectorType | T.MatrixType):
-            self.fmt.append(f"{CT.count(t)}{T.struct_code(t.elem)}")
+            self.fmt.append(f"{CT.count(t)}{t.elem.struct}")
         elif isinstance(t, T.ArrayType):
             self.fmt.append(f"Q{2 * t.ndim}q")
         else:  # a handle

@@ -6,24 +6,27 @@ from typing import Any
 
 import numpy as np
 
-import kdsl as wp
+from kdsl.ir import types as T
+from kdsl.types import class_of
 
-#: (name, kdsl dtype, NumPy dtype, required capabilities)
+
+def dtype_row(t: T.ScalarType, requires: tuple[str, ...] = ()) -> tuple[str, type, type, tuple]:
+    """(IR name, kdsl dtype, NumPy scalar type, required capabilities) of ``t``."""
+    return t.name, class_of(t), t.np_dtype.type, requires
+
+
 INT_TYPES = (
-    ("i32", wp.int32, np.int32, ()),
-    ("u32", wp.uint32, np.uint32, ()),
-    ("i64", wp.int64, np.int64, ("int64",)),
-    ("u64", wp.uint64, np.uint64, ("int64",)),
+    dtype_row(T.I32),
+    dtype_row(T.U32),
+    dtype_row(T.I64, ("int64",)),
+    dtype_row(T.U64, ("int64",)),
 )
-FLOAT_TYPES = (
-    ("f32", wp.float32, np.float32, ()),
-    ("f64", wp.float64, np.float64, ("fp64",)),
-)
+FLOAT_TYPES = (dtype_row(T.F32), dtype_row(T.F64, ("fp64",)))
 SMALL_INT_TYPES = (
-    ("i8", wp.int8, np.int8, ("int8",)),
-    ("u8", wp.uint8, np.uint8, ("int8",)),
-    ("i16", wp.int16, np.int16, ("int16",)),
-    ("u16", wp.uint16, np.uint16, ("int16",)),
+    dtype_row(T.I8, ("int8",)),
+    dtype_row(T.U8, ("int8",)),
+    dtype_row(T.I16, ("int16",)),
+    dtype_row(T.U16, ("int16",)),
 )
 
 

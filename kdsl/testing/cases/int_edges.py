@@ -146,9 +146,7 @@ def _cast_ref(ins):
     return {"out": np.array(out, dt)}
 
 
-_CAST_DSTS = (("i8", wp.int8, np.int8, ("int8",)), ("u8", wp.uint8, np.uint8, ("int8",)),
-              ("i16", wp.int16, np.int16, ("int16",)), ("u16", wp.uint16, np.uint16, ("int16",)),
-              *INT_TYPES)  # fmt: skip
+_CAST_DSTS = (*SMALL_INT_TYPES, *INT_TYPES)
 
 
 def int_cases() -> list[Case]:

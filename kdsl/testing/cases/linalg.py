@@ -10,9 +10,9 @@ import numpy as np
 
 import kdsl as wp
 from kdsl.testing.case import Case, f64, uniform
+from kdsl.testing.cases._dtypes import FLOAT_TYPES
 
 N = 24
-_FLOATS = (("f32", wp.float32, np.float32, ()), ("f64", wp.float64, np.float64, ("fp64",)))
 #: Decompositions iterate: compare float32 results a little more loosely.
 _ITER_TOL = {np.float32: (2e-4, 2e-4), np.float64: (1e-10, 1e-10)}
 
@@ -40,7 +40,7 @@ def _cw_kernel(vtype, mtype):
 
 def _cw_cases() -> list[Case]:
     out = []
-    for tname, dtype, d, req in _FLOATS:
+    for tname, dtype, d, req in FLOAT_TYPES:
         vtype, mtype = wp.vector(3, dtype), wp.matrix((3, 3), dtype)
 
         def make(rng, d=d):
@@ -108,7 +108,7 @@ def _reduce_kernel(dtype):
 
 def _reduce_cases() -> list[Case]:
     out = []
-    for tname, dtype, d, req in _FLOATS:
+    for tname, dtype, d, req in FLOAT_TYPES:
 
         def make(rng, d=d):
             v = uniform(rng, (N, 4), -3, 3, d)
@@ -173,7 +173,7 @@ def _build_kernel(dtype):
 
 def _build_cases() -> list[Case]:
     out = []
-    for tname, dtype, d, req in _FLOATS:
+    for tname, dtype, d, req in FLOAT_TYPES:
 
         def make(rng, d=d):
             z = {k: np.zeros((N, 3, 3), d) for k in ("diag", "skew", "ident", "rows", "cols")}
@@ -217,7 +217,7 @@ def _det_inv_kernel(mtype, dtype):
 
 def _det_inv_cases() -> list[Case]:
     out = []
-    for tname, dtype, d, req in _FLOATS:
+    for tname, dtype, d, req in FLOAT_TYPES:
         for n in (2, 3, 4):
 
             def make(rng, n=n, d=d):
@@ -281,7 +281,7 @@ def _decomp_inputs(rng, d, sym=False):
 
 def _svd3_cases() -> list[Case]:
     out = []
-    for tname, dtype, d, req in _FLOATS:
+    for tname, dtype, d, req in FLOAT_TYPES:
 
         def make(rng, d=d):
             z = np.zeros((N, 3, 3), d)
@@ -318,7 +318,7 @@ def _svd2_kernel(dtype):
 
 def _svd2_cases() -> list[Case]:
     out = []
-    for tname, dtype, d, req in _FLOATS:
+    for tname, dtype, d, req in FLOAT_TYPES:
 
         def make(rng, d=d):
             a = _mats(rng, 2, d)
@@ -359,7 +359,7 @@ def _qr3_kernel(dtype):
 
 def _qr3_cases() -> list[Case]:
     out = []
-    for tname, dtype, d, req in _FLOATS:
+    for tname, dtype, d, req in FLOAT_TYPES:
 
         def make(rng, d=d):
             z = np.zeros((N, 3, 3), d)
@@ -399,7 +399,7 @@ def _eig3_kernel(dtype):
 
 def _eig3_cases() -> list[Case]:
     out = []
-    for tname, dtype, d, req in _FLOATS:
+    for tname, dtype, d, req in FLOAT_TYPES:
 
         def make(rng, d=d):
             z = np.zeros((N, 3, 3), d)
@@ -428,7 +428,7 @@ def _rotations(rng, n: int) -> np.ndarray:
 def _repeated_cases() -> list[Case]:
     """eig3 and svd3 where eigen/singular values repeat (their vectors are not unique)."""
     out = []
-    for tname, dtype, d, req in _FLOATS:
+    for tname, dtype, d, req in FLOAT_TYPES:
 
         def make_eig(rng, d=d):
             r = _rotations(rng, N)
@@ -489,7 +489,7 @@ def _rect_kernel(dtype):
 
 def _rect_cases() -> list[Case]:
     out = []
-    for tname, dtype, d, req in _FLOATS:
+    for tname, dtype, d, req in FLOAT_TYPES:
 
         def make(rng, d=d):
             return {"a": uniform(rng, (N, 4), -3, 3, d), "b": uniform(rng, (N, 4), -3, 3, d),

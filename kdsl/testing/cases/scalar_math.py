@@ -14,10 +14,11 @@ import math
 import numpy as np
 
 import kdsl as wp
+from kdsl.ir import types as T
 from kdsl.testing.case import Case, f64, uniform
+from kdsl.testing.cases._dtypes import FLOAT_TYPES, dtype_row
 
 N = 48
-_FLOATS = (("f32", wp.float32, np.float32, ()), ("f64", wp.float64, np.float64, ("fp64",)))
 
 
 def edges(np_dtype) -> np.ndarray:
@@ -179,7 +180,7 @@ _LOOSE = {"sin": (1e-5, 1e-5), "cos": (1e-5, 1e-5)}
 
 def _unary_cases() -> list[Case]:
     out = []
-    for tname, dtype, np_dtype, req in _FLOATS:
+    for tname, dtype, np_dtype, req in FLOAT_TYPES:
         for name, (fn, (lo, hi), extra, ref) in _UNARY.items():
 
             def make(rng, np_dtype=np_dtype, lo=lo, hi=hi, extra=extra):
@@ -231,7 +232,7 @@ def _vector_cases() -> list[Case]:
     table = {"floor": np.floor, "ceil": np.ceil, "trunc": np.trunc, "rint": np.rint,
              "round": _UNARY["round"][3], "frac": _UNARY["frac"][3], "sign": _sign_ref,
              "abs": np.abs}  # fmt: skip
-    for tname, dtype, np_dtype, req in _FLOATS:
+    for tname, dtype, np_dtype, req in FLOAT_TYPES:
         vtype = wp.vector(3, dtype)
         for name, ref in table.items():
             fn = getattr(wp, name)
@@ -248,9 +249,7 @@ def _vector_cases() -> list[Case]:
 
 # --- integers --------------------------------------------------------------------------------
 
-_INTS = (("i8", wp.int8, np.int8), ("i16", wp.int16, np.int16), ("i32", wp.int32, np.int32),
-         ("i64", wp.int64, np.int64), ("u8", wp.uint8, np.uint8), ("u32", wp.uint32, np.uint32),
-         ("u64", wp.uint64, np.uint64))  # fmt: skip
+_INTS = tuple(dtype_row(t)[:3] for t in (T.I8, T.I16, T.I32, T.I64, T.U8, T.U32, T.U64))
 
 
 def _int_values(rng, np_dtype) -> np.ndarray:
@@ -362,7 +361,7 @@ _TERNARY = {
 
 def _ternary_cases() -> list[Case]:
     out = []
-    for tname, dtype, np_dtype, req in _FLOATS:
+    for tname, dtype, np_dtype, req in FLOAT_TYPES:
         for name, (fn, ref) in _TERNARY.items():
             gen = _ternary_inputs(name)
             out.append(Case(
@@ -432,7 +431,7 @@ def _pred_kernel(dtype):
 
 def _pred_cases() -> list[Case]:
     out = []
-    for tname, dtype, np_dtype, req in _FLOATS:
+    for tname, dtype, np_dtype, req in FLOAT_TYPES:
 
         def make(rng, d=np_dtype):
             a = _values(rng, d, -3, 3)
@@ -479,7 +478,7 @@ def _zero_sign(x):
 
 def _minmax_cases() -> list[Case]:
     out = []
-    for tname, dtype, np_dtype, req in _FLOATS:
+    for tname, dtype, np_dtype, req in FLOAT_TYPES:
 
         def make(rng, d=np_dtype):
             a = _values(rng, d, -3, 3)
@@ -521,7 +520,7 @@ def _binary_kernel(dtype):
 
 def _binary_cases() -> list[Case]:
     out = []
-    for tname, dtype, np_dtype, req in _FLOATS:
+    for tname, dtype, np_dtype, req in FLOAT_TYPES:
 
         def make(rng, d=np_dtype):
             a = _values(rng, d, -3, 3)
