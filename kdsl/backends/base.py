@@ -27,7 +27,7 @@ from kdsl.passes import DEFAULT_PIPELINE
 
 @dataclass
 class CompiledKernel:
-    """What ``Backend.compile`` returns: one kernel, ready to launch.
+    """What ``Backend.load`` returns: one kernel, ready to launch.
 
     ``payload`` is the backend's own artifact (closures, a JIT handle, a CUDA
     function); the runtime never looks inside it. ``metadata["name"]``, set by
@@ -127,7 +127,13 @@ class Backend(ABC):
         raise NotImplementedError(f"the {self.name} backend builds no binaries")
 
     def load_artifact(self, job: Job, target: str, data: bytes) -> Any:
-        """``data`` (from ``build`` or the disk cache) made runnable; the bytes by default."""
+        """``data`` (from ``build`` or the disk cache) made runnable; the bytes by default.
+
+        The result is kept per cache key for the process and handed to every later job of
+        that key, so it must depend only on ``data`` and ``target`` (bind per-job objects
+        such as the module's ops in ``load``); ``job`` is given for names derived from
+        ``job.key(target)``.
+        """
         return data
 
     @abstractmethod
