@@ -6,6 +6,10 @@ through ``em.get`` and emits through ``em.b``; nested regions go through
 ``em.lower_block``. A vector, matrix or struct value is a ``composite.Parts`` of
 scalar LLVM values (never an LLVM vector), ``em.map`` applies a scalar emitter to
 each component.
+
+``ModuleState`` holds the module's feature analysis (``kdsl.passes.features``): the
+LLVM module declares a C library function only for a feature the analysis lists
+(``tanf`` for ``math.tan``, ``printf`` for ``print``), and only once some op calls it.
 """
 
 from __future__ import annotations
@@ -19,6 +23,7 @@ from kdsl.backends.cpu import types as LT
 from kdsl.backends.cpu.composite import Parts
 from kdsl.errors import KdslCapabilityError
 from kdsl.ir.core import Block, Module, Operation, Value
+from kdsl.passes.features import Features, analyze_features
 
 Lowering = Callable[["Emitter", Operation], Any]
 
@@ -38,6 +43,9 @@ FAST_MATH_FN_ATTRS = (
     ("no-signed-zeros-fp-math", "true"),
     ("approx-func-fp-math", "true"),
 )
+
+#: C library functions (other than libm's, see ``Emitter.libm``) -> their feature.
+LIBC_FEATURES = {"printf": "print"}
 
 
 class FastMathBuilder(ir.IRBuilder):
@@ -75,7 +83,9 @@ class FastMathBuilder(ir.IRBuilder):
     def fcmp_unordered(self, cmpop, lhs, rhs, name="", flags=()):
         return super().fcmp_unordered(cmpop, lhs, rhs, name, flags or self.fm_flags)
 
-    def call(self, fn, args, name="", cconv=None, tail=False, fastmath=(), attrs=(), arg_attrs=None):
+    def call(
+        self, fn, args, name="", cconv=None, tail=False, fastmath=(), attrs=(), arg_attrs=None
+    ):
         ret = fn.function_type.return_type if isinstance(fn, ir.Function) else None
         if not fastmath and ret is not None and _is_float(ret):
             fastmath = self.fm_flags
@@ -109,22 +119,36 @@ def mark_fast_math(fn: ir.Function) -> None:
 class ModuleState:
     """What the functions of one LLVM module share: declarations and callees."""
 
-    def __init__(self, llmod: ir.Module, module: Module, table: dict[str, Lowering]) -> None:
+    def __init__(
+        self,
+        llmod: ir.Module,
+        module: Module,
+        table: dict[str, Lowering],
+        features: Features | None = None,
+    ) -> None:
         self.llmod = llmod
         self.module = module
         self.table = table
+        #: What the module uses (computed here unless the caller has it already).
+        self.features = analyze_features(module) if features is None else features
         self.funcs: dict[str, ir.Function] = {}
         self.pending: list[str] = []  # callees declared but not emitted yet
-        self.libm_used: set[str] = set()
         #: Debug build: kernels and functions take a pointer to an error record (``checks``).
         self.debug = False
         #: ``fast_math`` kernel option: float ops get ``FAST_MATH_FLAGS``.
         self.fast_math = False
 
     def declare(self, name: str, fnty: ir.FunctionType) -> ir.Function:
-        """The function ``name`` of the module, declared on first use."""
+        """The function ``name`` of the module, declared on first use.
+
+        A C library function of ``LIBC_FEATURES`` is declared only when the feature
+        analysis lists its feature.
+        """
         fn = self.llmod.globals.get(name)
         if fn is None:
+            feature = LIBC_FEATURES.get(name)
+            if feature is not None:
+                self.features.require(feature, f"the cpu backend's declaration of {name}")
             fn = ir.Function(self.llmod, fnty, name)
         return fn
 
@@ -208,13 +232,17 @@ class Emitter:
         return self.b.call(fn, list(vals))
 
     def libm(self, name: str, *vals: ir.Value) -> ir.Value:
-        """Call the C library function ``name`` (``sin``...) on float scalars."""
+        """Call the C math function ``name`` (``tan``...) on float scalars.
+
+        ``name`` is also the math op's (the feature ``math.<name>`` must be listed).
+        """
         t = vals[0].type
         if isinstance(t, ir.HalfType):
             wide = [self.b.fpext(v, LT.F32) for v in vals]
             return self.b.fptrunc(self.libm(name, *wide), t)
         sym = name + ("f" if isinstance(t, ir.FloatType) else "")
-        self.state.libm_used.add(sym)
+        if sym not in self.state.llmod.globals:
+            self.state.features.require(f"math.{name}", f"the cpu backend's call of {sym}")
         fn = self.state.declare(sym, ir.FunctionType(t, [t] * len(vals)))
         return self.b.call(fn, list(vals))
 

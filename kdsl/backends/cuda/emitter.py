@@ -2,7 +2,11 @@
 
 ``Source`` collects what the whole translation unit needs, each piece once and
 only when some op asks for it (``need``): type definitions, scalar helpers,
-atomics, the debug record. ``FuncEmitter`` writes one kernel or function body:
+atomics, the debug record. It holds the module's feature analysis
+(``kdsl.passes.features``): a piece that belongs to a feature (the ``kd_f16`` type
+for ``f16``, a vector type for ``vectors``, a struct for ``structs``...) is made
+only when the analysis lists that feature, so the analysis is the one account of
+what a unit holds. ``FuncEmitter`` writes one kernel or function body:
 each IR value becomes a C variable ``v<n>``; each line remembers the source
 location of the op it came from, so ``lower`` can put ``#line`` directives in.
 
@@ -21,6 +25,7 @@ from kdsl.backends.cuda import ctypes_ as CT
 from kdsl.errors import KdslCapabilityError
 from kdsl.ir import types as T
 from kdsl.ir.core import Block, Loc, Module, Operation, Value
+from kdsl.passes.features import Features, analyze_features, composite_kind
 
 Lowering = Callable[["FuncEmitter", Operation], Any]
 
@@ -28,10 +33,18 @@ Lowering = Callable[["FuncEmitter", Operation], Any]
 class Source:
     """Everything one generated translation unit shares (see the module docstring)."""
 
-    def __init__(self, module: Module, table: dict[str, Lowering], debug: bool = False) -> None:
+    def __init__(
+        self,
+        module: Module,
+        table: dict[str, Lowering],
+        debug: bool = False,
+        features: Features | None = None,
+    ) -> None:
         self.module = module
         self.table = table
         self.debug = debug
+        #: What the module uses (computed here unless the caller has it already).
+        self.features = analyze_features(module) if features is None else features
         #: key -> C text, in dependency order (a piece is added after what it needs).
         self.pieces: dict[str, str] = {}
         self._making: set[str] = set()
@@ -39,12 +52,21 @@ class Source:
         #: IR function symbol -> C name (kernels and functions).
         self.func_names: dict[str, str] = {}
         self.funcs_todo: list[str] = []
-        self.uses_f16 = False
 
-    def need(self, key: str, make: Callable[[], str]) -> None:
-        """Add the piece ``key`` (text from ``make()``) unless it is there already."""
+    @property
+    def uses_f16(self) -> bool:
+        """True if the module has float16 values (the unit then defines ``kd_f16``)."""
+        return "f16" in self.features
+
+    def need(self, key: str, make: Callable[[], str], feature: str | None = None) -> None:
+        """Add the piece ``key`` (text from ``make()``) unless it is there already.
+
+        A piece of a ``feature`` is made only when the feature analysis lists it.
+        """
         if key in self.pieces or key in self._making:
             return
+        if feature is not None:
+            self.features.require(feature, f"the cuda backend's piece {key!r}")
         self._making.add(key)
         text = make()  # may need other pieces first; they land before this one
         self._making.discard(key)
@@ -74,7 +96,11 @@ class Source:
         if isinstance(t, T.VectorType | T.MatrixType):
             name = CT.composite_name(t)
             elem = self.ctype(t.elem)
-            self.need(f"type:{name}", lambda: f"struct {name} {{ {elem} c[{CT.count(t)}]; }};")
+            self.need(
+                f"type:{name}",
+                lambda: f"struct {name} {{ {elem} c[{CT.count(t)}]; }};",
+                composite_kind(t),
+            )
             return name
         if isinstance(t, T.StructType):
             return self._struct(t)
@@ -98,7 +124,7 @@ class Source:
         cs = [self.ctype(t) for t in types]
         name = "kd_ret_" + "_".join(CT.sanitize(c) for c in cs)
         fields = " ".join(f"{c} r{i};" for i, c in enumerate(cs))
-        self.need(f"type:{name}", lambda: f"struct {name} {{ {fields} }};")
+        self.need(f"type:{name}", lambda: f"struct {name} {{ {fields} }};", "calls")
         return name
 
     def _struct(self, t: T.StructType) -> str:
@@ -111,7 +137,7 @@ class Source:
             fields = " ".join(f"{self.ctype(ft)} f{i};" for i, (_, ft) in enumerate(t.fields))
             return f"struct {name} {{ {fields} }};"
 
-        self.need(f"type:{name}", make)
+        self.need(f"type:{name}", make, "structs")
         return name
 
 

@@ -1,10 +1,12 @@
 """The C helpers generated code may call, each added to a module only when used.
 
 Every function here adds one piece to a ``Source`` (with what it depends on) and
-returns the name to call. Integer helpers follow ``kdsl.ir.semantics``: division
-and remainder by zero give 0 and never trap, ``MIN / -1`` wraps, shifts by the
-width or more give 0 (or -1). Float min/max follow IEEE 754-2019 minimumNumber /
-maximumNumber (NaN loses, -0.0 < +0.0), the same rule as the cpu backend.
+returns the name to call; a piece of a feature (``kd_f16``: ``f16``) is made only
+when the module's feature analysis lists the feature. Integer helpers follow
+``kdsl.ir.semantics``: division and remainder by zero give 0 and never trap,
+``MIN / -1`` wraps, shifts by the width or more give 0 (or -1). Float min/max
+follow IEEE 754-2019 minimumNumber / maximumNumber (NaN loses, -0.0 < +0.0), the
+same rule as the cpu backend.
 """
 
 from __future__ import annotations
@@ -18,7 +20,6 @@ _FI = "__device__ __forceinline__"
 
 def need_f16(src: Source) -> None:
     """The ``kd_f16`` type and its conversions (PTX ``cvt``; no CUDA header needed)."""
-    src.uses_f16 = True
     src.need(
         "f16",
         lambda: (
@@ -33,6 +34,7 @@ def need_f16(src: Source) -> None:
   kd_f16 h; asm("cvt.rn.f16.f64 %0, %1;" : "=h"(h.bits) : "d"(d)); return h;
 }}"""
         ),
+        "f16",
     )
 
 
