@@ -72,6 +72,10 @@ class KdslRuntimeError(KdslError):
     """A failure while a kernel ran (out-of-bounds access in debug mode, ...)."""
 
 
+class KdslGradientWarning(UserWarning):
+    """A differentiable kernel whose gradient may be wrong (e.g. it reads an array it wrote)."""
+
+
 def source_line(file: str, line: int) -> str | None:
     """The text of ``line`` in ``file``, or None when it cannot be read."""
     text = linecache.getline(file, line)

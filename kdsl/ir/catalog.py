@@ -29,6 +29,7 @@ COMMUTATIVE = "commutative"
 READS = "reads"  # reads memory (kd.load): not removable across writes
 WRITES = "writes"  # writes memory (kd.store, atomics): never removed
 SPECULATABLE = "speculatable"  # pure and safe to run on paths that did not ask for it
+CHECK = "check"  # a run-time check (with WRITES): its only effect is stopping a failing thread
 
 TypeRule = Callable[[Sequence[Type], dict[str, Any]], Sequence[Type]]
 Verifier = Callable[[Operation], None]

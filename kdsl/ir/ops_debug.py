@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from kdsl.errors import KdslRuntimeError
-from kdsl.ir.catalog import CATALOG, WRITES
+from kdsl.ir.catalog import CATALOG, CHECK, WRITES
 from kdsl.ir.core import Loc, Module, Operation
 from kdsl.ir.ops_mem import element_index
 from kdsl.ir.types import ArrayType, ScalarType, Type, elem_type
@@ -58,7 +58,7 @@ CATALOG.define(
     "kd.check_bounds",
     "Debug mode: stop with an error when an index is outside the array's shape. "
     "``arg`` names the array (for messages); ``site`` numbers the check in its module.",
-    traits=frozenset({WRITES}),
+    traits=frozenset({WRITES, CHECK}),
     type_rule=_bounds_rule,
     verifier=_verify_site,
     interp=_bounds_interp,
@@ -102,7 +102,7 @@ CATALOG.define(
     "Debug mode (``verify_fp``): stop with an error when a float value (any lane) is NaN "
     "or infinite. ``arg`` names the array the value is stored into; ``site`` numbers "
     "the check in its module.",
-    traits=frozenset({WRITES}),
+    traits=frozenset({WRITES, CHECK}),
     type_rule=_finite_rule,
     verifier=_verify_site,
     interp=_finite_interp,

@@ -1,6 +1,8 @@
 """Rewriting helpers shared by the passes: effects, constants, cloning, inlining regions.
 
-Not a pass (the leading underscore keeps it out of the pass registry).
+IR-generic (they read op traits, never a pass's own tables), so they live with the
+IR rather than among the passes; ``kdsl.ir.rewrite_scf`` adds the rewrites of
+structured ops that drop unneeded values.
 """
 
 from __future__ import annotations
@@ -9,10 +11,9 @@ import math
 from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
-from kdsl.ir import CATALOG, Block, Module, Operation, Region, Value
 from kdsl.ir.builder import normalize_constant
-from kdsl.ir.catalog import PURE, READS, SPECULATABLE, WRITES
-from kdsl.ir.core import OpResult
+from kdsl.ir.catalog import CATALOG, PURE, READS, SPECULATABLE, WRITES
+from kdsl.ir.core import Block, Module, Operation, OpResult, Region, Value
 from kdsl.ir.types import ScalarType
 
 #: Region ops whose only effects are those of the ops nested in them.
@@ -37,10 +38,12 @@ def is_constant_equal(v: Value, want: float, *, sign: bool = False) -> bool:
 
 
 def has_trait(op: Operation, trait: str) -> bool:
+    """True if ``op``'s catalog entry carries ``trait`` (``PURE``, ``WRITES``, ...)."""
     return trait in op.opdef.traits
 
 
 def is_speculatable(op: Operation) -> bool:
+    """True if ``op`` may run on a path that did not ask for it (no regions, no effects)."""
     return has_trait(op, SPECULATABLE) and not op.regions
 
 
@@ -73,6 +76,7 @@ def replace_op(op: Operation, values: Sequence[Value]) -> None:
 
 
 def insert_before(anchor: Operation, op: Operation) -> Operation:
+    """Insert the unattached ``op`` right before ``anchor``; return ``op``."""
     assert anchor.parent is not None
     return anchor.parent.insert_before(anchor, op)
 
@@ -121,6 +125,7 @@ def clone_op(op: Operation, mapping: dict[Value, Value]) -> Operation:
 
 
 def clone_block(block: Block, mapping: dict[Value, Value]) -> Block:
+    """A deep copy of ``block`` (see ``clone_op``); ``mapping`` gains its values."""
     new = Block([a.type for a in block.args], [a.name_hint for a in block.args])
     for old_a, new_a in zip(block.args, new.args):
         mapping[old_a] = new_a

@@ -1,15 +1,16 @@
-"""Removing values that structured ops carry or yield but nobody needs.
+"""Removing values that structured ops (``scf.if``, ``scf.for``, ``scf.while``) carry or
+yield but nobody needs.
 
-Shared by ``canonicalize`` and ``dce`` (not a pass itself). Each function returns
-True when it rewrote the op; the op is then replaced by a new one, so callers must
-not touch the old op afterwards.
+Shared by ``canonicalize`` and ``dce``, like the canonicalization patterns MLIR keeps
+with its ``scf`` ops. Each function returns True when it rewrote the op; the op is
+then replaced by a new one, so callers must not touch the old op afterwards.
 """
 
 from __future__ import annotations
 
-from kdsl.ir import Operation, Value
 from kdsl.ir.catalog import PURE
-from kdsl.passes._rewrite import rebuild_with_results
+from kdsl.ir.core import Operation, Value
+from kdsl.ir.rewrite import rebuild_with_results
 
 
 def drop_unused_if_results(op: Operation) -> bool:

@@ -30,9 +30,7 @@ from typing import ClassVar
 from kdsl.ir import CATALOG, Module, Operation, Value
 from kdsl.ir.catalog import COMMUTATIVE
 from kdsl.ir.core import OpResult
-from kdsl.ir.types import BOOL, MatrixType, ScalarType, VectorType, elem_type, value_shape
-from kdsl.passes._loops import drop_dead_for_values, drop_dead_while_values, drop_unused_if_results
-from kdsl.passes._rewrite import (
+from kdsl.ir.rewrite import (
     constant_of,
     inline_block_before,
     insert_before,
@@ -42,6 +40,12 @@ from kdsl.passes._rewrite import (
     replace_op,
     rewrite_module,
 )
+from kdsl.ir.rewrite_scf import (
+    drop_dead_for_values,
+    drop_dead_while_values,
+    drop_unused_if_results,
+)
+from kdsl.ir.types import BOOL, MatrixType, ScalarType, VectorType, elem_type, value_shape
 from kdsl.passes.manager import ModulePass
 
 Pattern = Callable[[Operation], bool]

@@ -6,7 +6,7 @@ than reading memory. That covers unused pure ops, unused loads, and ``scf.if`` /
 ``scf.for`` / ``scf.while`` ops whose results are unused and whose regions hold no
 op that writes memory (``kd.store``, ``kd.atomic_rmw``) or has unknown effects
 (``func.call``). Stores and atomics are never removed. It also drops unused results
-of ``scf.if`` and loop-carried values that no one reads (see ``_loops``).
+of ``scf.if`` and loop-carried values that no one reads (see ``kdsl.ir.rewrite_scf``).
 
 Blocks are scanned from the end so a chain of dead ops goes in one sweep; rounds
 repeat until nothing changes. No options.
@@ -18,8 +18,12 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 from kdsl.ir import Block, Module
-from kdsl.passes._loops import drop_dead_for_values, drop_dead_while_values, drop_unused_if_results
-from kdsl.passes._rewrite import is_trivially_dead
+from kdsl.ir.rewrite import is_trivially_dead
+from kdsl.ir.rewrite_scf import (
+    drop_dead_for_values,
+    drop_dead_while_values,
+    drop_unused_if_results,
+)
 from kdsl.passes.manager import ModulePass
 
 _TRIM = {

@@ -26,15 +26,15 @@ import numpy as np
 
 from kdsl.ir import Module, Operation, Value
 from kdsl.ir.catalog import PURE
-from kdsl.ir.semantics import np_value
-from kdsl.ir.types import ScalarType
-from kdsl.passes._rewrite import (
+from kdsl.ir.rewrite import (
     constant_of,
     inline_block_before,
     make_constant,
     replace_op,
     rewrite_module,
 )
+from kdsl.ir.semantics import np_value
+from kdsl.ir.types import ScalarType
 from kdsl.passes.manager import ModulePass
 
 

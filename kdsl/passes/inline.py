@@ -26,7 +26,7 @@ from typing import ClassVar
 
 from kdsl.errors import KdslError
 from kdsl.ir import Module, Operation, Value
-from kdsl.passes._rewrite import clone_op, insert_before, replace_op
+from kdsl.ir.rewrite import clone_op, insert_before, replace_op
 from kdsl.passes.manager import ModulePass
 
 

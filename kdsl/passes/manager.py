@@ -91,12 +91,16 @@ def _format_option(value: Any) -> str:
 
 
 def _pass_module_names() -> list[str]:
-    """Names of the modules in this package that hold one pass each (not imported)."""
+    """Names of the modules in this package that hold one pass each (not imported).
+
+    A pass too large for one file is a package (``adjoint/``): its ``__init__``
+    defines the pass, its other modules the parts.
+    """
     here = os.path.dirname(__file__)
     return sorted(
         m.name
         for m in pkgutil.iter_modules([here])
-        if not m.name.startswith("_") and m.name not in _NOT_PASSES and not m.ispkg
+        if not m.name.startswith("_") and m.name not in _NOT_PASSES
     )
 
 
@@ -119,7 +123,7 @@ def _load_pass(module_name: str) -> type[ModulePass]:
     if len(found) != 1 or found[0].name != want:
         got = [c.name for c in found]
         raise RuntimeError(
-            f"kdsl/passes/{module_name}.py must define one pass named {want!r}: {got}"
+            f"module kdsl.passes.{module_name} must define one pass named {want!r}: {got}"
         )
     return found[0]
 

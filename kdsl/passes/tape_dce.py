@@ -11,20 +11,18 @@ counting pass.
 
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass
 from typing import ClassVar
 
 from kdsl.ir import Module, Operation
+from kdsl.passes.adjoint.tapes import TAPE_GUARD, is_tape_param
 from kdsl.passes.manager import ModulePass
 
-_TAPE = re.compile(r"tape\d+_\d+")
 
-
-def _tapes(func) -> list:
+def _tapes(func: Operation) -> list:
     """The adjoint's tape parameters: hidden ones (past ``hidden_from``) named ``tape<L>_<j>``."""
     args = func.regions[0].block.args[func.attrs["hidden_from"] :]
-    return [a for a in args if _TAPE.fullmatch(a.name_hint or "")]
+    return [a for a in args if is_tape_param(a.name_hint)]
 
 
 def _read(arg) -> bool:
@@ -50,7 +48,7 @@ class TapeDCEPass(ModulePass):
                             op.erase()
                             changed = True
             for op in list(func.walk()):
-                if op.name == "scf.if" and "tape_guard" in op.attrs and _guards_nothing(op):
+                if op.name == "scf.if" and TAPE_GUARD in op.attrs and _guards_nothing(op):
                     op.erase()
                     changed = True
         return changed

@@ -12,8 +12,7 @@ import pytest
 
 import kdsl as wp
 from kdsl.autograd import gradcheck
-from kdsl.errors import KdslError
-from kdsl.passes._adjoint import KdslGradientWarning
+from kdsl.errors import KdslError, KdslGradientWarning
 from kdsl.runtime.adjoint import launch_adjoint
 from kdsl.testing.cases import gradients
 from kdsl.testing.cases.gradients import dynamic_loop, two_d, while_loop
