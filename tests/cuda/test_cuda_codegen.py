@@ -214,9 +214,10 @@ def test_nvrtc_error_in_generated_code_quotes_it():
 
 def test_compile_without_gpu_for_a_given_arch_uses_the_cache():
     k1 = compile_kernel(BACKEND, saxpy.build_module(), saxpy.key, {"arch": ARCH})
-    assert k1.payload.cubins[ARCH][:4] == b"\x7fELF"
+    assert k1.payload.cubin(ARCH)[:4] == b"\x7fELF"
     k2 = compile_kernel(BACKEND, saxpy.build_module(), saxpy.key, {"arch": ARCH})
-    assert k2.payload.cubins[ARCH] == k1.payload.cubins[ARCH]
+    assert k2.payload.job.key(ARCH) == k1.payload.job.key(ARCH)
+    assert k2.payload.cubin(ARCH) is k1.payload.cubin(ARCH)  # the memory layer's object
 
 
 def test_stages_and_ptx():
