@@ -108,11 +108,11 @@ class FfiKernel:
 
     def _preload(self, jax: Any) -> None:
         # Compile now, not inside XLA's call (which may be under CUDA graph capture).
-        from kdsl.runtime.launch import _plan
+        from kdsl.runtime.launch import launch_plan
 
         for dev in F.jax_devices_to_preload(jax):
             if dev.alias not in self._preloaded:
-                _plan(self.kernel, dev, None)
+                launch_plan(self.kernel, dev, None)
                 self._preloaded.add(dev.alias)
 
     def _execute(self, frame: Any, platform: str) -> None:

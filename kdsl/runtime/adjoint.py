@@ -125,22 +125,22 @@ def launch_adjoint(
     from kdsl.runtime import alloc
     from kdsl.runtime.array import array
     from kdsl.runtime.launch import (
-        _check_tid,
-        _plan,
-        _resolve_stream,
+        check_tid,
+        launch_plan,
         normalize_dim,
+        resolve_stream,
     )
 
     adj = adjoint_kernel(kernel)
     dims = normalize_dim(dim, kernel.name)
-    _check_tid(kernel, dims)
+    check_tid(kernel, dims)
     n = len(kernel.arg_types)
     if len(args) != n or len(adj_args) != n:
         raise KdslLaunchError(
             f"kernel '{kernel.name}': its adjoint takes {n} arguments and {n} adjoints, got "
             f"{len(args)} and {len(adj_args)}"
         )
-    plan = _plan(adj, device, backend)
+    plan = launch_plan(adj, device, backend)
     dev = plan.device
     convs = plan.converters
     primal = [convs[i](v) for i, v in enumerate(args)]
@@ -154,7 +154,7 @@ def launch_adjoint(
         else:
             # A scalar's adjoint is an unused input of the adjoint kernel (as in Warp).
             adjoints.append(primal[i] if g is None else convs[n + i](g))
-    stream = _resolve_stream(dev, stream)
+    stream = resolve_stream(dev, stream)
     hidden, status = _hidden_args(kernel, adj, dims, primal, dev, backend, stream)
     for j, (name, _, _) in enumerate(adj.hidden):
         if name == "grad_owned":
@@ -232,7 +232,7 @@ def _tape_array(t: T.ArrayType, threads: int, slots: int, dev: Any) -> Any:
 def _tape_slots(kernel, adj, dims, primal, dev, backend, stream, used) -> list[int]:
     """Each loop's tape length: static, measured by the counting pass, or 0 when unread."""
     from kdsl.runtime import alloc
-    from kdsl.runtime.launch import _plan
+    from kdsl.runtime.launch import launch_plan
     from kdsl.types import class_of
 
     slots = list(adj.func.attrs["tape_slots"])
@@ -240,7 +240,7 @@ def _tape_slots(kernel, adj, dims, primal, dev, backend, stream, used) -> list[i
     if all(s >= 0 or i not in read for i, s in enumerate(slots)):
         return [s if i in read else 0 for i, s in enumerate(slots)]
     counter = _counter(kernel)
-    plan = _plan(counter, dev, backend)
+    plan = launch_plan(counter, dev, backend)
     counts = alloc.zeros(len(slots), dtype=class_of(T.I32), device=dev)
     args = primal + [plan.converters[-1](counts)]
     plan.backend.launch(plan.compiled, dims, args, stream)

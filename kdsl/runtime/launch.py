@@ -78,7 +78,8 @@ def _kernel_name(kernel: Any) -> str:
     return getattr(kernel, "name", None) or getattr(kernel, "key", "?")
 
 
-def _check_tid(kernel: Any, dims: tuple[int, ...]) -> None:
+def check_tid(kernel: Any, dims: tuple[int, ...]) -> None:
+    """Refuse a grid whose rank differs from the kernel's n-d ``tid()`` (n > 1)."""
     nd = getattr(kernel, "tid_ndim", 0) or 0
     if nd > 1 and nd != len(dims):
         raise KdslLaunchError(
@@ -102,7 +103,7 @@ def _compiled(kernel: Any, backend: Backend, options: dict[str, Any]) -> Compile
     return compiled
 
 
-def _resolve_stream(device: Device, stream: Any) -> Any:
+def resolve_stream(device: Device, stream: Any) -> Any:
     """The stream a launch on ``device`` runs on: the user's, else the device's current one."""
     if stream is not None or device.is_cpu:
         return stream
@@ -112,7 +113,7 @@ def _resolve_stream(device: Device, stream: Any) -> Any:
 
 
 class _Plan:
-    """What a kernel's launches on one device and backend share (see ``_plan``)."""
+    """What a kernel's launches on one device and backend share (see ``launch_plan``)."""
 
     __slots__ = ("backend", "compiled", "converters", "device", "options", "settings")
 
@@ -132,7 +133,7 @@ class _Plan:
 _PLAN_ATTR = "_kdsl_plans"
 
 
-def _plan(kernel: Any, device: Any, backend: Any) -> _Plan:
+def launch_plan(kernel: Any, device: Any, backend: Any) -> _Plan:
     """The cached plan for ``kernel`` on ``device`` with ``backend``.
 
     Plans are looked up by device, backend and the debug settings of ``kdsl.config``,
@@ -263,7 +264,7 @@ class Launch:
     def set_dim(self, dim: Any) -> None:
         """Change the launch grid."""
         dims = normalize_dim(dim, _kernel_name(self.kernel))
-        _check_tid(self.kernel, dims)
+        check_tid(self.kernel, dims)
         self.dims = dims
         self._run = None
 
@@ -326,7 +327,7 @@ def launch(
     else:
         dims = normalize_dim(dim, _kernel_name(kernel))
     args = [*inputs, *outputs] if outputs else inputs
-    plan = _plan(kernel, device, backend)
+    plan = launch_plan(kernel, device, backend)
     convs = plan.converters
     if len(args) != len(convs):
         names = list(kernel.arg_names)
@@ -336,9 +337,9 @@ def launch(
         )
     converted = [conv(v) for conv, v in zip(convs, args)]
     if len(dims) > 1 or (getattr(kernel, "tid_ndim", 0) or 0) > 1:
-        _check_tid(kernel, dims)
+        check_tid(kernel, dims)
     dev = plan.device
-    stream = _resolve_stream(dev, stream)
+    stream = resolve_stream(dev, stream)
     if record_cmd:
         return Launch(kernel, plan.backend, plan.compiled, dims, converted, dev, stream)
     plan.backend.launch(plan.compiled, dims, converted, stream)

@@ -10,8 +10,8 @@ import numpy as np
 
 import kdsl as wp
 from kdsl.testing.case import Case, f64, integers
-from kdsl.testing.cases._dtypes import SMALL_INT_TYPES
-from kdsl.testing.cases._dtypes import wrap as _wrap
+from kdsl.testing.cases.dtype_rows import SMALL_INT_TYPES
+from kdsl.testing.cases.dtype_rows import wrap as _wrap
 
 N = 256  # threads of the contention cases
 SLOTS = 5

@@ -17,9 +17,9 @@ import numpy as np
 
 import kdsl as wp
 from kdsl.testing.case import Case, f64, integers
-from kdsl.testing.cases._dtypes import FLOAT_TYPES, INT_TYPES
-from kdsl.testing.cases._dtypes import wrap as _wrap
 from kdsl.testing.cases.atomics_composite import SLOTS, N, composite_cases, slots
+from kdsl.testing.cases.dtype_rows import FLOAT_TYPES, INT_TYPES
+from kdsl.testing.cases.dtype_rows import wrap as _wrap
 from kdsl.testing.cases.int_edges import int_cases
 
 # -- add / sub / min / max under contention ------------------------------------------

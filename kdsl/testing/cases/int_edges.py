@@ -11,8 +11,8 @@ import numpy as np
 
 import kdsl as wp
 from kdsl.testing.case import Case
-from kdsl.testing.cases._dtypes import FLOAT_TYPES, INT_TYPES, SMALL_INT_TYPES
-from kdsl.testing.cases._dtypes import wrap as _wrap
+from kdsl.testing.cases.dtype_rows import FLOAT_TYPES, INT_TYPES, SMALL_INT_TYPES
+from kdsl.testing.cases.dtype_rows import wrap as _wrap
 
 
 def _divmod_kernel(dtype):

@@ -10,7 +10,7 @@ import numpy as np
 
 import kdsl as wp
 from kdsl.testing.case import Case, f64, uniform
-from kdsl.testing.cases._dtypes import FLOAT_TYPES
+from kdsl.testing.cases.dtype_rows import FLOAT_TYPES
 
 N = 24
 #: Decompositions iterate: compare float32 results a little more loosely.

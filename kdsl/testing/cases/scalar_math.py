@@ -16,7 +16,7 @@ import numpy as np
 import kdsl as wp
 from kdsl.ir import types as T
 from kdsl.testing.case import Case, f64, uniform
-from kdsl.testing.cases._dtypes import FLOAT_TYPES, dtype_row
+from kdsl.testing.cases.dtype_rows import FLOAT_TYPES, dtype_row
 
 N = 48
 
