@@ -3,14 +3,16 @@
     python tools/gen_ir_docs.py            # rewrite docs/ir.md
     python tools/gen_ir_docs.py --check    # exit 1 if docs/ir.md is out of date
 
-The page is a hand-written introduction to the text format (below) followed by
-one section per op group, each op with its doc, traits, attributes, regions and a
-text-form example. tests/cli/test_ir_docs.py runs ``--check`` so the page cannot
-drift from the catalog.
+The page is a hand-written introduction to the text format (below), a table of
+how each built-in backend lowers each op (from the lowering registry,
+``kdsl.ir.lowering``), then one section per op group, each op with its doc,
+traits, attributes, regions and a text-form example. tests/cli/test_ir_docs.py
+runs ``--check`` so the page cannot drift from the catalog.
 """
 
 from __future__ import annotations
 
+import importlib
 import inspect
 import textwrap
 from pathlib import Path
@@ -18,6 +20,16 @@ from types import ModuleType
 
 ROOT = Path(__file__).resolve().parent.parent
 DOCS = ROOT / "docs" / "ir.md"
+
+#: The built-in backends, each with the module that registers all of its lowerings.
+BACKENDS = {
+    "cpu": "kdsl.backends.cpu.ops",
+    "cuda": "kdsl.backends.cuda.ops",
+    "interp": "kdsl.backends.interp.program",
+}
+
+#: How a coverage kind (``kdsl.ir.lowering.Coverage.kind``) reads in the table.
+KIND_CELLS = {"rule": "yes", "default": "catalog", "structural": "structural", "gap": "**gap**"}
 
 #: Sections in this order; groups not listed follow alphabetically.
 GROUP_ORDER = ("arithmetic", "math", "vector", "struct", "memory", "control flow", "functions")
@@ -152,6 +164,39 @@ def _op_section(opdef) -> str:
     return "\n".join(lines)
 
 
+def _coverage_section(ops: list) -> list[str]:
+    """The lowering-coverage table: one row per op, one column per built-in backend."""
+    from kdsl.ir.lowering import LOWERINGS
+
+    for module in BACKENDS.values():
+        importlib.import_module(module)
+    lines = [
+        "## Lowering coverage",
+        "",
+        "How each built-in backend lowers each op, as registered in the lowering registry",
+        "(`kdsl.ir.lowering.LOWERINGS`): `yes`, a lowering the backend registered; `catalog`,",
+        "the op's catalog rule (the interpreter runs each op's `interp` rule); `structural`,",
+        "lowered inside another lowering (notes below); `gap`, the backend cannot lower it",
+        "(reasons below). tests/ir/test_lowering_coverage.py checks that no cell is empty.",
+        "",
+        "| Op | " + " | ".join(BACKENDS) + " |",
+        "| --- |" + " --- |" * len(BACKENDS),
+    ]
+    notes: dict[str, list[str]] = {"structural": [], "gap": []}
+    for opdef in ops:
+        cells = []
+        for backend in BACKENDS:
+            c = LOWERINGS.coverage(opdef, backend)
+            cells.append(KIND_CELLS[c.kind] if c is not None else "**none**")
+            if c is not None and c.kind in notes:
+                notes[c.kind].append(f"- `{opdef.name}` on {backend}: {c.note}")
+        lines.append(f"| `{opdef.name}` | " + " | ".join(cells) + " |")
+    lines.append("")
+    for kind, title in (("structural", "Structural ops"), ("gap", "Gaps")):
+        lines += [f"**{title}.**", ""] + (notes[kind] or ["None."]) + [""]
+    return lines
+
+
 def render() -> str:
     """The full text of docs/ir.md for the catalog as kdsl defines it."""
     import kdsl
@@ -167,6 +212,7 @@ def render() -> str:
     parts = [INTRO, "## Ops by group", ""]
     parts += [f"- [{g}](#{g.replace(' ', '-')}) ({len(groups[g])} ops)" for g in order]
     parts.append("")
+    parts += _coverage_section([opdef for g in order for opdef in groups[g]])
     seen_modules: set[str] = set()
     for group in order:
         parts += [f"## {group}", ""]
@@ -183,7 +229,9 @@ def main(argv: list[str] | None = None) -> int:
     """Write docs/ir.md, or with ``--check`` report whether it is up to date."""
     from kdsl.tools.docgen import write_or_check
 
-    return write_or_check(argv, __doc__.splitlines()[0], DOCS, render, "python tools/gen_ir_docs.py")
+    return write_or_check(
+        argv, __doc__.splitlines()[0], DOCS, render, "python tools/gen_ir_docs.py"
+    )
 
 
 if __name__ == "__main__":

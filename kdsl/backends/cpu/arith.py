@@ -21,6 +21,9 @@ from kdsl.backends.cpu.emitter import Emitter, Lowering
 from kdsl.ir import semantics as sem
 from kdsl.ir import types as T
 from kdsl.ir.core import Operation
+from kdsl.ir.lowering import LOWERINGS
+
+CPU = LOWERINGS.for_backend("cpu")
 
 _HALF = ir.HalfType()
 
@@ -240,26 +243,24 @@ def _method(name: str) -> Callable:
     return lambda em, et, a, b: getattr(em.b, name)(a, b)
 
 
-TABLE: dict[str, Lowering] = {
-    "arith.constant": _constant,
-    "arith.add": binary(_method("add"), _method("fadd")),
-    "arith.sub": binary(_method("sub"), _method("fsub")),
-    "arith.mul": binary(_method("mul"), _method("fmul")),
-    "arith.div": binary(int_div, _method("fdiv")),
-    "arith.floordiv": binary(int_floordiv, float_floordiv),
-    "arith.mod": binary(int_mod, _method("frem")),
-    "arith.pow": binary(None, lambda em, et, a, b: em.call_intrinsic("llvm.pow", a, b)),
-    "arith.min": _minmax("llvm.smin", "llvm.umin", "llvm.minimumnum"),
-    "arith.max": _minmax("llvm.smax", "llvm.umax", "llvm.maximumnum"),
-    "arith.and": binary(_method("and_"), None),
-    "arith.or": binary(_method("or_"), None),
-    "arith.xor": binary(_method("xor"), None),
-    "arith.shl": binary(shl, None),
-    "arith.shr": binary(shr, None),
-    "arith.neg": _neg,
-    "arith.not": _not,
-    "arith.bitnot": _not,
-    "arith.cmp": _cmp,
-    "arith.cast": _cast,
-    "arith.select": _select,
-}
+CPU.register("arith.constant", _constant)
+CPU.register("arith.add", binary(_method("add"), _method("fadd")))
+CPU.register("arith.sub", binary(_method("sub"), _method("fsub")))
+CPU.register("arith.mul", binary(_method("mul"), _method("fmul")))
+CPU.register("arith.div", binary(int_div, _method("fdiv")))
+CPU.register("arith.floordiv", binary(int_floordiv, float_floordiv))
+CPU.register("arith.mod", binary(int_mod, _method("frem")))
+CPU.register("arith.pow", binary(None, lambda em, et, a, b: em.call_intrinsic("llvm.pow", a, b)))
+CPU.register("arith.min", _minmax("llvm.smin", "llvm.umin", "llvm.minimumnum"))
+CPU.register("arith.max", _minmax("llvm.smax", "llvm.umax", "llvm.maximumnum"))
+CPU.register("arith.and", binary(_method("and_"), None))
+CPU.register("arith.or", binary(_method("or_"), None))
+CPU.register("arith.xor", binary(_method("xor"), None))
+CPU.register("arith.shl", binary(shl, None))
+CPU.register("arith.shr", binary(shr, None))
+CPU.register("arith.neg", _neg)
+CPU.register("arith.not", _not)
+CPU.register("arith.bitnot", _not)
+CPU.register("arith.cmp", _cmp)
+CPU.register("arith.cast", _cast)
+CPU.register("arith.select", _select)

@@ -15,9 +15,12 @@ from llvmlite import ir
 
 from kdsl.backends.cpu import checks, versioning
 from kdsl.backends.cpu.composite import leaf_types, leaves, rebuild_all
-from kdsl.backends.cpu.emitter import Emitter, Lowering
+from kdsl.backends.cpu.emitter import Emitter
 from kdsl.ir import types as T
 from kdsl.ir.core import Operation
+from kdsl.ir.lowering import LOWERINGS
+
+CPU = LOWERINGS.for_backend("cpu")
 
 
 def _phis(em: Emitter, values: list[Any], pred: ir.Block, name: str) -> list[ir.Instruction]:
@@ -141,9 +144,13 @@ def _call(em: Emitter, op: Operation) -> list[Any]:
     return rebuild_all(types, [em.b.extract_value(out, i) for i in range(n)])
 
 
-TABLE: dict[str, Lowering] = {
-    "scf.if": _if,
-    "scf.for": _for,
-    "scf.while": _while,
-    "func.call": _call,
-}
+CPU.register("scf.if", _if)
+CPU.register("scf.for", _for)
+CPU.register("scf.while", _while)
+CPU.register("func.call", _call)
+
+# Ops lowered as part of another lowering, never on their own.
+CPU.structural("scf.yield", "ends a region; the lowering of the op owning it reads its operands")
+CPU.structural("scf.condition", "ends the before region; the `scf.while` lowering reads it")
+CPU.structural("func.func", "`lower.emit_kernel` (kernels), `lower.declare_func` (functions)")
+CPU.structural("func.return", "`lower.declare_func` returns its operands")

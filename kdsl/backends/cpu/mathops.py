@@ -13,6 +13,9 @@ from kdsl.backends.cpu.arith import widen_half
 from kdsl.backends.cpu.emitter import Emitter, Lowering
 from kdsl.ir import types as T
 from kdsl.ir.core import Operation
+from kdsl.ir.lowering import LOWERINGS
+
+CPU = LOWERINGS.for_backend("cpu")
 
 #: math op -> LLVM intrinsic (elementwise on vectors, exact IEEE or libm-backed).
 INTRINSICS = {
@@ -102,15 +105,15 @@ def _bit_count(em: Emitter, op: Operation) -> ir.Value:
     return em.b.zext(n, LT.I32) if width < 32 else n
 
 
-TABLE: dict[str, Lowering] = {
-    **{f"math.{k}": _intrinsic(v) for k, v in INTRINSICS.items()},
-    **{f"math.{k}": _libm(k) for k in LIBM},
-    "math.abs": _componentwise(_abs),
-    "math.sign": _componentwise(_sign),
-    "math.isnan": _isnan,
-    "math.isinf": _isinf,
-    "math.isfinite": _isfinite,
-    "math.atan2": _libm("atan2"),
-    "math.copysign": _componentwise(_copysign),
-    "math.bit_count": _bit_count,
-}
+for _name, _intr in INTRINSICS.items():
+    CPU.register(f"math.{_name}", _intrinsic(_intr))
+for _name in LIBM:
+    CPU.register(f"math.{_name}", _libm(_name))
+CPU.register("math.abs", _componentwise(_abs))
+CPU.register("math.sign", _componentwise(_sign))
+CPU.register("math.isnan", _isnan)
+CPU.register("math.isinf", _isinf)
+CPU.register("math.isfinite", _isfinite)
+CPU.register("math.atan2", _libm("atan2"))
+CPU.register("math.copysign", _componentwise(_copysign))
+CPU.register("math.bit_count", _bit_count)

@@ -14,10 +14,13 @@ from llvmlite import ir
 
 from kdsl.backends.cpu import types as LT
 from kdsl.backends.cpu.composite import Parts, components
-from kdsl.backends.cpu.emitter import Emitter, Lowering
+from kdsl.backends.cpu.emitter import Emitter
 from kdsl.errors import KdslCapabilityError
 from kdsl.ir import types as T
 from kdsl.ir.core import Operation, Value
+from kdsl.ir.lowering import LOWERINGS
+
+CPU = LOWERINGS.for_backend("cpu")
 
 
 def _tid(em: Emitter, op: Operation) -> ir.Value:
@@ -191,7 +194,9 @@ def _cas_scalar(em: Emitter, ptr: ir.Value, compare: ir.Value, value: ir.Value) 
     if isinstance(t, ir.IntType):
         return B.extract_value(B.cmpxchg(ptr, compare, value, "monotonic", "monotonic"), 0)
     bits = ir.IntType(_width(t))
-    pair = B.cmpxchg(ptr, B.bitcast(compare, bits), B.bitcast(value, bits), "monotonic", "monotonic")
+    pair = B.cmpxchg(
+        ptr, B.bitcast(compare, bits), B.bitcast(value, bits), "monotonic", "monotonic"
+    )
     return B.bitcast(B.extract_value(pair, 0), t)
 
 
@@ -211,11 +216,9 @@ def _atomic_cas(em: Emitter, op: Operation) -> Any:
     return out[0] if isinstance(at.dtype, T.ScalarType) else Parts(out)
 
 
-TABLE: dict[str, Lowering] = {
-    "kd.tid": _tid,
-    "kd.array_shape": _array_shape,
-    "kd.load": _load,
-    "kd.store": _store,
-    "kd.atomic_rmw": _atomic,
-    "kd.atomic_cas": _atomic_cas,
-}
+CPU.register("kd.tid", _tid)
+CPU.register("kd.array_shape", _array_shape)
+CPU.register("kd.load", _load)
+CPU.register("kd.store", _store)
+CPU.register("kd.atomic_rmw", _atomic)
+CPU.register("kd.atomic_cas", _atomic_cas)

@@ -24,9 +24,12 @@ import llvmlite.binding as llvm
 from llvmlite import ir
 
 from kdsl.backends.cpu import types as LT
-from kdsl.backends.cpu.emitter import Emitter, Lowering
+from kdsl.backends.cpu.emitter import Emitter
 from kdsl.ir.core import Module, Operation
+from kdsl.ir.lowering import LOWERINGS
 from kdsl.ir.ops_print import c_format
+
+CPU = LOWERINGS.for_backend("cpu")
 
 
 @cache
@@ -87,7 +90,7 @@ def flushing(fn: Callable[..., Any]) -> Callable[..., None]:
     return run
 
 
-TABLE: dict[str, Lowering] = {"kd.print": _print}
+CPU.register("kd.print", _print)
 
 # Registered on import, before any kernel object (built now or loaded from the kernel
 # cache) that calls printf is linked.

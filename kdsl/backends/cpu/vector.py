@@ -22,6 +22,9 @@ from kdsl.backends.cpu.composite import Parts, components
 from kdsl.backends.cpu.emitter import Emitter, Lowering
 from kdsl.ir import types as T
 from kdsl.ir.core import Operation, Value
+from kdsl.ir.lowering import LOWERINGS
+
+CPU = LOWERINGS.for_backend("cpu")
 
 
 def _construct(em: Emitter, op: Operation) -> Parts:
@@ -208,20 +211,18 @@ def _struct_insert(em: Emitter, op: Operation) -> Parts:
     return Parts(fields)
 
 
-TABLE: dict[str, Lowering] = {
-    "vec.construct": _construct,
-    "vec.splat": _splat,
-    "vec.extract": _extract,
-    "vec.insert": _insert,
-    "vec.dot": _widened(_dot),
-    "vec.cross": _widened(_cross),
-    "vec.length": _widened(_length),
-    "vec.length_sq": _widened(_length_sq),
-    "vec.normalize": _widened(_normalize),
-    "vec.matmul": _widened(_matmul),
-    "vec.transpose": _transpose,
-    "vec.outer": _widened(_outer),
-    "struct.construct": _struct_construct,
-    "struct.extract": _struct_extract,
-    "struct.insert": _struct_insert,
-}
+CPU.register("vec.construct", _construct)
+CPU.register("vec.splat", _splat)
+CPU.register("vec.extract", _extract)
+CPU.register("vec.insert", _insert)
+CPU.register("vec.dot", _widened(_dot))
+CPU.register("vec.cross", _widened(_cross))
+CPU.register("vec.length", _widened(_length))
+CPU.register("vec.length_sq", _widened(_length_sq))
+CPU.register("vec.normalize", _widened(_normalize))
+CPU.register("vec.matmul", _widened(_matmul))
+CPU.register("vec.transpose", _transpose)
+CPU.register("vec.outer", _widened(_outer))
+CPU.register("struct.construct", _struct_construct)
+CPU.register("struct.extract", _struct_extract)
+CPU.register("struct.insert", _struct_insert)

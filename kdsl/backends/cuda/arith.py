@@ -22,6 +22,9 @@ from kdsl.backends.cuda.emitter import FuncEmitter, Lowering, Source
 from kdsl.ir import semantics as sem
 from kdsl.ir import types as T
 from kdsl.ir.core import Operation
+from kdsl.ir.lowering import LOWERINGS
+
+CUDA = LOWERINGS.for_backend("cuda")
 
 #: A scalar rule: (source, element type, operand expressions) -> C expression.
 ScalarRule = Callable[..., str]
@@ -350,13 +353,12 @@ def _select(em: FuncEmitter, op: Operation) -> str:
     return f"{c} ? {a} : {b}"
 
 
-TABLE: dict[str, Lowering] = {
-    "arith.constant": _constant,
-    **{f"arith.{k}": _binary(k) for k in BINARY},
-    "arith.neg": _neg,
-    "arith.not": _not,
-    "arith.bitnot": _bitnot,
-    "arith.cmp": _cmp,
-    "arith.cast": _cast,
-    "arith.select": _select,
-}
+CUDA.register("arith.constant", _constant)
+for _name in BINARY:
+    CUDA.register(f"arith.{_name}", _binary(_name))
+CUDA.register("arith.neg", _neg)
+CUDA.register("arith.not", _not)
+CUDA.register("arith.bitnot", _bitnot)
+CUDA.register("arith.cmp", _cmp)
+CUDA.register("arith.cast", _cast)
+CUDA.register("arith.select", _select)

@@ -9,9 +9,12 @@ parallel assignment), so after the loop they hold the results.
 from __future__ import annotations
 
 from kdsl.backends.cuda import checks
-from kdsl.backends.cuda.emitter import FuncEmitter, Lowering
+from kdsl.backends.cuda.emitter import FuncEmitter
 from kdsl.ir import types as T
 from kdsl.ir.core import Operation, OpResult, Value
+from kdsl.ir.lowering import LOWERINGS
+
+CUDA = LOWERINGS.for_backend("cuda")
 
 
 def _declare_results(em: FuncEmitter, op: Operation) -> list[str]:
@@ -101,9 +104,13 @@ def _call(em: FuncEmitter, op: Operation) -> list[str]:
     return [em.declare(r.type, f"{tmp}.r{i}") for i, r in enumerate(op.results)]
 
 
-TABLE: dict[str, Lowering] = {
-    "scf.if": _if,
-    "scf.for": _for,
-    "scf.while": _while,
-    "func.call": _call,
-}
+CUDA.register("scf.if", _if)
+CUDA.register("scf.for", _for)
+CUDA.register("scf.while", _while)
+CUDA.register("func.call", _call)
+
+# Ops lowered as part of another lowering, never on their own.
+CUDA.structural("scf.yield", "ends a region; the lowering of the op owning it reads its operands")
+CUDA.structural("scf.condition", "ends the before region; the `scf.while` lowering reads it")
+CUDA.structural("func.func", "`lower._kernel` (`__global__`), `lower._function` (`__device__`)")
+CUDA.structural("func.return", "`lower._function` returns its operands")

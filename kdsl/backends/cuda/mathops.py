@@ -12,6 +12,9 @@ from kdsl.backends.cuda.arith import is_f16, lanewise, widened
 from kdsl.backends.cuda.emitter import FuncEmitter, Lowering, Source
 from kdsl.ir import types as T
 from kdsl.ir.core import Operation
+from kdsl.ir.lowering import LOWERINGS
+
+CUDA = LOWERINGS.for_backend("cuda")
 
 #: math op -> C function for double (float adds the ``f`` suffix).
 _FUNCS = {
@@ -85,12 +88,11 @@ def _bit_count(em: FuncEmitter, op: Operation) -> str:
     return f"__popcll({u})" if t.bits == 64 else f"__popc((unsigned int){u})"
 
 
-TABLE: dict[str, Lowering] = {
-    **{f"math.{k}": _elementwise(_libm(k)) for k in _FUNCS},
-    "math.abs": _elementwise(_abs),
-    "math.sign": _elementwise(_sign),
-    "math.isnan": _predicate("isnan"),
-    "math.isinf": _predicate("isinf"),
-    "math.isfinite": _predicate("isfinite"),
-    "math.bit_count": _bit_count,
-}
+for _name in _FUNCS:
+    CUDA.register(f"math.{_name}", _elementwise(_libm(_name)))
+CUDA.register("math.abs", _elementwise(_abs))
+CUDA.register("math.sign", _elementwise(_sign))
+CUDA.register("math.isnan", _predicate("isnan"))
+CUDA.register("math.isinf", _predicate("isinf"))
+CUDA.register("math.isfinite", _predicate("isfinite"))
+CUDA.register("math.bit_count", _bit_count)

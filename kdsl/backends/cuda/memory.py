@@ -17,10 +17,13 @@ from __future__ import annotations
 from kdsl.backends.cuda import ctypes_ as CT
 from kdsl.backends.cuda import helpers as H
 from kdsl.backends.cuda.arith import is_f16, scalar_rule
-from kdsl.backends.cuda.emitter import FuncEmitter, Lowering, Source
+from kdsl.backends.cuda.emitter import FuncEmitter, Source
 from kdsl.errors import KdslCapabilityError
 from kdsl.ir import types as T
 from kdsl.ir.core import Operation, Value
+from kdsl.ir.lowering import LOWERINGS
+
+CUDA = LOWERINGS.for_backend("cuda")
 
 _FI = "__device__ __forceinline__"
 
@@ -224,11 +227,9 @@ def _atomic(em: FuncEmitter, op: Operation) -> str:
     return r
 
 
-TABLE: dict[str, Lowering] = {
-    "kd.tid": _tid,
-    "kd.array_shape": _array_shape,
-    "kd.load": _load,
-    "kd.store": _store,
-    "kd.atomic_rmw": _atomic,
-    "kd.atomic_cas": _atomic_cas,
-}
+CUDA.register("kd.tid", _tid)
+CUDA.register("kd.array_shape", _array_shape)
+CUDA.register("kd.load", _load)
+CUDA.register("kd.store", _store)
+CUDA.register("kd.atomic_rmw", _atomic)
+CUDA.register("kd.atomic_cas", _atomic_cas)

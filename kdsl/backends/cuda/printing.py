@@ -13,9 +13,12 @@ from __future__ import annotations
 
 import string
 
-from kdsl.backends.cuda.emitter import FuncEmitter, Lowering
+from kdsl.backends.cuda.emitter import FuncEmitter
 from kdsl.ir.core import Operation
+from kdsl.ir.lowering import LOWERINGS
 from kdsl.ir.ops_print import c_format
+
+CUDA = LOWERINGS.for_backend("cuda")
 
 #: Bytes written as themselves inside a generated string literal.
 _PLAIN = frozenset((string.ascii_letters + string.digits + " %.,:;=+-_()[]<>{}!#&|^~@$'").encode())
@@ -34,4 +37,4 @@ def _print(em: FuncEmitter, op: Operation) -> None:
     em.line(f"printf({', '.join(args)});", op.loc)
 
 
-TABLE: dict[str, Lowering] = {"kd.print": _print}
+CUDA.register("kd.print", _print)

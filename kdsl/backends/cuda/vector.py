@@ -11,9 +11,12 @@ from __future__ import annotations
 
 from kdsl.backends.cuda import ctypes_ as CT
 from kdsl.backends.cuda.arith import is_f16, scalar_rule
-from kdsl.backends.cuda.emitter import FuncEmitter, Lowering, Source
+from kdsl.backends.cuda.emitter import FuncEmitter, Source
 from kdsl.ir import types as T
 from kdsl.ir.core import Operation
+from kdsl.ir.lowering import LOWERINGS
+
+CUDA = LOWERINGS.for_backend("cuda")
 
 _FI = "__device__ __forceinline__"
 
@@ -218,20 +221,18 @@ def _struct_insert(em: FuncEmitter, op: Operation) -> str:
     return r
 
 
-TABLE: dict[str, Lowering] = {
-    "vec.construct": _construct,
-    "vec.splat": _splat,
-    "vec.extract": _extract,
-    "vec.insert": _insert,
-    "vec.dot": _dot,
-    "vec.cross": _cross,
-    "vec.length": _length,
-    "vec.length_sq": _length_sq,
-    "vec.normalize": _normalize,
-    "vec.matmul": _matmul,
-    "vec.transpose": _transpose,
-    "vec.outer": _outer,
-    "struct.construct": _struct_construct,
-    "struct.extract": _struct_extract,
-    "struct.insert": _struct_insert,
-}
+CUDA.register("vec.construct", _construct)
+CUDA.register("vec.splat", _splat)
+CUDA.register("vec.extract", _extract)
+CUDA.register("vec.insert", _insert)
+CUDA.register("vec.dot", _dot)
+CUDA.register("vec.cross", _cross)
+CUDA.register("vec.length", _length)
+CUDA.register("vec.length_sq", _length_sq)
+CUDA.register("vec.normalize", _normalize)
+CUDA.register("vec.matmul", _matmul)
+CUDA.register("vec.transpose", _transpose)
+CUDA.register("vec.outer", _outer)
+CUDA.register("struct.construct", _struct_construct)
+CUDA.register("struct.extract", _struct_extract)
+CUDA.register("struct.insert", _struct_insert)

@@ -5,6 +5,12 @@ closure that reads its operand slots, calls the op catalog's ``interp`` rule and
 writes its result slots, so running a thread does no lookups by op name. Ops
 that need nothing from the running thread (constants) are evaluated once, at
 compile time, through the same catalog rule.
+
+The interpreter's lowering of an op is its catalog ``interp`` rule: that is this
+backend's default in the lowering registry (``kdsl.ir.lowering``), so the
+registry reports it and an explicit ``interp`` registration would override it.
+Terminators and ``func.func`` are structural: a block's terminator gives the
+values it yields (``CompiledBlock.term_slots``), a function is compiled whole.
 """
 
 from __future__ import annotations
@@ -17,8 +23,16 @@ import numpy as np
 
 from kdsl.errors import KdslCapabilityError, KdslError, KdslLaunchError, KdslRuntimeError
 from kdsl.ir.core import Block, Module, Operation, Region, Value
+from kdsl.ir.lowering import LOWERINGS
 
 Step = Callable[["ThreadContext", list], None]
+
+INTERP = LOWERINGS.for_backend("interp")
+LOWERINGS.set_default("interp", lambda opdef: opdef.interp, "the op's catalog interp rule")
+INTERP.structural("scf.yield", "ends a region; its operands are what the region gives back")
+INTERP.structural("scf.condition", "ends the before region; the `scf.while` rule reads it")
+INTERP.structural("func.return", "ends a function; its operands are the call's results")
+INTERP.structural("func.func", "compiled whole by `Program.function`")
 
 
 class CompiledBlock:
@@ -101,7 +115,7 @@ class _FunctionCompiler:
         return CompiledBlock(arg_slots, steps, term_slots)
 
     def op(self, op: Operation) -> Step | None:
-        rule = op.opdef.interp
+        rule = LOWERINGS.get(op.opdef, "interp")
         if rule is None:
             raise KdslCapabilityError(f"the interp backend has no rule for {op.name}", op.loc)
         if op.name == "kd.tid":
