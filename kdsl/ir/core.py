@@ -198,7 +198,7 @@ class Operation:
 class Block:
     """A list of operations with typed arguments."""
 
-    __slots__ = ("args", "ops", "parent")
+    __slots__ = ("args", "ops", "parent", "_anchor_at")
 
     def __init__(
         self, arg_types: Sequence[Type] = (), arg_names: Sequence[str | None] | None = None
@@ -207,6 +207,8 @@ class Block:
         self.args = [BlockArgument(t, self, i, n) for i, (t, n) in enumerate(zip(arg_types, names))]
         self.ops: list[Operation] = []
         self.parent: Region | None = None
+        #: Where the last ``insert_before`` anchor ended up: a guess checked before use.
+        self._anchor_at = 0
 
     def add_arg(self, type: Type, name_hint: str | None = None) -> BlockArgument:
         arg = BlockArgument(type, self, len(self.args), name_hint)
@@ -232,7 +234,13 @@ class Block:
         return op
 
     def insert_before(self, anchor: Operation, op: Operation) -> Operation:
-        return self.insert(self.ops.index(anchor), op)
+        # Passes insert runs of ops before one anchor (inlining, constants): try where
+        # the anchor was last time before searching the block.
+        i = self._anchor_at
+        if i >= len(self.ops) or self.ops[i] is not anchor:
+            i = self.ops.index(anchor)
+        self._anchor_at = i + 1
+        return self.insert(i, op)
 
     def detach(self, op: Operation) -> Operation:
         """Take ``op`` out of this block without dropping its operands."""

@@ -8,14 +8,18 @@ mutable state (MLIR ``PassManagement.md``).
 Pipelines are strings: ``"inline,fold{max_iters=3},cse,dce"``. Options are
 ``key=value`` pairs inside braces, converted to the field's type.
 
-``PassManager`` runs a pipeline with the debugging aids of ``mlir-opt``: verify after
-each pass, IR dumps before/after chosen passes, per-pass timings, and a crash
-reproducer (the IR before the failing pass and the pipeline, in a ``.kir`` file).
+``PassManager`` runs a pipeline with the debugging aids of ``mlir-opt``: verification
+(after each pass, or once at the end with the failing pass found by a rerun; see
+``kdsl.config.verify_passes``), IR dumps before/after chosen passes, per-pass timings,
+and a crash reproducer (the IR before the failing pass and the pipeline, in a ``.kir``
+file). The reproducer's IR is a structural copy taken before each pass
+(``clone_module``) and printed only when the pass fails.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import gc
 import importlib
 import os
 import pkgutil
@@ -25,10 +29,12 @@ import tempfile
 import time
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from typing import IO, Any, ClassVar
+from typing import IO, Any, ClassVar, NoReturn
 
+from kdsl import config
 from kdsl.errors import KdslError, KdslVerifyError
-from kdsl.ir import Module, print_module, verify_module
+from kdsl.ir import Block, Module, Operation, Region, print_module, verify_module
+from kdsl.ir.core import OpResult, Value
 
 #: Modules of ``kdsl.passes`` that are not passes.
 _NOT_PASSES = frozenset({"manager"})
@@ -204,6 +210,111 @@ def run_fixpoint(module: Module, pipeline: str | Sequence[ModulePass], max_iters
     return changed_any
 
 
+# --- snapshots ------------------------------------------------------------------
+
+
+def clone_module(module: Module) -> Module:
+    """A structural copy of ``module`` that shares nothing mutable with it.
+
+    New ops, values, blocks and regions with their use-lists; attribute lists and
+    dicts copied, types and locations shared (they are immutable). Other attributes
+    of the module object (``features``) are shared. It prints exactly as ``module``
+    does, so the pass manager keeps one before each pass and prints it only when the
+    pass fails: about a third of the cost of printing, and right even when a pass
+    raises after changing the module. Also copies invalid IR (uses before
+    definitions), which a crash reproducer may need.
+    """
+    new = Module(module.name)
+    for key, value in vars(module).items():
+        if key not in ("body", "structs"):
+            setattr(new, key, value)
+    new.structs = dict(module.structs)
+    mapping: dict[Value, Value] = {}
+    late: list[tuple[Operation, int, Value]] = []
+    body = new.body
+    for func in module.body.ops:
+        body.append(_clone_op(func, mapping, late))
+    for op, index, old in late:  # operands used before their definition
+        value = mapping.get(old)
+        if value is not None:  # else defined nowhere in the module: left as it is
+            op.operands[index] = value
+            value.uses.append((op, index))
+    return new
+
+
+_new = object.__new__
+_ATTR_CONTAINERS = (list, dict)
+
+
+def _clone_op(
+    op: Operation, mapping: dict[Value, Value], late: list[tuple[Operation, int, Value]]
+) -> Operation:
+    # Fields are set directly (no constructor checks): this runs for every op before
+    # every pass. tests/passes/test_manager_policy.py pins the slots copied here.
+    new: Operation = _new(Operation)
+    new.opdef = op.opdef
+    new.loc = op.loc
+    new.parent = None
+    operands: list[Value] = []
+    for i, v in enumerate(op.operands):
+        nv = mapping.get(v)
+        if nv is None:
+            late.append((new, i, v))
+        else:
+            nv.uses.append((new, i))
+        operands.append(v if nv is None else nv)
+    new.operands = operands
+    results: list[OpResult] = []
+    for r in op.results:
+        nr: OpResult = _new(OpResult)
+        nr.type, nr.uses, nr.name_hint, nr.op, nr.index = r.type, [], r.name_hint, new, r.index
+        mapping[r] = nr
+        results.append(nr)
+    new.results = results
+    attrs = op.attrs.copy()
+    for key, value in attrs.items():
+        if isinstance(value, _ATTR_CONTAINERS):
+            attrs[key] = _copy_container(value)
+    new.attrs = attrs
+    regions: list[Region] = []
+    for region in op.regions:
+        new_region = Region(_clone_block(region.block, mapping, late))
+        new_region.parent = new
+        regions.append(new_region)
+    new.regions = regions
+    return new
+
+
+def _clone_block(
+    block: Block, mapping: dict[Value, Value], late: list[tuple[Operation, int, Value]]
+) -> Block:
+    new = Block([a.type for a in block.args], [a.name_hint for a in block.args])
+    for old_arg, new_arg in zip(block.args, new.args):
+        mapping[old_arg] = new_arg
+    ops = new.ops
+    for op in block.ops:
+        copy = _clone_op(op, mapping, late)
+        copy.parent = new
+        ops.append(copy)
+    return new
+
+
+def _copy_container(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {k: _copy_container(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_copy_container(v) for v in value]
+    return value
+
+
+def _is_valid(module: Module) -> bool:
+    try:
+        verify_module(module)
+    except KdslVerifyError:
+        return False
+    return True
+
+
 # --- the manager ----------------------------------------------------------------
 
 
@@ -223,6 +334,13 @@ class PassTiming:
 class PassManager:
     """Runs a pipeline over a module with verification, IR dumps, timing, reproducers.
 
+    ``verify_each``: True verifies after every pass, False never verifies, None (the
+    default) follows ``kdsl.config.verify_passes``: after every pass in debug mode and
+    in the tests, else once after the last pass. A failure found at the end is traced
+    back by rerunning the pipeline from a copy of the input with verification after
+    every pass, so it raises the error (and writes the reproducer) that verifying
+    after every pass would have.
+
     ``print_before``/``print_after`` name passes (or hold ``"all"``) whose IR is
     dumped to ``out`` (default ``sys.stderr``) under MLIR-style headers.
     """
@@ -231,7 +349,7 @@ class PassManager:
         self,
         pipeline: str | Sequence[ModulePass],
         *,
-        verify_each: bool = True,
+        verify_each: bool | None = None,
         print_before: Iterable[str] = (),
         print_after: Iterable[str] = (),
         print_after_all: bool = False,
@@ -241,7 +359,10 @@ class PassManager:
         reproducer_dir: str | None = None,
     ) -> None:
         self.passes = _as_passes(pipeline)
-        self.verify_each = verify_each
+        #: Whether the module is verified at all (after every pass or at the end).
+        self.verify = verify_each is not False
+        #: Whether the module is verified after every pass (else once, after the last).
+        self.verify_each = config.verify_each_pass() if verify_each is None else verify_each
         self.print_before = frozenset(print_before)
         self.print_after = frozenset(print_after) | ({"all"} if print_after_all else set())
         self.time_passes = time_passes
@@ -257,41 +378,101 @@ class PassManager:
         return pipeline_str(self.passes)
 
     def run(self, module: Module) -> bool:
-        """Run every pass over ``module`` in place; return whether anything changed."""
+        """Run every pass over ``module`` in place; return whether anything changed.
+
+        Python's cyclic garbage collector is paused during the run (unless it was
+        off already). The IR is a graph of reference cycles (ops, results and their
+        use-lists) and passes allocate many short-lived objects, so the collector ran
+        several full collections per run, each one walking every object of the
+        process: a quarter of a 3,400-op kernel's pipeline in a fresh process, more
+        in a bigger one. What the run leaves behind is collected after it.
+        """
+        paused = gc.isenabled()
+        if paused:
+            gc.disable()
+        try:
+            return self._run(module)
+        finally:
+            if paused:
+                gc.enable()
+
+    def _run(self, module: Module) -> bool:
         changed_any = False
+        start: Module | None = None  # the input, for tracing a deferred verify failure
         for p in self.passes:
-            before = print_module(module, debuginfo=True)
+            # The crash reproducer's IR: a copy now, printed only if the pass fails.
+            before = clone_module(module)
+            if start is None:
+                start = before
             if self._wants(self.print_before, p):
                 self._dump("Before", p, module)
-            start = time.perf_counter()
+            t0 = time.perf_counter()
+            error: Exception | None = None
             try:
                 changed = p.apply(module)
-            except KdslError as e:
-                raise e.add_context(f"during pass {p.name}") from None
             except Exception as e:
-                path = self.write_reproducer(before, p)
-                raise PassCrashError(
-                    f"pass {p.name} crashed: {type(e).__name__}: {e}\n"
-                    f"  reproducer: {path} (run: kdsl opt {path} -p {p.spec()!r})"
-                ) from e
-            elapsed = time.perf_counter() - start
+                error = e
+            if error is not None:  # handled outside the except clause: no chained context
+                self._pass_failed(error, p, before, start)
+            elapsed = time.perf_counter() - t0
             self.timings.append(PassTiming(p.name, elapsed, bool(changed)))
             changed_any |= bool(changed)
             if self.verify_each:
                 self._verify(module, p, before)
             if self._wants(self.print_after, p):
                 self._dump("After", p, module)
+        if start is not None and self.verify and not self.verify_each:
+            self._verify_at_end(module, start)
         if self.time_passes:
             self._stream().write(self.timing_report())
         return changed_any
 
-    def _verify(self, module: Module, p: ModulePass, before: str) -> None:
+    def _pass_failed(
+        self, error: Exception, p: ModulePass, before: Module, start: Module
+    ) -> NoReturn:
+        """Raise for ``error`` from ``p``: a located user error, or a crash with reproducer."""
+        deferred = self.verify and not self.verify_each
+        if deferred and before is not start and not _is_valid(before):
+            # Verifying after every pass would have stopped at an earlier pass that
+            # left invalid IR: raise that error instead.
+            self._trace_back(start)
+        if isinstance(error, KdslError):
+            raise error.add_context(f"during pass {p.name}") from None
+        path = self.write_reproducer(print_module(before, debuginfo=True), p)
+        raise PassCrashError(
+            f"pass {p.name} crashed: {type(error).__name__}: {error}\n"
+            f"  reproducer: {path} (run: kdsl opt {path} -p {p.spec()!r})"
+        ) from error
+
+    def _verify(self, module: Module, p: ModulePass, before: Module) -> None:
         try:
             verify_module(module)
         except KdslVerifyError as e:
-            path = self.write_reproducer(before, p)
+            path = self.write_reproducer(print_module(before, debuginfo=True), p)
             e.add_context(f"after pass {p.name}; reproducer: {path}")
             raise
+
+    def _verify_at_end(self, module: Module, start: Module) -> None:
+        try:
+            verify_module(module)
+        except KdslVerifyError as e:
+            error = e
+        else:
+            return
+        self._trace_back(start)
+        # The rerun passed (a pass that does not repeat itself): blame the pipeline.
+        path = self._write_reproducer(print_module(start, debuginfo=True), self.pipeline)
+        error.add_context(f"after pipeline {self.pipeline}; reproducer: {path}")
+        raise error
+
+    def _trace_back(self, start: Module) -> None:
+        """Rerun the pipeline on a copy of ``start``, verifying after every pass.
+
+        Raises what that run raises (the error of the pass that broke the IR, with its
+        reproducer); returns only if the rerun succeeds.
+        """
+        rerun = PassManager(self.passes, verify_each=True, reproducer_dir=self.reproducer_dir)
+        rerun.run(clone_module(start))
 
     @staticmethod
     def _wants(names: frozenset[str], p: ModulePass) -> bool:
@@ -308,12 +489,15 @@ class PassManager:
 
     def write_reproducer(self, ir_text: str, failing: ModulePass) -> str:
         """Write ``ir_text`` with the pipeline to a ``.kir`` file; return its path."""
+        return self._write_reproducer(ir_text, failing.spec())
+
+    def _write_reproducer(self, ir_text: str, failing: str) -> str:
         directory = self.reproducer_dir or tempfile.gettempdir()
         fd, path = tempfile.mkstemp(prefix="kdsl-repro-", suffix=".kir", dir=directory)
         with os.fdopen(fd, "w") as f:
-            f.write(f"// kdsl reproducer: pass {failing.spec()} failed\n")
+            f.write(f"// kdsl reproducer: pass {failing} failed\n")
             f.write(f"// pipeline: {self.pipeline}\n")
-            f.write(f"// RUN: kdsl opt %s -p {failing.spec()}\n")
+            f.write(f"// RUN: kdsl opt %s -p {failing}\n")
             f.write(ir_text)
         return path
 
