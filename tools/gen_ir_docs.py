@@ -136,6 +136,12 @@ it reads (types, operand counts, terminators, dominance) unless asked not to.
 | `reads` | reads array memory: not moved across writes |
 | `writes` | writes array memory: never removed |
 | `terminator` | ends a block |
+| `constant_like` | no operands; its value is an attribute (`arith.constant`) |
+| `involution` | applying it twice gives the operand back: `f(f(x)) == x` |
+| `recursive_effects` | no effects of its own: it has those of the ops in its regions |
+| `check` | a run-time check (with `writes`): its only effect is stopping a failing thread |
+
+Passes ask about these facts through the traits, never through lists of op names.
 """
 
 

@@ -1,11 +1,14 @@
 """The op catalog: every op is defined once, here, with all it means.
 
 An ``OpDef`` holds an op's name, traits, type rule, verifier, folder and
-interpreter semantics (its VJP joins it with autodiff). Passes and backends look
-ops up in ``CATALOG`` by name; no second table of ops exists anywhere. Dialect
-files (``ops_arith``, ``ops_math``, ``ops_vec``, ``ops_mem``, ``ops_scf``,
-``ops_func``) define their ops with ``CATALOG.define``; importing ``kdsl.ir`` loads
-them all.
+interpreter semantics (its VJP joins it with autodiff; each backend's lowering is
+registered in ``kdsl.ir.lowering``). Passes and backends look ops up in
+``CATALOG`` by name; no second table of ops exists anywhere. Dialect files
+(``ops_arith``, ``ops_math``, ``ops_vec``, ``ops_mem``, ``ops_scf``, ``ops_func``)
+define their ops with ``CATALOG.define``, which returns the ``OpDef``: passes
+match ops by comparing ``op.opdef`` with these (``op.opdef is ops_scf.IF``) and
+ask about facts through traits, never through lists of op names. Importing
+``kdsl.ir`` loads them all.
 
 Interpreter semantics: ``interp(ctx, op, *operand_values)`` returns the result
 value (one result), a tuple (several) or None (none). ``ctx`` is the interpreter's
@@ -29,6 +32,11 @@ COMMUTATIVE = "commutative"
 READS = "reads"  # reads memory (kd.load): not removable across writes
 WRITES = "writes"  # writes memory (kd.store, atomics): never removed
 SPECULATABLE = "speculatable"  # pure and safe to run on paths that did not ask for it
+CONSTANT_LIKE = "constant_like"  # no operands, its value is an attribute (arith.constant)
+INVOLUTION = "involution"  # op(op(x)) == x (arith.neg, arith.not)
+#: Has no effects of its own: its effects are those of the ops in its regions
+#: (scf.if/for/while; MLIR's ``RecursiveMemoryEffects``).
+RECURSIVE_EFFECTS = "recursive_effects"
 CHECK = "check"  # a run-time check (with WRITES): its only effect is stopping a failing thread
 
 TypeRule = Callable[[Sequence[Type], dict[str, Any]], Sequence[Type]]
@@ -59,6 +67,12 @@ class OpDef:
     #: rule fold through it by default when every operand is constant.
     folder: Folder | None = None
     interp: InterpRule | None = None
+    #: Ops that reach an array element (``READS``/``WRITES``): the position of the
+    #: array operand; the element's indices are the operands after it.
+    array_operand: int | None = None
+    #: Ops that write an operand's value into memory whatever it holds (stores and
+    #: read-modify-writes, not a compare-and-swap): the position of that operand.
+    stored_operand: int | None = None
     #: Number of regions the op must have.
     num_regions: int = 0
     #: Attribute names the op requires.
@@ -118,6 +132,10 @@ class OpRegistry:
 
     def __contains__(self, name: str) -> bool:
         return name in self._ops
+
+    def get(self, name: str) -> OpDef | None:
+        """The op called ``name``, or None."""
+        return self._ops.get(name)
 
     def __iter__(self):
         return iter(self._ops.values())

@@ -14,7 +14,15 @@ from typing import Any
 import numpy as np
 
 from kdsl.ir import semantics as sem
-from kdsl.ir.catalog import CATALOG, COMMUTATIVE, PURE, SPECULATABLE
+from kdsl.ir.catalog import (
+    CATALOG,
+    COMMUTATIVE,
+    CONSTANT_LIKE,
+    INVOLUTION,
+    PURE,
+    SPECULATABLE,
+    OpDef,
+)
 from kdsl.ir.types import (
     BOOL,
     MatrixType,
@@ -43,8 +51,13 @@ def is_numeric(t: Type) -> bool:
     return isinstance(t, VectorType | MatrixType)
 
 
-def _binary_rule(kind: str, allow_scaling: bool = False, int_only: bool = False,
-                 float_only: bool = False, allow_bool: bool = False):
+def _binary_rule(
+    kind: str,
+    allow_scaling: bool = False,
+    int_only: bool = False,
+    float_only: bool = False,
+    allow_bool: bool = False,
+):
     def rule(ts: Sequence[Type], attrs: dict[str, Any]) -> list[Type]:
         a, b = ts
         verb = _VERBS.get(kind, kind)
@@ -140,8 +153,10 @@ _BINARY_DOCS = {
     "shr": "Shift right (arithmetic for signed); by the width or more gives 0 or -1.",
 }
 
+#: The binary ops by short name (``"add"`` -> ``arith.add``).
+BINARY_OPS: dict[str, OpDef] = {}
 for _name, _fn, _traits, _opts, _example in _BINARY:
-    CATALOG.define(
+    BINARY_OPS[_name] = CATALOG.define(
         f"arith.{_name}",
         _BINARY_DOCS[_name],
         traits=_traits,
@@ -150,6 +165,8 @@ for _name, _fn, _traits, _opts, _example in _BINARY:
         example=_example,
         group="arithmetic",
     )
+ADD, SUB, MUL = BINARY_OPS["add"], BINARY_OPS["sub"], BINARY_OPS["mul"]
+AND, OR = BINARY_OPS["and"], BINARY_OPS["or"]
 
 
 def _constant_interp(ctx, op):
@@ -162,10 +179,10 @@ def _constant_verify(op) -> None:
         raise TypeError(f"arith.constant must have a scalar type, not {t}")
 
 
-CATALOG.define(
+CONSTANT = CATALOG.define(
     "arith.constant",
     "A scalar constant. ``value`` holds it exactly (floats at full precision).",
-    traits=_PURE,
+    traits=_PURE | {CONSTANT_LIKE},
     verifier=_constant_verify,
     interp=_constant_interp,
     required_attrs=("value",),
@@ -197,13 +214,13 @@ def _bitnot_interp(ctx, op, a):
     return sem.unwrap(np.invert(np.asarray(a)))
 
 
-CATALOG.define(
-    "arith.neg", "Negation (integers wrap).", traits=_PURE,
+NEG = CATALOG.define(
+    "arith.neg", "Negation (integers wrap).", traits=_PURE | {INVOLUTION},
     type_rule=_unary_same("negate", lambda t: is_numeric(t), "a number, vector or matrix"),
     interp=_neg_interp, example="%1 = arith.neg %0 : f32", group="arithmetic",
 )  # fmt: skip
-CATALOG.define(
-    "arith.not", "Logical not of a bool.", traits=_PURE,
+NOT = CATALOG.define(
+    "arith.not", "Logical not of a bool.", traits=_PURE | {INVOLUTION},
     type_rule=_unary_same("apply 'not' to", lambda t: t == BOOL, "a bool"),
     interp=_not_interp, example="%1 = arith.not %0 : bool", group="arithmetic",
 )  # fmt: skip
@@ -245,7 +262,7 @@ def _cmp_interp(ctx, op, a, b):
     return np.bool_(r.all()) if pred == "eq" else np.bool_(r.any())
 
 
-CATALOG.define(
+CMP = CATALOG.define(
     "arith.cmp",
     "Comparison with predicate ``pred`` (eq, ne, lt, le, gt, ge) giving a bool. "
     "Vectors and matrices compare whole with eq/ne. Ordered float comparisons with "
@@ -275,7 +292,7 @@ def _cast_interp(ctx, op, a):
     return sem.unwrap(sem.cast_scalar_array(np.asarray(a), elem_type(dst)))
 
 
-CATALOG.define(
+CAST = CATALOG.define(
     "arith.cast",
     "Conversion to the result type (same shape, other element type). Float to "
     "integer truncates toward zero and saturates, NaN gives 0; integers wrap; "
@@ -301,7 +318,7 @@ def _select_interp(ctx, op, c, a, b):
     return a if c else b
 
 
-CATALOG.define(
+SELECT = CATALOG.define(
     "arith.select",
     "``a`` if ``cond`` else ``b``; both are evaluated.",
     traits=_PURE,

@@ -26,9 +26,6 @@ from kdsl.ir.core import Loc, Module, Operation
 from kdsl.ir.ops_mem import element_index
 from kdsl.ir.types import ArrayType, ScalarType, Type, elem_type
 
-#: The ops that hold a ``site`` attribute.
-CHECK_OPS = ("kd.check_bounds", "kd.check_finite")
-
 
 def _bounds_rule(ts: Sequence[Type], attrs: dict[str, Any]) -> list[Type]:
     a, idx = ts[0], ts[1:]
@@ -54,7 +51,7 @@ def _bounds_interp(ctx, op, a, *idx):
     element_index(ctx, op, a, 0, idx)  # raises the same error a load would
 
 
-CATALOG.define(
+CHECK_BOUNDS = CATALOG.define(
     "kd.check_bounds",
     "Debug mode: stop with an error when an index is outside the array's shape. "
     "``arg`` names the array (for messages); ``site`` numbers the check in its module.",
@@ -97,7 +94,7 @@ def _finite_interp(ctx, op, v):
         raise KdslRuntimeError(msg, op.loc, kernel)
 
 
-CATALOG.define(
+CHECK_FINITE = CATALOG.define(
     "kd.check_finite",
     "Debug mode (``verify_fp``): stop with an error when a float value (any lane) is NaN "
     "or infinite. ``arg`` names the array the value is stored into; ``site`` numbers "
@@ -110,6 +107,10 @@ CATALOG.define(
     example='kd.check_finite %3 {arg = "y", site = 1}',
     group="debug",
 )
+
+
+#: The ops that hold a ``site`` attribute.
+CHECK_OPS = (CHECK_BOUNDS, CHECK_FINITE)
 
 
 @dataclass(frozen=True)
@@ -129,8 +130,8 @@ def debug_sites(module: Module) -> dict[int, Site]:
     out: dict[int, Site] = {}
     for func in module.funcs:
         for op in func.walk():
-            if op.name in CHECK_OPS:
-                ndim = len(op.operands) - 1 if op.name == "kd.check_bounds" else 0
+            if op.opdef in CHECK_OPS:
+                ndim = len(op.operands) - 1 if op.opdef is CHECK_BOUNDS else 0
                 out[op.attrs["site"]] = Site(
                     op.name, func.attrs["sym_name"], op.attrs.get("arg", ""), op.loc, ndim
                 )

@@ -45,7 +45,7 @@ def _call_interp(ctx, op, *args):
     return tuple(out) if op.results else None
 
 
-CATALOG.define(
+FUNC = CATALOG.define(
     "func.func",
     "A function or kernel (see the module docstring).",
     verifier=_func_verify,
@@ -54,7 +54,7 @@ CATALOG.define(
     example='func.func @f(%x: f32) -> (f32) {kind = "func"} {\n  func.return %x\n}',
     group="functions",
 )
-CATALOG.define(
+CALL = CATALOG.define(
     "func.call",
     "Call a function of the module by name; gives its results.",
     interp=_call_interp,
@@ -62,7 +62,7 @@ CATALOG.define(
     example='%1 = func.call %0 {callee = "f"} : f32',
     group="functions",
 )
-CATALOG.define(
+RETURN = CATALOG.define(
     "func.return",
     "Return from a function with its result values (none for a kernel).",
     traits=frozenset({TERMINATOR}),

@@ -33,7 +33,7 @@ def _tid_interp(ctx, op):
     return ctx.tid(op.attrs["dim"], op.attrs["ndim"])
 
 
-CATALOG.define(
+TID = CATALOG.define(
     "kd.tid",
     "Index of the running thread. With ``ndim = 1`` it is the linear index over the "
     "whole launch; with ``ndim = n`` (the launch must have n dimensions) it is "
@@ -57,7 +57,7 @@ def _shape_rule(ts: Sequence[Type], attrs: dict[str, Any]) -> list[Type]:
     return [I32]
 
 
-CATALOG.define(
+ARRAY_SHAPE = CATALOG.define(
     "kd.array_shape",
     "Extent of dimension ``dim`` of an array.",
     traits=frozenset({PURE, SPECULATABLE}),
@@ -123,12 +123,13 @@ def _load_interp(ctx, op, a, *idx):
     return to_value(a[ix], op.results[0].type)
 
 
-CATALOG.define(
+LOAD = CATALOG.define(
     "kd.load",
     "Read one element of an array.",
     traits=frozenset({READS}),
     type_rule=_load_rule,
     interp=_load_interp,
+    array_operand=0,
     example="%2 = kd.load %0, %1 : f32",
     group="memory",
 )
@@ -147,12 +148,14 @@ def _store_interp(ctx, op, v, a, *idx):
     a[ix] = from_value(v, op.operands[0].type)
 
 
-CATALOG.define(
+STORE = CATALOG.define(
     "kd.store",
     "Write a value into one element of an array: ``kd.store %value, %array, %i...``.",
     traits=frozenset({WRITES}),
     type_rule=_store_rule,
     interp=_store_interp,
+    array_operand=1,
+    stored_operand=0,
     example="kd.store %2, %0, %1",
     group="memory",
 )
@@ -188,7 +191,7 @@ def _atomic_interp(ctx, op, v, a, *idx):
     return old
 
 
-CATALOG.define(
+ATOMIC_RMW = CATALOG.define(
     "kd.atomic_rmw",
     "Atomic read-modify-write of one array element with ``kind`` (add, sub, min, "
     "max, and, or, xor, exch); gives the old value. Vectors and matrices work "
@@ -197,6 +200,8 @@ CATALOG.define(
     traits=frozenset({READS, WRITES}),
     type_rule=_atomic_rule,
     interp=_atomic_interp,
+    array_operand=1,
+    stored_operand=0,
     required_attrs=("kind",),
     example='%3 = kd.atomic_rmw %2, %0, %1 {kind = "add"} : f32',
     group="memory",
@@ -230,7 +235,7 @@ def _cas_interp(ctx, op, compare, v, a, *idx):
     return old
 
 
-CATALOG.define(
+ATOMIC_CAS = CATALOG.define(
     "kd.atomic_cas",
     "Atomic compare-and-swap of one array element: ``kd.atomic_cas %compare, %value, "
     "%array, %i...`` stores ``value`` where the element's bits equal ``compare``'s and "
@@ -239,6 +244,7 @@ CATALOG.define(
     traits=frozenset({READS, WRITES}),
     type_rule=_cas_rule,
     interp=_cas_interp,
+    array_operand=2,  # writes only where the compare matches: no stored_operand
     example="%4 = kd.atomic_cas %2, %3, %0, %1 : i32",
     group="memory",
 )

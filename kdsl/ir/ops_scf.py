@@ -23,7 +23,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-from kdsl.ir.catalog import CATALOG, TERMINATOR, no_results
+from kdsl.ir.catalog import CATALOG, RECURSIVE_EFFECTS, TERMINATOR, no_results
 from kdsl.ir.types import BOOL, ScalarType, Type
 
 
@@ -65,10 +65,11 @@ def _results(op, values: Sequence[Any]):
     return tuple(values) if op.results else None
 
 
-CATALOG.define(
+IF = CATALOG.define(
     "scf.if",
     "Run the then region if the condition holds, else the else region; the results "
     "are what the region that ran yields.",
+    traits=frozenset({RECURSIVE_EFFECTS}),
     verifier=_if_verify,
     interp=_if_interp,
     num_regions=2,
@@ -103,9 +104,10 @@ def _for_interp(ctx, op, lb, ub, step, *init):
     return _results(op, carried)
 
 
-CATALOG.define(
+FOR = CATALOG.define(
     "scf.for",
     "A counted loop with loop-carried values (see the module docstring).",
+    traits=frozenset({RECURSIVE_EFFECTS}),
     verifier=_for_verify,
     interp=_for_interp,
     num_regions=1,
@@ -143,14 +145,15 @@ def _while_interp(ctx, op, *init):
         carried = list(ctx.run_region(after, passed))
 
 
-CATALOG.define(
+WHILE = CATALOG.define(
     "scf.while",
     "A loop with a condition region and a body region (see the module docstring).",
+    traits=frozenset({RECURSIVE_EFFECTS}),
     verifier=_while_verify,
     interp=_while_interp,
     num_regions=2,
     example=(
-        "%r = scf.while %x0 : i32 {\n^bb(%x: i32):\n  %c = arith.cmp %x, %n {pred = \"lt\"} : bool\n"
+        '%r = scf.while %x0 : i32 {\n^bb(%x: i32):\n  %c = arith.cmp %x, %n {pred = "lt"} : bool\n'
         "  scf.condition %c, %x\n} {\n^bb(%y: i32):\n  %z = arith.add %y, %one : i32\n"
         "  scf.yield %z\n}"
     ),
@@ -173,7 +176,7 @@ def _yield_verify(op) -> None:
         raise TypeError("scf.yield must end a region of scf.if, scf.for or scf.while")
 
 
-CATALOG.define(
+YIELD = CATALOG.define(
     "scf.yield",
     "Ends a region of scf.if/for/while, passing values to the parent op.",
     traits=frozenset({TERMINATOR}),
@@ -182,7 +185,7 @@ CATALOG.define(
     example="scf.yield %0, %1",
     group="control flow",
 )
-CATALOG.define(
+CONDITION = CATALOG.define(
     "scf.condition",
     "Ends the before region of scf.while: a bool, then the values passed on.",
     traits=frozenset({TERMINATOR}),

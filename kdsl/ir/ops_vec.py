@@ -54,7 +54,7 @@ def _construct_interp(ctx, op, *parts):
     return flat.astype(elem_type(rt).np_dtype).reshape(value_shape(rt))
 
 
-CATALOG.define(
+CONSTRUCT = CATALOG.define(
     "vec.construct",
     "A vector or matrix from its components: scalars and vectors concatenated in "
     "row-major order (a matrix may be given as rows).",
@@ -75,7 +75,7 @@ def _splat_interp(ctx, op, s):
     return np.full(value_shape(rt), s, dtype=elem_type(rt).np_dtype)
 
 
-CATALOG.define(
+SPLAT = CATALOG.define(
     "vec.splat", "A vector or matrix with every component equal to a scalar.",
     traits=_PURE, verifier=_splat_verify, interp=_splat_interp,
     example="%1 = vec.splat %0 : vec<3, f32>", group="vector",
@@ -121,7 +121,7 @@ def _extract_interp(ctx, op, v, *idx):
     return r.copy() if isinstance(r, np.ndarray) else r
 
 
-CATALOG.define(
+EXTRACT = CATALOG.define(
     "vec.extract",
     "A component of a vector (one index), a row (one index) or an element (two "
     "indices) of a matrix. An index out of range is an error.",
@@ -146,7 +146,7 @@ def _insert_interp(ctx, op, v, x, *idx):
     return out
 
 
-CATALOG.define(
+INSERT = CATALOG.define(
     "vec.insert",
     "A copy of a vector or matrix with one component (or matrix row) replaced.",
     traits=_PURE_CHECKED, type_rule=_insert_rule, interp=_insert_interp,
@@ -283,7 +283,7 @@ def _struct_construct_verify(op) -> None:
         )
 
 
-CATALOG.define(
+STRUCT_CONSTRUCT = CATALOG.define(
     "struct.construct", "A struct value from all of its fields, in order.",
     traits=_PURE, verifier=_struct_construct_verify,
     interp=lambda ctx, op, *fields: tuple(fields),
@@ -322,13 +322,13 @@ def _struct_insert_interp(ctx, op, s, x):
     return s[:i] + (x,) + s[i + 1 :]
 
 
-CATALOG.define(
+STRUCT_EXTRACT = CATALOG.define(
     "struct.extract", "One field of a struct value.",
     traits=_PURE, type_rule=_struct_extract_rule, interp=_struct_extract_interp,
     required_attrs=("field",),
     example='%1 = struct.extract %0 {field = "x"} : vec<3, f32>', group="struct",
 )  # fmt: skip
-CATALOG.define(
+STRUCT_INSERT = CATALOG.define(
     "struct.insert", "A copy of a struct with one field replaced.",
     traits=_PURE, type_rule=_struct_insert_rule, interp=_struct_insert_interp,
     required_attrs=("field",),

@@ -1,7 +1,8 @@
 """Debug mode: a ``kd.check_bounds`` before every array access.
 
-Every ``kd.load``, ``kd.store`` and ``kd.atomic_rmw`` gets a ``kd.check_bounds`` of
-its array and indices right before it, with the access's location, the array's
+Every op that reaches an array element (one whose catalog entry names its
+``array_operand``: ``kd.load``, ``kd.store``, ``kd.atomic_rmw``, ``kd.atomic_cas``)
+gets a ``kd.check_bounds`` of its array and indices right before it, with the access's location, the array's
 name (``arg``) and a fresh ``site`` number (see ``kdsl.ir.ops_debug``). A backend
 stops the failing thread at the check, so the access never touches memory.
 
@@ -19,18 +20,15 @@ from typing import ClassVar
 
 from kdsl.ir import Module, Operation
 from kdsl.ir.builder import create_op
-from kdsl.ir.ops_debug import next_site
+from kdsl.ir.ops_debug import CHECK_BOUNDS, next_site
 from kdsl.passes.manager import ModulePass
-
-#: Access op -> position of its array operand (indices follow it).
-ACCESSES = {"kd.load": 0, "kd.store": 1, "kd.atomic_rmw": 1, "kd.atomic_cas": 2}
 
 
 def _already_checked(op: Operation, operands: list) -> bool:
     block = op.parent
     pos = block.ops.index(op)
     prev = block.ops[pos - 1] if pos > 0 else None
-    return prev is not None and prev.name == "kd.check_bounds" and list(prev.operands) == operands
+    return prev is not None and prev.opdef is CHECK_BOUNDS and list(prev.operands) == operands
 
 
 @dataclass(frozen=True)
@@ -44,7 +42,7 @@ class BoundsCheckPass(ModulePass):
         changed = False
         for func in module.funcs:
             for op in list(func.walk()):
-                at = ACCESSES.get(op.name)
+                at = op.opdef.array_operand
                 if at is None:
                     continue
                 operands = list(op.operands[at:])
@@ -52,7 +50,7 @@ class BoundsCheckPass(ModulePass):
                     continue
                 arg = operands[0].name_hint or "array"
                 check = create_op(
-                    "kd.check_bounds", operands, [], {"arg": arg, "site": site}, loc=op.loc
+                    CHECK_BOUNDS.name, operands, [], {"arg": arg, "site": site}, loc=op.loc
                 )
                 op.parent.insert_before(op, check)
                 site += 1

@@ -1,12 +1,13 @@
 """Local simplifications that are exact in IEEE arithmetic and for wrapping integers.
 
-Patterns (dispatched by op name from one table):
+Patterns (dispatched by op definition from one table, or by trait):
 
-- constants move to the right of commutative ops;
+- constants move to the right of ``commutative`` ops;
 - ``x * 1 -> x``; ``x + 0 -> x`` for integers only (for floats ``-0.0 + 0.0`` is
   ``+0.0``), but ``x + (-0.0) -> x`` and ``x - 0.0 -> x`` for floats too (both
   exact, signed zeros included);
-- ``neg(neg x) -> x``, ``not(not b) -> b``, a cast to the operand's own type;
+- ``f(f x) -> x`` for ``involution`` ops (``neg``, ``not``), a cast to the operand's
+  own type;
 - ``select(c, x, x) -> x``; on bools ``select(c, x, false) -> and(c, x)``,
   ``select(c, true, x) -> or(c, x)``, ``select(c, true, false) -> c``;
 - ``cmp(x, x)`` on integers and bools gives its constant answer (not on floats: NaN);
@@ -27,9 +28,19 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import ClassVar
 
-from kdsl.ir import CATALOG, Module, Operation, Value
-from kdsl.ir.catalog import COMMUTATIVE
+from kdsl.ir import Module, Operation, Value
+from kdsl.ir.catalog import COMMUTATIVE, INVOLUTION, OpDef
 from kdsl.ir.core import OpResult
+from kdsl.ir.ops_arith import ADD, AND, CAST, CMP, MUL, OR, SELECT, SUB
+from kdsl.ir.ops_scf import FOR, IF, WHILE
+from kdsl.ir.ops_vec import (
+    CONSTRUCT,
+    EXTRACT,
+    INSERT,
+    STRUCT_CONSTRUCT,
+    STRUCT_EXTRACT,
+    STRUCT_INSERT,
+)
 from kdsl.ir.rewrite import (
     constant_of,
     inline_block_before,
@@ -95,7 +106,7 @@ def _mul(op: Operation) -> bool:
 
 def _involution(op: Operation) -> bool:
     (x,) = op.operands
-    if isinstance(x, OpResult) and x.op.name == op.name:
+    if isinstance(x, OpResult) and x.op.opdef is op.opdef:
         return _replace(op, x.op.operands[0])
     return False
 
@@ -105,8 +116,8 @@ def _cast(op: Operation) -> bool:
     return x.type == op.result.type and _replace(op, x)
 
 
-def _new_value(anchor: Operation, name: str, *operands: Value) -> Value:
-    new = Operation(CATALOG[name], operands, [operands[-1].type], None, (), anchor.loc)
+def _new_value(anchor: Operation, opdef: OpDef, *operands: Value) -> Value:
+    new = Operation(opdef, operands, [operands[-1].type], None, (), anchor.loc)
     return insert_before(anchor, new).result
 
 
@@ -121,9 +132,9 @@ def _select(op: Operation) -> bool:
     if ok_a and ok_b and ca is True and cb is False:
         return _replace(op, c)
     if ok_b and cb is False:
-        return _replace(op, _new_value(op, "arith.and", c, a))
+        return _replace(op, _new_value(op, AND, c, a))
     if ok_a and ca is True:
-        return _replace(op, _new_value(op, "arith.or", c, b))
+        return _replace(op, _new_value(op, OR, c, b))
     return False
 
 
@@ -171,10 +182,10 @@ def _vec_extract(op: Operation) -> bool:
     if idx is None or not isinstance(v, OpResult) or not _in_range(v.type, idx):
         return False
     src = v.op
-    if src.name == "vec.construct":
+    if src.opdef is CONSTRUCT:
         part = _component_of_construct(src, v.type, idx)
         return part is not None and _replace(op, part)
-    if src.name == "vec.insert" and len(src.operands) - 2 == len(idx):
+    if src.opdef is INSERT and len(src.operands) - 2 == len(idx):
         at = _const_indices(src.operands[2:])
         if at == idx:
             return _replace(op, src.operands[1])
@@ -189,9 +200,9 @@ def _struct_extract(op: Operation) -> bool:
     if not isinstance(s, OpResult):
         return False
     field = op.attrs["field"]
-    if s.op.name == "struct.construct":
+    if s.op.opdef is STRUCT_CONSTRUCT:
         return _replace(op, s.op.operands[s.type.field_index(field)])
-    if s.op.name == "struct.insert":
+    if s.op.opdef is STRUCT_INSERT:
         if s.op.attrs["field"] == field:
             return _replace(op, s.op.operands[1])
         op.set_operand(0, s.op.operands[0])
@@ -223,7 +234,7 @@ def _if_to_select(op: Operation, limit: int) -> bool:
         if a is b:
             values.append(a)
             continue
-        sel = Operation(CATALOG["arith.select"], (cond, a, b), [r.type], None, (), op.loc)
+        sel = Operation(SELECT, (cond, a, b), [r.type], None, (), op.loc)
         values.append(insert_before(op, sel).result)
     replace_op(op, values)
     return True
@@ -239,14 +250,11 @@ class CanonicalizePass(ModulePass):
     #: Most ops an ``scf.if`` may hold (both branches) to become ``arith.select``.
     speculate_limit: int = 8
 
-    def _patterns(self) -> dict[str, Pattern]:
+    def _patterns(self) -> dict[OpDef, Pattern]:
         return {
-            "arith.add": _add, "arith.sub": _sub, "arith.mul": _mul,
-            "arith.neg": _involution, "arith.not": _involution, "arith.cast": _cast,
-            "arith.select": _select, "arith.cmp": _cmp,
-            "vec.extract": _vec_extract, "struct.extract": _struct_extract,
-            "scf.if": self._scf_if, "scf.for": drop_dead_for_values,
-            "scf.while": drop_dead_while_values,
+            ADD: _add, SUB: _sub, MUL: _mul, CAST: _cast, SELECT: _select, CMP: _cmp,
+            EXTRACT: _vec_extract, STRUCT_EXTRACT: _struct_extract,
+            IF: self._scf_if, FOR: drop_dead_for_values, WHILE: drop_dead_while_values,
         }  # fmt: skip
 
     def _scf_if(self, op: Operation) -> bool:
@@ -260,9 +268,10 @@ class CanonicalizePass(ModulePass):
 
         def visit(op: Operation) -> bool:
             changed = False
-            if COMMUTATIVE in op.opdef.traits and len(op.operands) == 2:
+            traits = op.opdef.traits
+            if COMMUTATIVE in traits and len(op.operands) == 2:
                 changed = _swap_constant_left(op)
-            rule = patterns.get(op.name)
+            rule = _involution if INVOLUTION in traits else patterns.get(op.opdef)
             return (rule is not None and rule(op)) or changed
 
         changed = False

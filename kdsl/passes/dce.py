@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 from kdsl.ir import Block, Module
+from kdsl.ir.ops_scf import FOR, IF, WHILE
 from kdsl.ir.rewrite import is_trivially_dead
 from kdsl.ir.rewrite_scf import (
     drop_dead_for_values,
@@ -26,10 +27,11 @@ from kdsl.ir.rewrite_scf import (
 )
 from kdsl.passes.manager import ModulePass
 
+#: Region op -> what drops the values it carries or yields that nobody uses.
 _TRIM = {
-    "scf.if": drop_unused_if_results,
-    "scf.for": drop_dead_for_values,
-    "scf.while": drop_dead_while_values,
+    IF: drop_unused_if_results,
+    FOR: drop_dead_for_values,
+    WHILE: drop_dead_while_values,
 }
 
 
@@ -44,7 +46,7 @@ def _dce_block(block: Block) -> bool:
             continue
         for region in op.regions:
             changed |= _dce_block(region.block)
-        trim = _TRIM.get(op.name)
+        trim = _TRIM.get(op.opdef)
         if trim is not None:
             changed |= trim(op)
     return changed

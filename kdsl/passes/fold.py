@@ -25,7 +25,9 @@ from typing import Any, ClassVar
 import numpy as np
 
 from kdsl.ir import Module, Operation, Value
-from kdsl.ir.catalog import PURE
+from kdsl.ir.catalog import CONSTANT_LIKE, PURE
+from kdsl.ir.ops_arith import SELECT
+from kdsl.ir.ops_scf import FOR, IF
 from kdsl.ir.rewrite import (
     constant_of,
     inline_block_before,
@@ -70,9 +72,10 @@ def _evaluate(op: Operation, args: list[Any]) -> list[Any] | None:
 
 
 def _fold_pure(op: Operation) -> bool:
-    if PURE not in op.opdef.traits or op.regions or not op.operands or not op.results:
+    traits = op.opdef.traits
+    if PURE not in traits or op.regions or not op.operands or not op.results:
         return False
-    if op.name == "arith.constant":
+    if CONSTANT_LIKE in traits:
         return False
     if not all(isinstance(r.type, ScalarType) for r in op.results):
         return False
@@ -121,12 +124,12 @@ def _fold_for(op: Operation) -> bool:
     return True
 
 
-_CONTROL = {"scf.if": _fold_if, "arith.select": _fold_select, "scf.for": _fold_for}
+_CONTROL = {IF: _fold_if, SELECT: _fold_select, FOR: _fold_for}
 
 
 def fold_op(op: Operation) -> bool:
     """Fold one op if its operands allow; returns whether it was replaced."""
-    rule = _CONTROL.get(op.name)
+    rule = _CONTROL.get(op.opdef)
     if rule is not None:
         return rule(op)
     return _fold_pure(op)

@@ -1,7 +1,8 @@
 """Debug mode (``verify_fp``): a ``kd.check_finite`` before every store of a float value.
 
-Each ``kd.store`` and ``kd.atomic_rmw`` whose value is a float (or a vector or
-matrix of floats) gets a ``kd.check_finite`` of that value right before it, with
+Each op that writes an operand's value into memory (its catalog entry names the
+``stored_operand``: ``kd.store``, ``kd.atomic_rmw``) whose value is a float (or a
+vector or matrix of floats) gets a ``kd.check_finite`` of that value right before it, with
 the store's location, the array's name and a fresh ``site`` number, so the first
 NaN or Inf that reaches memory names the source line that wrote it. Values that
 stay in registers are not checked (an Inf in an intermediate may be intended).
@@ -13,13 +14,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import ClassVar
 
-from kdsl.ir import Module, Operation
+from kdsl.ir import Module, Operation, Value
 from kdsl.ir.builder import create_op
-from kdsl.ir.ops_debug import next_site
+from kdsl.ir.ops_debug import CHECK_BOUNDS, CHECK_FINITE, next_site
 from kdsl.ir.types import MatrixType, ScalarType, Type, VectorType
 from kdsl.passes.manager import ModulePass
-
-STORES = ("kd.store", "kd.atomic_rmw")
 
 
 def is_float_value(t: Type) -> bool:
@@ -29,14 +28,14 @@ def is_float_value(t: Type) -> bool:
     return isinstance(t, ScalarType) and t.is_float
 
 
-def _already_checked(op: Operation) -> bool:
+def _already_checked(op: Operation, value: Value) -> bool:
     block = op.parent
     pos = block.ops.index(op)
     # A bounds check may sit between the value's check and the store.
     for prev in reversed(block.ops[max(0, pos - 2) : pos]):
-        if prev.name == "kd.check_finite" and prev.operands[0] is op.operands[0]:
+        if prev.opdef is CHECK_FINITE and prev.operands[0] is value:
             return True
-        if prev.name != "kd.check_bounds":
+        if prev.opdef is not CHECK_BOUNDS:
             return False
     return False
 
@@ -52,14 +51,16 @@ class FpCheckPass(ModulePass):
         changed = False
         for func in module.funcs:
             for op in list(func.walk()):
-                if op.name not in STORES or not is_float_value(op.operands[0].type):
+                at = op.opdef.stored_operand
+                if at is None or not is_float_value(op.operands[at].type):
                     continue
-                if _already_checked(op):
+                value = op.operands[at]
+                if _already_checked(op, value):
                     continue
-                arg = op.operands[1].name_hint or "array"
+                arg = op.operands[op.opdef.array_operand].name_hint or "array"
                 check = create_op(
-                    "kd.check_finite",
-                    [op.operands[0]],
+                    CHECK_FINITE.name,
+                    [value],
                     [],
                     {"arg": arg, "site": site},
                     loc=op.loc,
@@ -67,7 +68,7 @@ class FpCheckPass(ModulePass):
                 anchor = op
                 # Keep the bounds check right before its access (its idempotence test).
                 pos = op.parent.ops.index(op)
-                if pos > 0 and op.parent.ops[pos - 1].name == "kd.check_bounds":
+                if pos > 0 and op.parent.ops[pos - 1].opdef is CHECK_BOUNDS:
                     anchor = op.parent.ops[pos - 1]
                 op.parent.insert_before(anchor, check)
                 site += 1

@@ -26,12 +26,13 @@ from typing import ClassVar
 
 from kdsl.errors import KdslError
 from kdsl.ir import Module, Operation, Value
+from kdsl.ir.ops_func import CALL
 from kdsl.ir.rewrite import clone_op, insert_before, replace_op
 from kdsl.passes.manager import ModulePass
 
 
 def _calls(func: Operation) -> list[Operation]:
-    return [op for op in func.walk() if op.name == "func.call"]
+    return [op for op in func.walk() if op.opdef is CALL]
 
 
 def _inline_call(call: Operation, callee: Operation) -> None:
