@@ -16,7 +16,7 @@ from typing import Any
 
 from kdsl.errors import KdslError, KdslTypeError
 from kdsl.frontend.values import is_weak
-from kdsl.ir import Value
+from kdsl.ir import CATALOG, Value
 from kdsl.ir.ops_math import BINARY_MATH, PREDICATES, UNARY_MATH
 from kdsl.ir.types import BOOL, F32, ArrayType, MatrixType, ScalarType, VectorType
 
@@ -296,11 +296,13 @@ PYTHON_ALIASES: dict[Any, Any] = {
     py.abs: BUILTINS["abs"], py.min: BUILTINS["min"], py.max: BUILTINS["max"],
     py.len: BUILTINS["len"], py.round: BUILTINS["round"], py.pow: BUILTINS["pow"],
 }  # fmt: skip
-for _name in ("sqrt", "exp", "log", "log2", "log10", "sin", "cos", "tan", "asin", "acos",
-              "atan", "atan2", "sinh", "cosh", "tanh", "floor", "ceil", "trunc", "isnan",
-              "isinf", "isfinite", "erf", "erfc", "copysign", "pow", "cbrt", "exp2"):  # fmt: skip
-    if hasattr(math, _name):
+# Python's ``math.sin`` is the catalog's ``math.sin``: every op of the ``math`` dialect
+# that Python's ``math`` module also has (``math.round`` and ``math.sign`` it has not).
+for _opdef in CATALOG:
+    _dialect, _, _name = _opdef.name.partition(".")
+    if _dialect == "math" and hasattr(math, _name):
         PYTHON_ALIASES[getattr(math, _name)] = BUILTINS[_name]
+PYTHON_ALIASES[math.pow] = BUILTINS["pow"]
 PYTHON_ALIASES[math.fabs] = BUILTINS["abs"]
 
 #: Python types usable as casts: float -> f32, int -> i32, bool -> bool.

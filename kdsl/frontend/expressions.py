@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import ast
 import builtins as pybuiltins
-import operator
 from types import ModuleType
 from typing import Any
 
@@ -15,8 +14,10 @@ from kdsl.frontend import geometry, structs
 from kdsl.frontend.builtins import PYTHON_ALIASES, PYTHON_CASTS, Builtin, cast
 from kdsl.frontend.emitter import Emitter, component_count
 from kdsl.frontend.static import static
+from kdsl.frontend.structs import is_indexed
 from kdsl.frontend.values import ShapeOf, describe, is_weak
 from kdsl.ir import Value
+from kdsl.ir.catalog import fold_literal
 from kdsl.ir.types import (
     BOOL,
     I32,
@@ -27,20 +28,13 @@ from kdsl.ir.types import (
     Type,
     VectorType,
 )
-from kdsl.frontend.structs import is_indexed
 
 _BINOPS = {
     ast.Add: "add", ast.Sub: "sub", ast.Mult: "mul", ast.Div: "div", ast.FloorDiv: "floordiv",
     ast.Mod: "mod", ast.Pow: "pow", ast.BitAnd: "and", ast.BitOr: "or", ast.BitXor: "xor",
     ast.LShift: "shl", ast.RShift: "shr", ast.MatMult: "matmul",
 }  # fmt: skip
-_PY_FOLD = {
-    "add": operator.add, "sub": operator.sub, "mul": operator.mul, "pow": operator.pow,
-    "and": operator.and_, "or": operator.or_, "xor": operator.xor,
-}  # fmt: skip
 _CMPOPS = {ast.Eq: "eq", ast.NotEq: "ne", ast.Lt: "lt", ast.LtE: "le", ast.Gt: "gt", ast.GtE: "ge"}
-_PY_CMP = {"eq": operator.eq, "ne": operator.ne, "lt": operator.lt, "le": operator.le,
-           "gt": operator.gt, "ge": operator.ge}  # fmt: skip
 _COMPONENTS = {"x": 0, "y": 1, "z": 2, "w": 3}
 
 
@@ -113,11 +107,12 @@ class ExpressionLowering(Emitter):
         for x in (a, b):
             if not (isinstance(x, Value) or is_weak(x)):
                 raise self.error(KdslTypeError, f"cannot use {describe(x)} in arithmetic", node)
-        if is_weak(a) and is_weak(b) and op in _PY_FOLD and not (op == "pow" and b < 0):
-            return _PY_FOLD[op](a, b)
-        if is_weak(a) and is_weak(b) and op == "div" and isinstance(a / 1 + b, float) and (
-            isinstance(a, float) or isinstance(b, float)) and b != 0:  # fmt: skip
-            return a / b
+        if is_weak(a) and is_weak(b):
+            # Two literals combine as Python combines them, where the op says so
+            # (``2 * 3``); otherwise they take types and the op is emitted (``7 / 2``).
+            folded = fold_literal(f"arith.{op}", a, b)
+            if folded is not None:
+                return folded
         x, y = self.coerce_pair(a, b, node)
         special = geometry.binop(self, op, x, y, node)  # q1 * q2, t1 * t2
         if special is not None:
@@ -130,10 +125,10 @@ class ExpressionLowering(Emitter):
         x = self.visit(node.operand)
         if isinstance(node.op, ast.Not):
             if is_weak(x):
-                return not x
+                return fold_literal("arith.not", x)
             return self.emit("arith.not", self.to_bool(x, node.operand), node=node)
         if is_weak(x) and not isinstance(node.op, ast.Invert):
-            return -x if isinstance(node.op, ast.USub) else x
+            return fold_literal("arith.neg", x) if isinstance(node.op, ast.USub) else x
         v = self.value(x, node)
         if isinstance(node.op, ast.UAdd):
             return v
@@ -172,7 +167,7 @@ class ExpressionLowering(Emitter):
                 raise self.error(KdslSyntaxError, "'in'/'is' comparisons are not supported", node)
             right = self.visit(right_node)
             if is_weak(left) and is_weak(right):
-                r: Any = _PY_CMP[pred](left, right)
+                r: Any = fold_literal("arith.cmp", left, right, pred=pred)
             else:
                 x, y = self.coerce_pair(left, right, node)
                 r = self.emit("arith.cmp", x, y, node=node, pred=pred)
@@ -262,8 +257,11 @@ class ExpressionLowering(Emitter):
             raise self.error(KdslSyntaxError, "starred arguments (*args) are not supported", node)
         # Keyword arguments go only to builtins that name them (``identity(n=3, dtype=float)``).
         target = PYTHON_ALIASES.get(fn, fn) if _hashable(fn) else fn
-        allowed = (target.keywords if isinstance(target, Builtin)
-                   else getattr(target, "__kdsl_keywords__", ()))  # struct fields
+        allowed = (
+            target.keywords
+            if isinstance(target, Builtin)
+            else getattr(target, "__kdsl_keywords__", ())
+        )  # struct fields
         for kw in node.keywords:
             if kw.arg is None or kw.arg not in allowed:
                 what = f"'{kw.arg}'" if kw.arg else "**kwargs"

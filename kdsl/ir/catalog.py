@@ -10,6 +10,12 @@ match ops by comparing ``op.opdef`` with these (``op.opdef is ops_scf.IF``) and
 ask about facts through traits, never through lists of op names. Importing
 ``kdsl.ir`` loads them all.
 
+Folding: ``OpDef.folder`` evaluates an op on constant operands. A pure op with an
+interpreter rule folds through that rule unless it defines its own folder, so a
+folded value is exactly what the op computes at run time. ``literal_folder``
+evaluates an op on untyped Python literals (``2 * 3`` in a kernel), with Python's
+own arithmetic; ``fold_literal`` is what the frontend calls.
+
 Interpreter semantics: ``interp(ctx, op, *operand_values)`` returns the result
 value (one result), a tuple (several) or None (none). ``ctx`` is the interpreter's
 thread context (thread index, region runner). Values are NumPy scalars, NumPy
@@ -18,9 +24,12 @@ arrays for vectors and matrices, tuples for structs and NumPy arrays for arrays.
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
+
+import numpy as np
 
 from kdsl.ir.core import Operation
 from kdsl.ir.types import Type
@@ -43,6 +52,7 @@ TypeRule = Callable[[Sequence[Type], dict[str, Any]], Sequence[Type]]
 Verifier = Callable[[Operation], None]
 Folder = Callable[[Operation, Sequence[Any]], Sequence[Any] | None]
 InterpRule = Callable[..., Any]
+LiteralFolder = Callable[..., Any]
 
 
 def no_results(types: Sequence[Type], attrs: dict[str, Any]) -> Sequence[Type]:
@@ -64,9 +74,14 @@ class OpDef:
     verifier: Verifier | None = None
     #: Constant folding: given constant operand values (None where unknown),
     #: return the folded result values or None. Pure ops with an interpreter
-    #: rule fold through it by default when every operand is constant.
+    #: rule fold through it by default when every operand is constant
+    #: (``interp_folder``).
     folder: Folder | None = None
     interp: InterpRule | None = None
+    #: Folding of untyped Python literals: ``literal_folder(attrs, *values)`` gives
+    #: the Python number Python's own operator gives, or None when the op must be
+    #: emitted on typed values instead (see ``fold_literal``).
+    literal_folder: LiteralFolder | None = None
     #: Ops that reach an array element (``READS``/``WRITES``): the position of the
     #: array operand; the element's indices are the operands after it.
     array_operand: int | None = None
@@ -83,6 +98,10 @@ class OpDef:
     group: str = ""
     #: Free-form extension slots (e.g. "vjp") filled by later subsystems.
     rules: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.folder is None and PURE in self.traits and self.interp is not None:
+            self.folder = interp_folder(self.interp)
 
     @property
     def is_pure(self) -> bool:
@@ -144,4 +163,41 @@ class OpRegistry:
         return len(self._ops)
 
 
+def interp_folder(interp: InterpRule) -> Folder:
+    """The default folder of a pure op: its interpreter rule on constant operands.
+
+    Gives None (no folding) when an operand is unknown or the rule raises (an
+    out-of-range ``vec.extract``: the error must still happen at run time). The
+    rule runs with ``ctx`` None (pure ops need no thread) and with NumPy's float
+    warnings silenced, as at run time.
+    """
+
+    def fold(op: Operation, args: Sequence[Any]) -> list[Any] | None:
+        if any(a is None for a in args):
+            return None
+        try:
+            with np.errstate(all="ignore"), warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                out = interp(None, op, *args)
+        except Exception:
+            return None
+        if len(op.results) == 1:
+            return [out]
+        return list(out) if isinstance(out, tuple) else None
+
+    return fold
+
+
 CATALOG = OpRegistry()
+
+
+def fold_literal(name: str, *values: Any, **attrs: Any) -> Any:
+    """``name`` applied to untyped Python literals, as Python computes it.
+
+    None when the op has no literal folder (or declines, e.g. ``2 ** -1``): the
+    caller then gives the literals types and emits the op.
+    """
+    opdef = CATALOG.get(name)
+    if opdef is None or opdef.literal_folder is None:
+        return None
+    return opdef.literal_folder(attrs, *values)

@@ -4,10 +4,16 @@ Binary arithmetic works on two values of the same type (scalar, vector or
 matrix, elementwise) and, for ``mul`` and ``div``, on a scalar and a composite of
 that scalar type. Type rules raise ``TypeError`` with a user-facing message; the
 frontend attaches the source location.
+
+Untyped Python literals combine with Python's own operators (``literal_folder``):
+``2 ** 10`` is the int 1024 and ``1.5 * 2`` the float 3.0 before either takes a
+type. Integer ``/`` and ``//``, ``%`` and shifts of literals are not folded that
+way: the literals take their types and the op keeps C's semantics (``7 / 2`` is 3).
 """
 
 from __future__ import annotations
 
+import operator
 from collections.abc import Sequence
 from typing import Any
 
@@ -119,21 +125,38 @@ def _mod(a, b):
     return np.fmod(a, b)
 
 
+def _literal(fn):
+    """A literal folder applying the Python operator ``fn``."""
+    return lambda attrs, a, b: fn(a, b)
+
+
+def _literal_div(attrs, a, b):
+    # Only true division with a float: int / int keeps C's integer division.
+    if (isinstance(a, float) or isinstance(b, float)) and b != 0:
+        return a / b
+    return None
+
+
+def _literal_pow(attrs, a, b):
+    return None if b < 0 else a**b  # 2 ** -1 is typed (and refused for integers)
+
+
+# (name, interpreter function, traits, type-rule options, literal folder, example)
 _BINARY = [
-    ("add", np.add, _PURE_COMM, dict(), "%2 = arith.add %0, %1 : f32"),
-    ("sub", np.subtract, _PURE, dict(), "%2 = arith.sub %0, %1 : vec<3, f32>"),
-    ("mul", np.multiply, _PURE_COMM, dict(allow_scaling=True), "%2 = arith.mul %0, %1 : vec<3, f32>"),
-    ("div", _div, _PURE, dict(allow_scaling=True), "%2 = arith.div %0, %1 : i32"),
-    ("floordiv", _floordiv, _PURE, dict(), "%2 = arith.floordiv %0, %1 : i32"),
-    ("mod", _mod, _PURE, dict(), "%2 = arith.mod %0, %1 : i32"),
-    ("pow", np.power, _PURE, dict(float_only=True), "%2 = arith.pow %0, %1 : f32"),
-    ("min", sem.float_min, _PURE_COMM, dict(), "%2 = arith.min %0, %1 : f32"),
-    ("max", sem.float_max, _PURE_COMM, dict(), "%2 = arith.max %0, %1 : f32"),
-    ("and", np.bitwise_and, _PURE_COMM, dict(int_only=True, allow_bool=True), "%2 = arith.and %0, %1 : bool"),
-    ("or", np.bitwise_or, _PURE_COMM, dict(int_only=True, allow_bool=True), "%2 = arith.or %0, %1 : bool"),
-    ("xor", np.bitwise_xor, _PURE_COMM, dict(int_only=True, allow_bool=True), "%2 = arith.xor %0, %1 : i32"),
-    ("shl", sem.shift_left, _PURE, dict(int_only=True), "%2 = arith.shl %0, %1 : i32"),
-    ("shr", sem.shift_right, _PURE, dict(int_only=True), "%2 = arith.shr %0, %1 : i32"),
+    ("add", np.add, _PURE_COMM, dict(), _literal(operator.add), "%2 = arith.add %0, %1 : f32"),
+    ("sub", np.subtract, _PURE, dict(), _literal(operator.sub), "%2 = arith.sub %0, %1 : vec<3, f32>"),
+    ("mul", np.multiply, _PURE_COMM, dict(allow_scaling=True), _literal(operator.mul), "%2 = arith.mul %0, %1 : vec<3, f32>"),
+    ("div", _div, _PURE, dict(allow_scaling=True), _literal_div, "%2 = arith.div %0, %1 : i32"),
+    ("floordiv", _floordiv, _PURE, dict(), None, "%2 = arith.floordiv %0, %1 : i32"),
+    ("mod", _mod, _PURE, dict(), None, "%2 = arith.mod %0, %1 : i32"),
+    ("pow", np.power, _PURE, dict(float_only=True), _literal_pow, "%2 = arith.pow %0, %1 : f32"),
+    ("min", sem.float_min, _PURE_COMM, dict(), None, "%2 = arith.min %0, %1 : f32"),
+    ("max", sem.float_max, _PURE_COMM, dict(), None, "%2 = arith.max %0, %1 : f32"),
+    ("and", np.bitwise_and, _PURE_COMM, dict(int_only=True, allow_bool=True), _literal(operator.and_), "%2 = arith.and %0, %1 : bool"),
+    ("or", np.bitwise_or, _PURE_COMM, dict(int_only=True, allow_bool=True), _literal(operator.or_), "%2 = arith.or %0, %1 : bool"),
+    ("xor", np.bitwise_xor, _PURE_COMM, dict(int_only=True, allow_bool=True), _literal(operator.xor), "%2 = arith.xor %0, %1 : i32"),
+    ("shl", sem.shift_left, _PURE, dict(int_only=True), None, "%2 = arith.shl %0, %1 : i32"),
+    ("shr", sem.shift_right, _PURE, dict(int_only=True), None, "%2 = arith.shr %0, %1 : i32"),
 ]  # fmt: skip
 
 _BINARY_DOCS = {
@@ -155,13 +178,14 @@ _BINARY_DOCS = {
 
 #: The binary ops by short name (``"add"`` -> ``arith.add``).
 BINARY_OPS: dict[str, OpDef] = {}
-for _name, _fn, _traits, _opts, _example in _BINARY:
+for _name, _fn, _traits, _opts, _literal_fn, _example in _BINARY:
     BINARY_OPS[_name] = CATALOG.define(
         f"arith.{_name}",
         _BINARY_DOCS[_name],
         traits=_traits,
         type_rule=_binary_rule(_name, **_opts),
         interp=_elementwise(_fn),
+        literal_folder=_literal_fn,
         example=_example,
         group="arithmetic",
     )
@@ -217,12 +241,14 @@ def _bitnot_interp(ctx, op, a):
 NEG = CATALOG.define(
     "arith.neg", "Negation (integers wrap).", traits=_PURE | {INVOLUTION},
     type_rule=_unary_same("negate", lambda t: is_numeric(t), "a number, vector or matrix"),
-    interp=_neg_interp, example="%1 = arith.neg %0 : f32", group="arithmetic",
+    interp=_neg_interp, literal_folder=lambda attrs, a: -a,
+    example="%1 = arith.neg %0 : f32", group="arithmetic",
 )  # fmt: skip
 NOT = CATALOG.define(
     "arith.not", "Logical not of a bool.", traits=_PURE | {INVOLUTION},
     type_rule=_unary_same("apply 'not' to", lambda t: t == BOOL, "a bool"),
-    interp=_not_interp, example="%1 = arith.not %0 : bool", group="arithmetic",
+    interp=_not_interp, literal_folder=lambda attrs, a: not a,
+    example="%1 = arith.not %0 : bool", group="arithmetic",
 )  # fmt: skip
 CATALOG.define(
     "arith.bitnot", "Bitwise complement of an integer.", traits=_PURE,
@@ -251,6 +277,10 @@ _CMP_FNS = {
     "eq": np.equal, "ne": np.not_equal, "lt": np.less,
     "le": np.less_equal, "gt": np.greater, "ge": np.greater_equal,
 }  # fmt: skip
+_CMP_LITERAL = {
+    "eq": operator.eq, "ne": operator.ne, "lt": operator.lt,
+    "le": operator.le, "gt": operator.gt, "ge": operator.ge,
+}  # fmt: skip
 
 
 def _cmp_interp(ctx, op, a, b):
@@ -270,6 +300,7 @@ CMP = CATALOG.define(
     traits=_PURE,
     type_rule=_cmp_rule,
     interp=_cmp_interp,
+    literal_folder=lambda attrs, a, b: _CMP_LITERAL[attrs["pred"]](a, b),
     required_attrs=("pred",),
     example='%2 = arith.cmp %0, %1 {pred = "lt"} : bool',
     group="arithmetic",

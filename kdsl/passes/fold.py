@@ -1,16 +1,17 @@
-"""Constant folding through the op catalog's interpreter rules and folder hooks.
+"""Constant folding through the op catalog's folders.
 
-A pure op whose operands are all ``arith.constant`` is evaluated with its catalog
-``interp`` rule (``ctx`` is None: pure ops need no thread context) and its scalar
-results become constants. Per-op ``folder`` hooks run too. Control flow folds when
-its condition is constant: ``scf.if`` is replaced by the region that runs,
+A pure op whose operands are all ``arith.constant`` is evaluated by its catalog
+``folder`` and its scalar results become constants. An op's folder is its own hook
+where it defines one, else its ``interp`` rule (``kdsl.ir.catalog.interp_folder``;
+``ctx`` is None: pure ops need no thread context). Control flow folds when its
+condition is constant: ``scf.if`` is replaced by the region that runs,
 ``arith.select`` by the chosen value, and an ``scf.for`` that runs no iteration by
 its initial values.
 
 Invariants: results are bit-exact with what the interpreter computes at run time
 (the catalog rule *is* the run-time semantics), so no float reassociation ever
-happens. An op whose rule raises (an out-of-range ``vec.extract``) is left alone,
-so the error still happens at run time.
+happens. An op whose folder raises or declines (an out-of-range ``vec.extract``) is
+left alone, so the error still happens at run time.
 
 Options: ``max_iters`` bounds the rounds over the module (each round folds what the
 previous one exposed).
@@ -52,23 +53,17 @@ def _constants(values: list[Value]) -> list[Any] | None:
 
 def _evaluate(op: Operation, args: list[Any]) -> list[Any] | None:
     """The op's results from constant operands, or None if it cannot (or must not) fold."""
-    opdef = op.opdef
+    folder = op.opdef.folder
+    if folder is None:
+        return None
     try:
         with np.errstate(all="ignore"), warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            if opdef.folder is not None:
-                out = opdef.folder(op, args)
-                if out is not None:
-                    return list(out)
-            if opdef.interp is None:
-                return None
-            out = opdef.interp(None, op, *args)
+            out = folder(op, args)
     except Exception:
         # The op would fail at run time (or the rule needs a context): keep it.
         return None
-    if len(op.results) == 1:
-        return [out]
-    return list(out) if isinstance(out, tuple) else None
+    return None if out is None else list(out)
 
 
 def _fold_pure(op: Operation) -> bool:

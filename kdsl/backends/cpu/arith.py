@@ -27,6 +27,11 @@ CPU = LOWERINGS.for_backend("cpu")
 
 _HALF = ir.HalfType()
 
+#: The C math functions LLVM may lower these lowerings' float operations to (``jit``
+#: resolves them): ``llvm.pow`` -> ``pow``, ``frem`` -> ``fmod``, float min/max ->
+#: ``fmin``/``fmax``.
+C_FUNCTIONS = ("pow", "fmod", "fmin", "fmax")
+
 
 def widen_half(em: Emitter, et: T.ScalarType, fn: Callable[..., Any], *vals: Any):
     """``fn(*vals)``, computed in float32 and rounded back when ``et`` is float16.

@@ -16,15 +16,14 @@ from functools import cache
 import llvmlite
 import llvmlite.binding as llvm
 
+from kdsl.backends.cpu import arith, mathops
+
 _LOCK = threading.Lock()
 _ENGINE: llvm.ExecutionEngine | None = None
 
-#: C math functions that generated code or LLVM's own lowering of intrinsics may call.
-_LIBM_NAMES = (
-    "sin", "cos", "tan", "asin", "acos", "atan", "atan2", "sinh", "cosh", "tanh",
-    "exp", "exp2", "log", "log2", "log10", "pow", "cbrt", "erf", "erfc", "fmod",
-    "floor", "ceil", "trunc", "round", "rint", "nearbyint", "fmin", "fmax", "sqrt",
-)  # fmt: skip
+#: C math functions that generated code or LLVM's own lowering of intrinsics may call,
+#: as the lowerings that emit them list them.
+_LIBM_NAMES = (*mathops.C_FUNCTIONS, *arith.C_FUNCTIONS)
 
 
 def llvm_version() -> str:

@@ -28,6 +28,13 @@ INTRINSICS = {
 #: math op -> C library function (the ``f`` suffix is added for float32).
 LIBM = ("cbrt", "tan", "asin", "acos", "atan", "sinh", "cosh", "tanh", "erf", "erfc")
 
+#: The C math functions these lowerings may call (``jit`` resolves them): the libm
+#: calls, and what LLVM lowers the intrinsics to where the target has no instruction
+#: (``llvm.sin`` -> ``sin``; ``llvm.rint`` may become ``nearbyint``).
+C_FUNCTIONS = (
+    *LIBM, "atan2", *(v.removeprefix("llvm.") for v in INTRINSICS.values()), "nearbyint",
+)  # fmt: skip
+
 
 def _intrinsic(name: str) -> Lowering:
     def lower(em: Emitter, op: Operation) -> Any:
