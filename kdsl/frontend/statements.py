@@ -12,10 +12,10 @@ from kdsl.frontend.builtins import BUILTINS
 from kdsl.frontend.control import BRK, CONT, MAX_UNROLL, RET, ControlFlowLowering
 from kdsl.frontend.expressions import _BINOPS, _COMPONENTS
 from kdsl.frontend.static import static
+from kdsl.frontend.structs import is_indexed
 from kdsl.frontend.values import ShapeOf, describe, is_weak
 from kdsl.ir import Value
 from kdsl.ir.types import BOOL, I32, ArrayType, MatrixType, StructType, VectorType
-from kdsl.frontend.structs import is_indexed
 
 
 class StatementLowering(ControlFlowLowering):

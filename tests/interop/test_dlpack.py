@@ -126,8 +126,8 @@ def test_array_interface_objects_launch_directly():
 
 def test_descriptor_from_a_non_torch_source_launches():
     # ArrayDescriptor is what return_ctype=True gives; build one directly here.
-    from kdsl.runtime.descriptor import ArrayDescriptor
     from kdsl.ir import types as T
+    from kdsl.runtime.descriptor import ArrayDescriptor
 
     src = np.zeros(4, np.float32)
     d = ArrayDescriptor(src, T.F32, wp.get_device("cpu"))
