@@ -9,8 +9,9 @@ is depends on the backend: ``fn(emitter, op)`` for cpu and cuda, the op's
 - a *gap*: it cannot lower the op, and says why (a capability it lacks); a kernel
   using the op fails with a capability error;
 - that the op is *structural*: lowered inside another lowering, not on its own
-  (terminators by the op whose region they end, ``func.func`` by the backend's
-  function driver);
+  (``func.func`` by the backend's function driver). Terminators are structural on
+  every backend without a declaration: the lowering of the op or function owning
+  their region reads their operands;
 - a *default*: a rule derived from the op catalog for every op it has no explicit
   rule for (the interpreter runs each op's ``interp`` rule).
 
@@ -29,7 +30,7 @@ Registering::
     @CPU.rule("arith.neg")
     def _neg(em, op): ...
 
-    CPU.structural("scf.yield", "ends a region; the parent op's lowering reads it")
+    CPU.structural("func.func", "`lower.emit_kernel` (kernels), `lower.declare_func`")
 """
 
 from __future__ import annotations
@@ -39,7 +40,7 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import Any, Literal
 
-from kdsl.ir.catalog import CATALOG, OpDef
+from kdsl.ir.catalog import CATALOG, TERMINATOR, OpDef
 
 Rule = Callable[..., Any]
 #: How an op is covered on a backend.
@@ -79,6 +80,10 @@ def _caller(depth: int) -> str:
 def _describe(c: Coverage) -> str:
     what = getattr(c.rule, "__qualname__", None) if c.rule is not None else c.kind
     return f"{c.origin} ({what})"
+
+
+#: How every backend covers a terminator (see the module docstring).
+TERMINATOR_NOTE = "a terminator: the lowering of the op or function owning its region reads it"
 
 
 class LoweringRegistry:
@@ -170,6 +175,9 @@ class LoweringRegistry:
         c = self._declared.get((name, backend))
         if c is not None:
             return c
+        opdef = CATALOG.get(name)
+        if opdef is not None and TERMINATOR in opdef.traits:
+            return Coverage(name, backend, "structural", None, TERMINATOR_NOTE, __name__)
         default = self._defaults.get(backend)
         if default is None or name not in CATALOG:
             return None

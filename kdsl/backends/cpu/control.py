@@ -150,7 +150,4 @@ CPU.register("scf.while", _while)
 CPU.register("func.call", _call)
 
 # Ops lowered as part of another lowering, never on their own.
-CPU.structural("scf.yield", "ends a region; the lowering of the op owning it reads its operands")
-CPU.structural("scf.condition", "ends the before region; the `scf.while` lowering reads it")
 CPU.structural("func.func", "`lower.emit_kernel` (kernels), `lower.declare_func` (functions)")
-CPU.structural("func.return", "`lower.declare_func` returns its operands")

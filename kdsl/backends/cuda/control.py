@@ -110,7 +110,4 @@ CUDA.register("scf.while", _while)
 CUDA.register("func.call", _call)
 
 # Ops lowered as part of another lowering, never on their own.
-CUDA.structural("scf.yield", "ends a region; the lowering of the op owning it reads its operands")
-CUDA.structural("scf.condition", "ends the before region; the `scf.while` lowering reads it")
 CUDA.structural("func.func", "`lower._kernel` (`__global__`), `lower._function` (`__device__`)")
-CUDA.structural("func.return", "`lower._function` returns its operands")

@@ -29,9 +29,6 @@ Step = Callable[["ThreadContext", list], None]
 
 INTERP = LOWERINGS.for_backend("interp")
 LOWERINGS.set_default("interp", lambda opdef: opdef.interp, "the op's catalog interp rule")
-INTERP.structural("scf.yield", "ends a region; its operands are what the region gives back")
-INTERP.structural("scf.condition", "ends the before region; the `scf.while` rule reads it")
-INTERP.structural("func.return", "ends a function; its operands are the call's results")
 INTERP.structural("func.func", "compiled whole by `Program.function`")
 
 
