@@ -21,6 +21,7 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping
 from typing import Any
 
+from kdsl import config
 from kdsl.backends.base import Backend, CompiledKernel, Job
 from kdsl.compiler import cache as kernel_cache
 from kdsl.compiler.pipelines import check_pipeline
@@ -67,12 +68,22 @@ def prepare_module(backend: Backend, module: Module, options: Mapping[str, Any])
 
     Returns whether instrumentation (debug checks) was inserted.
     """
+    verify = verify_each(options)
     if options.get("optimize", True) and backend.pipeline:
-        run_pipeline(module, backend.pipeline)
+        run_pipeline(module, backend.pipeline, verify_each=verify)
     checks = check_pipeline(options)
     if checks:
-        run_pipeline(module, checks)
+        run_pipeline(module, checks, verify_each=verify)
     return bool(checks)
+
+
+def verify_each(options: Mapping[str, Any]) -> bool | None:
+    """Verify after every pass for a kernel compiled with its own ``debug`` option.
+
+    None leaves the choice to ``kdsl.config.verify_passes`` (whose ``"auto"`` follows
+    the global ``kdsl.config.mode``); an explicit ``"each"`` or ``"end"`` there wins.
+    """
+    return True if options.get("debug") and config.verify_passes == "auto" else None
 
 
 def compile_kernel(
