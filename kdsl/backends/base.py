@@ -24,6 +24,11 @@ from kdsl.errors import KdslError, KdslLaunchError
 from kdsl.ir.core import Module
 from kdsl.passes import DEFAULT_PIPELINE
 
+#: A launch grid: the extent of each dimension (one to four of them).
+Dims = tuple[int, ...]
+#: Launch arguments, converted by the runtime (see the module docstring).
+Args = Sequence[Any]
+
 
 @dataclass
 class CompiledKernel:
@@ -141,21 +146,11 @@ class Backend(ABC):
         """The launchable kernel of ``job``: its binary comes from ``job.artifact(target)``."""
 
     @abstractmethod
-    def launch(
-        self,
-        compiled: CompiledKernel,
-        dims: tuple[int, ...],
-        args: Sequence[Any],
-        stream: Any = None,
-    ) -> None:
+    def launch(self, compiled: CompiledKernel, dims: Dims, args: Args, stream: Any = None) -> None:
         """Run ``compiled`` over the launch grid ``dims`` with converted ``args``."""
 
     def prepare(
-        self,
-        compiled: CompiledKernel,
-        dims: tuple[int, ...],
-        args: Sequence[Any],
-        stream: Any = None,
+        self, compiled: CompiledKernel, dims: Dims, args: Args, stream: Any = None
     ) -> Callable[[], None]:
         """A zero-argument callable that runs this launch; called again and again.
 
@@ -182,12 +177,7 @@ def launch_size(
     most ``MAX_THREADS`` threads; both raise ``KdslLaunchError`` naming the kernel.
     """
     name = compiled.metadata.get("name") or compiled.symbol
-    for nd in tid_ndims:
-        if nd != 1 and nd != len(dims):
-            raise KdslLaunchError(
-                f"kernel '{name}' uses a {nd}-d thread index but was launched with "
-                f"{len(dims)}-d dim={tuple(dims)}"
-            )
+    check_tid_ndims(name, dims, tid_ndims)
     total = 1
     for d in dims:
         total *= int(d)
@@ -197,6 +187,16 @@ def launch_size(
             f"{backend} backend's limit of {MAX_THREADS}"
         )
     return total
+
+
+def check_tid_ndims(kernel: str, dims: Sequence[int], tid_ndims: Iterable[int]) -> None:
+    """Raise ``KdslLaunchError`` if ``kernel`` uses an n-d ``tid()`` (n > 1) on a grid not n-d."""
+    for nd in tid_ndims:
+        if nd != 1 and nd != len(dims):
+            raise KdslLaunchError(
+                f"kernel '{kernel}' uses a {nd}-d thread index but was launched with "
+                f"{len(dims)}-d dim={tuple(dims)}"
+            )
 
 
 def source_version(version: str, sources: Iterable[Path]) -> str:

@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import ctypes
 import functools
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from kdsl.backends.base import Backend, CompiledKernel, Job, launch_size, source_version
+from kdsl.backends.base import Args, Backend, CompiledKernel, Dims, Job, launch_size, source_version
 from kdsl.backends.cpu import checks, jit, pool, printing
 from kdsl.backends.cpu.abi import ArgPacker, Packed
 from kdsl.backends.cpu.lower import kernel_names, kernel_symbol, lower_kernels, tid_ndims
@@ -17,7 +17,6 @@ from kdsl.ir.ops_debug import debug_sites
 
 #: The C type of every range function: (start, end, args, dims).
 RANGE_FN = ctypes.CFUNCTYPE(None, ctypes.c_int64, ctypes.c_int64, ctypes.c_void_p, ctypes.c_void_p)
-
 
 
 @functools.cache
@@ -111,13 +110,7 @@ class CpuBackend(Backend):
         meta = {"tid_ndims": sorted(payload.tid_ndims), "cache_key": job.key(target)}
         return CompiledKernel(self.name, symbol, module, payload, meta)
 
-    def launch(
-        self,
-        compiled: CompiledKernel,
-        dims: tuple[int, ...],
-        args: Sequence[Any],
-        stream: Any = None,
-    ) -> None:
+    def launch(self, compiled: CompiledKernel, dims: Dims, args: Args, stream: Any = None) -> None:
         k: CpuKernel = compiled.payload
         total = self._check_dims(compiled, dims)
         if total == 0:
@@ -136,11 +129,7 @@ class CpuBackend(Backend):
         pool.run_range(k.fn, total, argp, ctypes.addressof(extents), cost=k.cost)
 
     def prepare(
-        self,
-        compiled: CompiledKernel,
-        dims: tuple[int, ...],
-        args: Sequence[Any],
-        stream: Any = None,
+        self, compiled: CompiledKernel, dims: Dims, args: Args, stream: Any = None
     ) -> Callable[[], None]:
         """A launch with its arguments packed once: calling it only enters native code."""
         k: CpuKernel = compiled.payload
@@ -167,13 +156,11 @@ class CpuBackend(Backend):
         run.keep = (keep, extents)  # type: ignore[attr-defined]
         return run
 
-    def _check_dims(self, compiled: CompiledKernel, dims: tuple[int, ...]) -> int:
+    def _check_dims(self, compiled: CompiledKernel, dims: Dims) -> int:
         """The number of threads of ``dims``, checked against the kernel's tid()."""
         return launch_size(compiled, dims, compiled.payload.tid_ndims, self.name)
 
-    def _launch_checked(
-        self, compiled: CompiledKernel, dims: tuple[int, ...], args: Sequence[Any], total: int
-    ) -> None:
+    def _launch_checked(self, compiled: CompiledKernel, dims: Dims, args: Args, total: int) -> None:
         """A debug build's launch: a fresh error record, raised from after the run."""
         k: CpuKernel = compiled.payload
         record = checks.new_record()

@@ -8,12 +8,12 @@ from __future__ import annotations
 
 import ctypes
 import functools
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 from kdsl.backends import checks_common
-from kdsl.backends.base import Backend, CompiledKernel, Job, launch_size, source_version
+from kdsl.backends.base import Args, Backend, CompiledKernel, Dims, Job, launch_size, source_version
 from kdsl.backends.cuda import nvrtc
 from kdsl.backends.cuda.devices import device_count
 from kdsl.backends.cuda.lower import BLOCK, generate, kernel_names, tid_ndims
@@ -133,13 +133,7 @@ class CudaBackend(Backend):
         meta = {"tid_ndims": sorted(payload.tid_ndims), "arch": arch, "source": gen.text}
         return CompiledKernel(self.name, symbol, module, payload, meta)
 
-    def launch(
-        self,
-        compiled: CompiledKernel,
-        dims: tuple[int, ...],
-        args: Sequence[Any],
-        stream: Any = None,
-    ) -> None:
+    def launch(self, compiled: CompiledKernel, dims: Dims, args: Args, stream: Any = None) -> None:
         k: CudaKernel = compiled.payload
         name = compiled.metadata.get("name") or compiled.symbol
         dims = tuple(int(d) for d in dims)
@@ -174,11 +168,7 @@ class CudaBackend(Backend):
             checks_common.raise_for_record(host, k.sites, name, compiled.symbol, dims)
 
     def prepare(
-        self,
-        compiled: CompiledKernel,
-        dims: tuple[int, ...],
-        args: Sequence[Any],
-        stream: Any = None,
+        self, compiled: CompiledKernel, dims: Dims, args: Args, stream: Any = None
     ) -> Callable[[], None]:
         """A launch packed once: calling it is one ``cuLaunchKernel`` (release builds)."""
         k: CudaKernel = compiled.payload

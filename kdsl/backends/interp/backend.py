@@ -7,10 +7,9 @@ It is slow: one Python call per op per thread.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from typing import Any
 
-from kdsl.backends.base import Backend, CompiledKernel, Job
+from kdsl.backends.base import Args, Backend, CompiledKernel, Dims, Job
 from kdsl.backends.interp.program import Program, run_kernel
 
 
@@ -36,13 +35,7 @@ class InterpBackend(Backend):
             self.name, job.symbol, job.module, program, {"tid_ndims": sorted(fn.tid_ndims)}
         )
 
-    def launch(
-        self,
-        compiled: CompiledKernel,
-        dims: tuple[int, ...],
-        args: Sequence[Any],
-        stream: Any = None,
-    ) -> None:
+    def launch(self, compiled: CompiledKernel, dims: Dims, args: Args, stream: Any = None) -> None:
         run_kernel(
             compiled.payload, compiled.symbol, tuple(dims), args, compiled.metadata.get("name")
         )

@@ -17,11 +17,13 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from kdsl.errors import KdslCapabilityError, KdslError, KdslLaunchError, KdslRuntimeError
+from kdsl.backends.base import Args, Dims, check_tid_ndims
+from kdsl.errors import KdslCapabilityError, KdslError, KdslRuntimeError
 from kdsl.ir.core import Block, Module, Operation, Region, Value
 from kdsl.ir.lowering import LOWERINGS
 
@@ -32,33 +34,24 @@ LOWERINGS.set_default("interp", lambda opdef: opdef.interp, "the op's catalog in
 INTERP.structural("func.func", "compiled whole by `Program.function`")
 
 
+@dataclass(slots=True, eq=False)
 class CompiledBlock:
     """A block as closures: where its arguments go, its steps, what it yields."""
 
-    __slots__ = ("arg_slots", "steps", "term_slots")
-
-    def __init__(self, arg_slots: list[int], steps: list[Step], term_slots: list[int]) -> None:
-        self.arg_slots = arg_slots
-        self.steps = steps
-        self.term_slots = term_slots
+    arg_slots: list[int]
+    steps: list[Step]
+    term_slots: list[int]
 
 
+@dataclass(eq=False)
 class CompiledFunction:
     """One ``func.func``: its entry block, its nested regions and a frame template."""
 
-    def __init__(
-        self,
-        name: str,
-        template: list,
-        entry: CompiledBlock,
-        regions: dict[Region, CompiledBlock],
-        tid_ndims: set[int],
-    ) -> None:
-        self.name = name
-        self.template = template
-        self.entry = entry
-        self.regions = regions
-        self.tid_ndims = tid_ndims
+    name: str
+    template: list
+    entry: CompiledBlock
+    regions: dict[Region, CompiledBlock]
+    tid_ndims: set[int]
 
 
 class _NotConstant(Exception):
@@ -213,13 +206,7 @@ class ThreadContext:
 
     def run_region(self, region: Region, args: Sequence[Any]) -> list:
         """Run a region of the current function; gives its terminator's operands."""
-        blk = self.fn.regions[region]
-        f = self.frame
-        for s, v in zip(blk.arg_slots, args):
-            f[s] = v
-        for step in blk.steps:
-            step(self, f)
-        return [f[s] for s in blk.term_slots]
+        return _run_block(self, self.fn.regions[region], args)
 
     def call(self, callee: str, args: Sequence[Any]) -> list:
         """Call a function of the module in a fresh frame; gives its results."""
@@ -242,11 +229,7 @@ def _run_block(ctx: ThreadContext, blk: CompiledBlock, args: Sequence[Any]) -> l
 
 
 def run_kernel(
-    program: Program,
-    symbol: str,
-    dims: tuple[int, ...],
-    args: Sequence[Any],
-    name: str | None = None,
+    program: Program, symbol: str, dims: Dims, args: Args, name: str | None = None
 ) -> None:
     """Run kernel ``symbol`` once per thread of ``dims``, in row-major order.
 
@@ -254,12 +237,7 @@ def run_kernel(
     """
     fn = program.function(symbol)
     name = name or symbol
-    for nd in fn.tid_ndims:
-        if nd != 1 and nd != len(dims):
-            raise KdslLaunchError(
-                f"kernel '{name}' uses a {nd}-d thread index but was launched with "
-                f"{len(dims)}-d dim={dims}"
-            )
+    check_tid_ndims(name, dims, fn.tid_ndims)
     ctx = ThreadContext(program, fn, name)
     f = ctx.frame
     entry = fn.entry
