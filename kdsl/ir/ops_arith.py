@@ -29,15 +29,7 @@ from kdsl.ir.catalog import (
     SPECULATABLE,
     OpDef,
 )
-from kdsl.ir.types import (
-    BOOL,
-    MatrixType,
-    ScalarType,
-    Type,
-    VectorType,
-    elem_type,
-    with_elem,
-)
+from kdsl.ir.types import BOOL, MatrixType, ScalarType, Type, VectorType, elem_type, with_elem
 
 _PURE = frozenset({PURE, SPECULATABLE})
 _PURE_COMM = frozenset({PURE, SPECULATABLE, COMMUTATIVE})

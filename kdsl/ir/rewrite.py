@@ -114,7 +114,7 @@ def clone_op(op: Operation, mapping: dict[Value, Value]) -> Operation:
         op.opdef,
         [mapping.get(v, v) for v in op.operands],
         [r.type for r in op.results],
-        _copy_attr(op.attrs),
+        copy_attr(op.attrs),
         regions,
         op.loc,
     )
@@ -134,11 +134,12 @@ def clone_block(block: Block, mapping: dict[Value, Value]) -> Block:
     return new
 
 
-def _copy_attr(value: Any) -> Any:
+def copy_attr(value: Any) -> Any:
+    """A copy of an attribute value: nested dicts and lists copied, the rest shared."""
     if isinstance(value, dict):
-        return {k: _copy_attr(v) for k, v in value.items()}
+        return {k: copy_attr(v) for k, v in value.items()}
     if isinstance(value, list):
-        return [_copy_attr(v) for v in value]
+        return [copy_attr(v) for v in value]
     return value
 
 
@@ -192,9 +193,17 @@ def rewrite_postorder(block: Block, visit: Callable[[Operation], bool]) -> bool:
     return changed
 
 
-def rewrite_module(module: Module, visit: Callable[[Operation], bool]) -> bool:
-    """``rewrite_postorder`` over the body of every function."""
+def rewrite_module(module: Module, visit: Callable[[Operation], bool], rounds: int = 1) -> bool:
+    """``rewrite_postorder`` over the body of every function.
+
+    Repeated while a round changes something, ``rounds`` times at most.
+    """
     changed = False
-    for func in module.funcs:
-        changed |= rewrite_postorder(func.regions[0].block, visit)
+    for _ in range(rounds):
+        round_changed = False
+        for func in module.funcs:
+            round_changed |= rewrite_postorder(func.regions[0].block, visit)
+        if not round_changed:
+            break
+        changed = True
     return changed

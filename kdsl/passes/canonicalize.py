@@ -274,9 +274,4 @@ class CanonicalizePass(ModulePass):
             rule = _involution if INVOLUTION in traits else patterns.get(op.opdef)
             return (rule is not None and rule(op)) or changed
 
-        changed = False
-        for _ in range(self.max_iters):
-            if not rewrite_module(module, visit):
-                break
-            changed = True
-        return changed
+        return rewrite_module(module, visit, rounds=self.max_iters)

@@ -139,9 +139,4 @@ class FoldPass(ModulePass):
     max_iters: int = 8
 
     def apply(self, module: Module) -> bool:
-        changed = False
-        for _ in range(self.max_iters):
-            if not rewrite_module(module, fold_op):
-                break
-            changed = True
-        return changed
+        return rewrite_module(module, fold_op, rounds=self.max_iters)

@@ -35,6 +35,7 @@ from kdsl import config
 from kdsl.errors import KdslError, KdslVerifyError
 from kdsl.ir import Block, Module, Operation, Region, print_module, verify_module
 from kdsl.ir.core import OpResult, Value
+from kdsl.ir.rewrite import copy_attr
 
 #: Modules of ``kdsl.passes`` that are not passes.
 _NOT_PASSES = frozenset({"manager"})
@@ -274,7 +275,7 @@ def _clone_op(
     attrs = op.attrs.copy()
     for key, value in attrs.items():
         if isinstance(value, _ATTR_CONTAINERS):
-            attrs[key] = _copy_container(value)
+            attrs[key] = copy_attr(value)
     new.attrs = attrs
     regions: list[Region] = []
     for region in op.regions:
@@ -297,14 +298,6 @@ def _clone_block(
         copy.parent = new
         ops.append(copy)
     return new
-
-
-def _copy_container(value: Any) -> Any:
-    if isinstance(value, dict):
-        return {k: _copy_container(v) for k, v in value.items()}
-    if isinstance(value, list):
-        return [_copy_container(v) for v in value]
-    return value
 
 
 def _is_valid(module: Module) -> bool:

@@ -11,6 +11,8 @@ replays the branch that ran and reverses it; loops reverse over their tapes
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
+
 from kdsl.errors import KdslError
 from kdsl.ir import Block, Builder, Operation, Region, Value
 from kdsl.ir.types import I64, StructType, Type
@@ -23,6 +25,7 @@ from kdsl.passes.adjoint.tapes import TapeWriter
 Adjoints = dict[Value, Value]
 
 
+@dataclass(eq=False)
 class ReverseSweep:
     """Emits the reverse of a kernel's ops into its adjoint function.
 
@@ -31,22 +34,13 @@ class ReverseSweep:
     ``grad_owned`` mask is added to it on first use).
     """
 
-    def __init__(
-        self,
-        primal: Primal,
-        b: Builder,
-        replay: Replay,
-        tapes: TapeWriter,
-        grads: dict[Value, Value],
-        body: Block,
-    ) -> None:
-        self.primal = primal
-        self.b = b
-        self.replay = replay
-        self.tapes = tapes
-        self.grads = grads
-        self.body = body
-        self._grad_owned: Value | None = None
+    primal: Primal
+    b: Builder
+    replay: Replay
+    tapes: TapeWriter
+    grads: dict[Value, Value]
+    body: Block
+    _grad_owned: Value | None = field(default=None, init=False)
 
     def reverse_block(self, block: Block, vmap: dict[Value, Value], adj: Adjoints) -> None:
         """Emit the reverse of ``block``'s ops (terminator excluded) into the builder."""
