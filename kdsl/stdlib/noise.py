@@ -55,25 +55,19 @@ def interpolate(a0: float32, a1: float32, t: float32) -> float32:
     return (a1 - a0) * smootherstep(t) + a0
 
 
-@func
-def interpolate_gradient(a0: float32, a1: float32, t: float32, d_a0: vec2, d_a1: vec2,
-                         d_t: vec2) -> vec2:  # fmt: skip
-    """``interpolate_gradient(...)``: the gradient of ``interpolate`` from its inputs' gradients."""
-    return (d_a1 - d_a0) * smootherstep(t) + (a1 - a0) * smootherstep_gradient(t) * d_t + d_a0
+def _define_interpolate_gradient(V):
+    """Define ``interpolate_gradient`` for gradients of type ``V``."""
+    global interpolate_gradient
+
+    @func
+    def interpolate_gradient(a0: float32, a1: float32, t: float32, d_a0: V, d_a1: V,
+                             d_t: V) -> V:  # fmt: skip
+        """``interpolate_gradient(...)``: the gradient of ``interpolate`` from its inputs' gradients."""
+        return (d_a1 - d_a0) * smootherstep(t) + (a1 - a0) * smootherstep_gradient(t) * d_t + d_a0
 
 
-@func
-def interpolate_gradient(a0: float32, a1: float32, t: float32, d_a0: vec3, d_a1: vec3,  # noqa: F811
-                         d_t: vec3) -> vec3:  # fmt: skip
-    """``interpolate_gradient(...)``: the gradient of ``interpolate`` (3-D)."""
-    return (d_a1 - d_a0) * smootherstep(t) + (a1 - a0) * smootherstep_gradient(t) * d_t + d_a0
-
-
-@func
-def interpolate_gradient(a0: float32, a1: float32, t: float32, d_a0: vec4, d_a1: vec4,  # noqa: F811
-                         d_t: vec4) -> vec4:  # fmt: skip
-    """``interpolate_gradient(...)``: the gradient of ``interpolate`` (4-D)."""
-    return (d_a1 - d_a0) * smootherstep(t) + (a1 - a0) * smootherstep_gradient(t) * d_t + d_a0
+for _V in (vec2, vec3, vec4):
+    _define_interpolate_gradient(_V)
 
 
 @func
@@ -248,46 +242,64 @@ def noise_4d(state: uint32, x0: int32, y0: int32, z0: int32, t0: int32, x1: int3
 
 
 @func
-def noise(state: uint32, x: float32) -> float32:
-    """``noise(state, x)``: 1-D Perlin noise at ``x``; ``state`` picks the field."""
+def perlin(state: uint32, x: float32):
+    """``perlin(state, x)``: value and (unused, zero) gradient of 1-D Perlin noise at ``x``."""
     fx = wp.floor(x)
     x0 = int32(fx)
-    return noise_1d(state, x0, x0 + 1, x - fx)
+    return noise_1d(state, x0, x0 + 1, x - fx), float32(0.0)
 
 
 @func
-def noise(state: uint32, xy: vec2) -> float32:  # noqa: F811
-    """``noise(state, xy)``: 2-D Perlin noise at ``xy``; ``state`` picks the field."""
+def perlin(state: uint32, xy: vec2):  # noqa: F811
+    """``perlin(state, xy)``: value and gradient of 2-D Perlin noise at ``xy``."""
     f = wp.floor(xy)
     x0 = int32(f[0])
     y0 = int32(f[1])
-    value, _ = noise_2d(state, x0, y0, x0 + 1, y0 + 1, xy[0] - f[0], xy[1] - f[1])
-    return value
+    return noise_2d(state, x0, y0, x0 + 1, y0 + 1, xy[0] - f[0], xy[1] - f[1])
 
 
 @func
-def noise(state: uint32, xyz: vec3) -> float32:  # noqa: F811
-    """``noise(state, xyz)``: 3-D Perlin noise at ``xyz``; ``state`` picks the field."""
+def perlin(state: uint32, xyz: vec3):  # noqa: F811
+    """``perlin(state, xyz)``: value and gradient of 3-D Perlin noise at ``xyz``."""
     f = wp.floor(xyz)
     x0 = int32(f[0])
     y0 = int32(f[1])
     z0 = int32(f[2])
-    value, _ = noise_3d(state, x0, y0, z0, x0 + 1, y0 + 1, z0 + 1, xyz[0] - f[0],
-                        xyz[1] - f[1], xyz[2] - f[2])  # fmt: skip
-    return value
+    return noise_3d(state, x0, y0, z0, x0 + 1, y0 + 1, z0 + 1, xyz[0] - f[0], xyz[1] - f[1],
+                    xyz[2] - f[2])  # fmt: skip
 
 
 @func
-def noise(state: uint32, xyzt: vec4) -> float32:  # noqa: F811
-    """``noise(state, xyzt)``: 4-D Perlin noise at ``xyzt``; ``state`` picks the field."""
+def perlin(state: uint32, xyzt: vec4):  # noqa: F811
+    """``perlin(state, xyzt)``: value and gradient of 4-D Perlin noise at ``xyzt``."""
     f = wp.floor(xyzt)
     x0 = int32(f[0])
     y0 = int32(f[1])
     z0 = int32(f[2])
     t0 = int32(f[3])
-    value, _ = noise_4d(state, x0, y0, z0, t0, x0 + 1, y0 + 1, z0 + 1, t0 + 1, xyzt[0] - f[0],
-                        xyzt[1] - f[1], xyzt[2] - f[2], xyzt[3] - f[3])  # fmt: skip
-    return value
+    return noise_4d(state, x0, y0, z0, t0, x0 + 1, y0 + 1, z0 + 1, t0 + 1, xyzt[0] - f[0],
+                    xyzt[1] - f[1], xyzt[2] - f[2], xyzt[3] - f[3])  # fmt: skip
+
+
+def _define_noise(V):
+    """Define ``noise`` and ``noise_gradient`` for points of type ``V``."""
+    global noise, noise_gradient
+
+    @func
+    def noise(state: uint32, p: V) -> float32:
+        """``noise(state, p)``: Perlin noise at ``p`` (1-D to 4-D); ``state`` picks the field."""
+        value, _ = perlin(state, p)
+        return value
+
+    @func
+    def noise_gradient(state: uint32, p: V) -> V:
+        """``noise_gradient(state, p)``: the gradient of ``noise`` at ``p``."""
+        _, g = perlin(state, p)
+        return g
+
+
+for _V in (float32, vec2, vec3, vec4):
+    _define_noise(_V)
 
 
 # Periodic noise: lattice coordinates wrap with C's remainder (``%`` on ints), as in
@@ -343,171 +355,65 @@ def pnoise(state: uint32, xyzt: vec4, px: int32, py: int32, pz: int32,  # noqa: 
 
 
 @func
-def noise_gradient(state: uint32, p: vec2) -> vec2:
-    """``noise_gradient(state, p)``: the gradient of 2-D ``noise`` at ``p``."""
-    f = wp.floor(p)
-    x0 = int32(f[0])
-    y0 = int32(f[1])
-    _, g = noise_2d(state, x0, y0, x0 + 1, y0 + 1, p[0] - f[0], p[1] - f[1])
-    return g
-
-
-@func
-def noise_gradient(state: uint32, p: vec3) -> vec3:  # noqa: F811
-    """``noise_gradient(state, p)``: the gradient of 3-D ``noise`` at ``p``."""
-    f = wp.floor(p)
-    x0 = int32(f[0])
-    y0 = int32(f[1])
-    z0 = int32(f[2])
-    _, g = noise_3d(state, x0, y0, z0, x0 + 1, y0 + 1, z0 + 1, p[0] - f[0], p[1] - f[1],
-                    p[2] - f[2])  # fmt: skip
-    return g
-
-
-@func
-def noise_gradient(state: uint32, p: vec4) -> vec4:  # noqa: F811
-    """``noise_gradient(state, p)``: the gradient of 4-D ``noise`` at ``p``."""
-    f = wp.floor(p)
-    x0 = int32(f[0])
-    y0 = int32(f[1])
-    z0 = int32(f[2])
-    t0 = int32(f[3])
-    _, g = noise_4d(state, x0, y0, z0, t0, x0 + 1, y0 + 1, z0 + 1, t0 + 1, p[0] - f[0],
-                    p[1] - f[1], p[2] - f[2], p[3] - f[3])  # fmt: skip
-    return g
-
-
-@func
-def curlnoise(state: uint32, xy: vec2, octaves: uint32, lacunarity: float32,
-              gain: float32) -> vec2:  # fmt: skip
-    """``curlnoise(state, xy, octaves=1, lacunarity=2, gain=0.5)``: divergence-free 2-D noise."""
-    curl_sum = vec2()
-    freq = float32(1.0)
-    amplitude = float32(1.0)
-    for _i in range(int32(octaves)):
-        curl_sum = curl_sum + amplitude * noise_gradient(state, freq * xy)
-        amplitude = amplitude * gain
-        freq = freq * lacunarity
-    return vec2(-curl_sum[1], curl_sum[0])
-
-
-@func
 def next_potential(state: uint32, offset: uint32) -> uint32:
     """``next_potential(state, offset)``: Warp's ``rand_init(state, offset)`` on a uint32 state."""
     return rand_pcg(state + rand_pcg(offset))
 
 
-@func
-def curlnoise(state: uint32, xyz: vec3, octaves: uint32, lacunarity: float32,  # noqa: F811
-              gain: float32) -> vec3:  # fmt: skip
-    """``curlnoise(state, xyz, octaves=1, lacunarity=2, gain=0.5)``: divergence-free 3-D noise."""
-    s1 = vec3()
-    s2 = vec3()
-    s3 = vec3()
-    freq = float32(1.0)
-    amplitude = float32(1.0)
-    for _i in range(int32(octaves)):
-        pt = freq * xyz
-        # One gradient per potential; a loop keeps a single copy of the noise code.
-        for j in range(3):
-            if j == 1:
-                state = next_potential(state, uint32(CURL_OFFSET_2))
-            elif j == 2:
-                state = next_potential(state, uint32(CURL_OFFSET_3))
-            g = amplitude * noise_gradient(state, pt)
-            if j == 0:
-                s1 = s1 + g
-            elif j == 1:
-                s2 = s2 + g
+def _define_curlnoise(P, R):
+    """Define ``curlnoise`` for points of type ``P`` and curls of type ``R``, with Warp's
+    defaults (octaves=1, lacunarity=2, gain=0.5) as shorter overloads."""
+    global curlnoise
+
+    @func
+    def curlnoise(state: uint32, p: P, octaves: uint32, lacunarity: float32, gain: float32) -> R:
+        """``curlnoise(state, p, octaves=1, lacunarity=2, gain=0.5)``: divergence-free noise:
+        the curl of one potential in 2-D, of three in 3-D (and 3-D over time)."""
+        s1 = P()
+        s2 = P()
+        s3 = P()
+        freq = float32(1.0)
+        amplitude = float32(1.0)
+        for _i in range(int32(octaves)):
+            pt = freq * p
+            if wp.static(P is vec2):
+                s1 = s1 + amplitude * noise_gradient(state, pt)
             else:
-                s3 = s3 + g
-        amplitude = amplitude * gain
-        freq = freq * lacunarity
-    return vec3(s3[1] - s2[2], s1[2] - s3[0], s2[0] - s1[1])
+                # One gradient per potential; a loop keeps a single copy of the noise code.
+                for j in range(3):
+                    if j == 1:
+                        state = next_potential(state, uint32(CURL_OFFSET_2))
+                    elif j == 2:
+                        state = next_potential(state, uint32(CURL_OFFSET_3))
+                    g = amplitude * noise_gradient(state, pt)
+                    if j == 0:
+                        s1 = s1 + g
+                    elif j == 1:
+                        s2 = s2 + g
+                    else:
+                        s3 = s3 + g
+            amplitude = amplitude * gain
+            freq = freq * lacunarity
+        if wp.static(P is vec2):
+            return vec2(-s1[1], s1[0])
+        else:
+            return vec3(s3[1] - s2[2], s1[2] - s3[0], s2[0] - s1[1])
+
+    @func
+    def curlnoise(state: uint32, p: P) -> R:
+        """``curlnoise(state, p)``: one octave of curl noise."""
+        return curlnoise(state, p, uint32(1), 2.0, 0.5)
+
+    @func
+    def curlnoise(state: uint32, p: P, octaves: uint32) -> R:
+        """``curlnoise(state, p, octaves)``: curl noise, lacunarity 2, gain 0.5."""
+        return curlnoise(state, p, octaves, 2.0, 0.5)
+
+    @func
+    def curlnoise(state: uint32, p: P, octaves: uint32, lacunarity: float32) -> R:
+        """``curlnoise(state, p, octaves, lacunarity)``: curl noise, gain 0.5."""
+        return curlnoise(state, p, octaves, lacunarity, 0.5)
 
 
-@func
-def curlnoise(state: uint32, xyzt: vec4, octaves: uint32, lacunarity: float32,  # noqa: F811
-              gain: float32) -> vec3:  # fmt: skip
-    """``curlnoise(state, xyzt, octaves=1, lacunarity=2, gain=0.5)``: 3-D curl noise over time."""
-    s1 = vec4()
-    s2 = vec4()
-    s3 = vec4()
-    freq = float32(1.0)
-    amplitude = float32(1.0)
-    for _i in range(int32(octaves)):
-        pt = freq * xyzt
-        # One gradient per potential; a loop keeps a single copy of the noise code.
-        for j in range(3):
-            if j == 1:
-                state = next_potential(state, uint32(CURL_OFFSET_2))
-            elif j == 2:
-                state = next_potential(state, uint32(CURL_OFFSET_3))
-            g = amplitude * noise_gradient(state, pt)
-            if j == 0:
-                s1 = s1 + g
-            elif j == 1:
-                s2 = s2 + g
-            else:
-                s3 = s3 + g
-        amplitude = amplitude * gain
-        freq = freq * lacunarity
-    return vec3(s3[1] - s2[2], s1[2] - s3[0], s2[0] - s1[1])
-
-
-# Warp's defaults (octaves=1, lacunarity=2, gain=0.5) as shorter overloads.
-
-
-@func
-def curlnoise(state: uint32, xy: vec2) -> vec2:  # noqa: F811
-    """``curlnoise(state, xy)``: one octave of 2-D curl noise."""
-    return curlnoise(state, xy, uint32(1), 2.0, 0.5)
-
-
-@func
-def curlnoise(state: uint32, xy: vec2, octaves: uint32) -> vec2:  # noqa: F811
-    """``curlnoise(state, xy, octaves)``: 2-D curl noise, lacunarity 2, gain 0.5."""
-    return curlnoise(state, xy, octaves, 2.0, 0.5)
-
-
-@func
-def curlnoise(state: uint32, xy: vec2, octaves: uint32, lacunarity: float32) -> vec2:  # noqa: F811
-    """``curlnoise(state, xy, octaves, lacunarity)``: 2-D curl noise, gain 0.5."""
-    return curlnoise(state, xy, octaves, lacunarity, 0.5)
-
-
-@func
-def curlnoise(state: uint32, xyz: vec3) -> vec3:  # noqa: F811
-    """``curlnoise(state, xyz)``: one octave of 3-D curl noise."""
-    return curlnoise(state, xyz, uint32(1), 2.0, 0.5)
-
-
-@func
-def curlnoise(state: uint32, xyz: vec3, octaves: uint32) -> vec3:  # noqa: F811
-    """``curlnoise(state, xyz, octaves)``: 3-D curl noise, lacunarity 2, gain 0.5."""
-    return curlnoise(state, xyz, octaves, 2.0, 0.5)
-
-
-@func
-def curlnoise(state: uint32, xyz: vec3, octaves: uint32, lacunarity: float32) -> vec3:  # noqa: F811
-    """``curlnoise(state, xyz, octaves, lacunarity)``: 3-D curl noise, gain 0.5."""
-    return curlnoise(state, xyz, octaves, lacunarity, 0.5)
-
-
-@func
-def curlnoise(state: uint32, xyzt: vec4) -> vec3:  # noqa: F811
-    """``curlnoise(state, xyzt)``: one octave of 3-D curl noise over time."""
-    return curlnoise(state, xyzt, uint32(1), 2.0, 0.5)
-
-
-@func
-def curlnoise(state: uint32, xyzt: vec4, octaves: uint32) -> vec3:  # noqa: F811
-    """``curlnoise(state, xyzt, octaves)``: 3-D curl noise over time, lacunarity 2, gain 0.5."""
-    return curlnoise(state, xyzt, octaves, 2.0, 0.5)
-
-
-@func
-def curlnoise(state: uint32, xyzt: vec4, octaves: uint32,  # noqa: F811
-              lacunarity: float32) -> vec3:  # fmt: skip
-    """``curlnoise(state, xyzt, octaves, lacunarity)``: 3-D curl noise over time, gain 0.5."""
-    return curlnoise(state, xyzt, octaves, lacunarity, 0.5)
+for _P, _R in ((vec2, vec2), (vec3, vec3), (vec4, vec3)):
+    _define_curlnoise(_P, _R)
