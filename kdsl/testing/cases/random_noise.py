@@ -50,70 +50,33 @@ def rand_init_offset(seed: wp.array(dtype=wp.int32), offset: wp.array(dtype=wp.i
     out[i] = wp.rand_init(seed[i], offset[i])
 
 
-@wp.kernel
-def randi_stream(seed: wp.array(dtype=wp.int32), offset: wp.array(dtype=wp.int32),
-                 out: wp.array(dtype=wp.int32, ndim=2)):  # fmt: skip
-    i = wp.tid()
-    state = wp.rand_init(seed[i], offset[i])
-    for k in range(4):
-        out[i, k] = wp.randi(state)
+def _stream_kernel(draw, dtype):
+    """A kernel storing four draws of ``draw(state)`` per thread."""
+
+    @wp.kernel
+    def stream(seed: wp.array(dtype=wp.int32), offset: wp.array(dtype=wp.int32),
+               out: wp.array(dtype=dtype, ndim=2)):  # fmt: skip
+        i = wp.tid()
+        state = wp.rand_init(seed[i], offset[i])
+        for k in range(4):
+            out[i, k] = draw(state)
+
+    return stream
 
 
-@wp.kernel
-def randi_range(seed: wp.array(dtype=wp.int32), offset: wp.array(dtype=wp.int32),
-                lo: wp.array(dtype=wp.int32), hi: wp.array(dtype=wp.int32),
-                out: wp.array(dtype=wp.int32, ndim=2)):  # fmt: skip
-    i = wp.tid()
-    state = wp.rand_init(seed[i], offset[i])
-    out[i, 0] = wp.randi(state, lo[i], hi[i])
-    out[i, 1] = wp.randi(state, lo[i], hi[i])
+def _range_kernel(draw, dtype):
+    """A kernel storing two draws of ``draw(state, lo, hi)`` per thread."""
 
+    @wp.kernel
+    def in_range(seed: wp.array(dtype=wp.int32), offset: wp.array(dtype=wp.int32),
+                 lo: wp.array(dtype=dtype), hi: wp.array(dtype=dtype),
+                 out: wp.array(dtype=dtype, ndim=2)):  # fmt: skip
+        i = wp.tid()
+        state = wp.rand_init(seed[i], offset[i])
+        out[i, 0] = draw(state, lo[i], hi[i])
+        out[i, 1] = draw(state, lo[i], hi[i])
 
-@wp.kernel
-def randu_stream(seed: wp.array(dtype=wp.int32), offset: wp.array(dtype=wp.int32),
-                 out: wp.array(dtype=wp.uint32, ndim=2)):  # fmt: skip
-    i = wp.tid()
-    state = wp.rand_init(seed[i], offset[i])
-    for k in range(4):
-        out[i, k] = wp.randu(state)
-
-
-@wp.kernel
-def randu_range(seed: wp.array(dtype=wp.int32), offset: wp.array(dtype=wp.int32),
-                lo: wp.array(dtype=wp.uint32), hi: wp.array(dtype=wp.uint32),
-                out: wp.array(dtype=wp.uint32, ndim=2)):  # fmt: skip
-    i = wp.tid()
-    state = wp.rand_init(seed[i], offset[i])
-    out[i, 0] = wp.randu(state, lo[i], hi[i])
-    out[i, 1] = wp.randu(state, lo[i], hi[i])
-
-
-@wp.kernel
-def randf_stream(seed: wp.array(dtype=wp.int32), offset: wp.array(dtype=wp.int32),
-                 out: wp.array(dtype=float, ndim=2)):  # fmt: skip
-    i = wp.tid()
-    state = wp.rand_init(seed[i], offset[i])
-    for k in range(4):
-        out[i, k] = wp.randf(state)
-
-
-@wp.kernel
-def randf_range(seed: wp.array(dtype=wp.int32), offset: wp.array(dtype=wp.int32),
-                lo: wp.array(dtype=float), hi: wp.array(dtype=float),
-                out: wp.array(dtype=float, ndim=2)):  # fmt: skip
-    i = wp.tid()
-    state = wp.rand_init(seed[i], offset[i])
-    out[i, 0] = wp.randf(state, lo[i], hi[i])
-    out[i, 1] = wp.randf(state, lo[i], hi[i])
-
-
-@wp.kernel
-def randn_stream(seed: wp.array(dtype=wp.int32), offset: wp.array(dtype=wp.int32),
-                 out: wp.array(dtype=float, ndim=2)):  # fmt: skip
-    i = wp.tid()
-    state = wp.rand_init(seed[i], offset[i])
-    for k in range(4):
-        out[i, k] = wp.randn(state)
+    return in_range
 
 
 def _draws(method, k=4, dtype=None):
@@ -167,26 +130,26 @@ def _seeding_cases():
         Case("rand_init_offset", rand_init_offset, N,
              lambda rng: _seeded(rng, out=np.zeros(N, np.uint32)),
              lambda inp: {"out": R.rand_init(inp["seed"], inp["offset"])}, ("out",)),
-        Case("randi_stream", randi_stream, N,
+        Case("randi_stream", _stream_kernel(wp.randi, wp.int32), N,
              lambda rng: _seeded(rng, out=np.zeros((N, 4), np.int32)), _draws("randi"), ("out",)),
-        Case("randi_range", randi_range, N,
+        Case("randi_range", _range_kernel(wp.randi, wp.int32), N,
              lambda rng: _seeded(rng, **dict(zip(("lo", "hi"), _int_ranges(rng, np.int32))),
                                  out=np.zeros((N, 2), np.int32)),
              _range_ref("randi"), ("out",)),
-        Case("randu_stream", randu_stream, N,
+        Case("randu_stream", _stream_kernel(wp.randu, wp.uint32), N,
              lambda rng: _seeded(rng, out=np.zeros((N, 4), np.uint32)), _draws("randu"), ("out",)),
-        Case("randu_range", randu_range, N,
+        Case("randu_range", _range_kernel(wp.randu, wp.uint32), N,
              lambda rng: _seeded(rng, **dict(zip(("lo", "hi"), _int_ranges(rng, np.uint32))),
                                  out=np.zeros((N, 2), np.uint32)),
              _range_ref("randu"), ("out",)),
-        Case("randf_stream", randf_stream, N,
+        Case("randf_stream", _stream_kernel(wp.randf, float), N,
              lambda rng: _seeded(rng, out=np.zeros((N, 4), np.float32)), _draws("randf"),
              ("out",), tol=(0.0, 0.0)),
-        Case("randf_range", randf_range, N,
+        Case("randf_range", _range_kernel(wp.randf, float), N,
              lambda rng: _seeded(rng, **dict(zip(("lo", "hi"), _float_ranges(rng))),
                                  out=np.zeros((N, 2), np.float32)),
              _range_ref("randf"), ("out",), tol=(0.0, 0.0)),
-        Case("randn_stream", randn_stream, N,
+        Case("randn_stream", _stream_kernel(wp.randn, float), N,
              lambda rng: _seeded(rng, out=np.zeros((N, 4), np.float32)), _draws("randn"),
              ("out",), tol=(1e-5, 1e-6)),
     ]  # fmt: skip
@@ -515,44 +478,24 @@ def _noise_kernel(vtype):
 
 def _pnoise_kernel(dim):
     vtype = _VEC[dim]
-    if dim == 1:
-
-        @wp.kernel
-        def pnoise1(seed: wp.array(dtype=wp.int32), x: wp.array(dtype=vtype),
-                    period: wp.array(dtype=wp.vec4i), out: wp.array(dtype=float)):  # fmt: skip
-            i = wp.tid()
-            out[i] = wp.pnoise(wp.rand_init(seed[i]), x[i], period[i][0])
-
-        return pnoise1
-    if dim == 2:
-
-        @wp.kernel
-        def pnoise2(seed: wp.array(dtype=wp.int32), x: wp.array(dtype=vtype),
-                    period: wp.array(dtype=wp.vec4i), out: wp.array(dtype=float)):  # fmt: skip
-            i = wp.tid()
-            q = period[i]
-            out[i] = wp.pnoise(wp.rand_init(seed[i]), x[i], q[0], q[1])
-
-        return pnoise2
-    if dim == 3:
-
-        @wp.kernel
-        def pnoise3(seed: wp.array(dtype=wp.int32), x: wp.array(dtype=vtype),
-                    period: wp.array(dtype=wp.vec4i), out: wp.array(dtype=float)):  # fmt: skip
-            i = wp.tid()
-            q = period[i]
-            out[i] = wp.pnoise(wp.rand_init(seed[i]), x[i], q[0], q[1], q[2])
-
-        return pnoise3
 
     @wp.kernel
-    def pnoise4(seed: wp.array(dtype=wp.int32), x: wp.array(dtype=vtype),
-                period: wp.array(dtype=wp.vec4i), out: wp.array(dtype=float)):  # fmt: skip
+    def pnoise_kernel(seed: wp.array(dtype=wp.int32), x: wp.array(dtype=vtype),
+                      period: wp.array(dtype=wp.vec4i), out: wp.array(dtype=float)):  # fmt: skip
         i = wp.tid()
         q = period[i]
-        out[i] = wp.pnoise(wp.rand_init(seed[i]), x[i], q[0], q[1], q[2], q[3])
+        state = wp.rand_init(seed[i])
+        # One period per axis of the point.
+        if wp.static(dim == 1):
+            out[i] = wp.pnoise(state, x[i], q[0])
+        elif wp.static(dim == 2):
+            out[i] = wp.pnoise(state, x[i], q[0], q[1])
+        elif wp.static(dim == 3):
+            out[i] = wp.pnoise(state, x[i], q[0], q[1], q[2])
+        else:
+            out[i] = wp.pnoise(state, x[i], q[0], q[1], q[2], q[3])
 
-    return pnoise4
+    return pnoise_kernel
 
 
 def _noise_cases():
@@ -587,25 +530,16 @@ def _noise_cases():
     return out
 
 
-@wp.kernel
-def curl2(seed: wp.int32, x: wp.array(dtype=wp.vec2), octaves: wp.uint32, lacunarity: float,
-          gain: float, out: wp.array(dtype=wp.vec2)):  # fmt: skip
-    i = wp.tid()
-    out[i] = wp.curlnoise(wp.rand_init(seed), x[i], octaves, lacunarity, gain)
+def _curl_kernel(vtype, ctype):
+    """A kernel storing ``curlnoise`` of points of type ``vtype`` (curls of type ``ctype``)."""
 
+    @wp.kernel
+    def curl(seed: wp.int32, x: wp.array(dtype=vtype), octaves: wp.uint32, lacunarity: float,
+             gain: float, out: wp.array(dtype=ctype)):  # fmt: skip
+        i = wp.tid()
+        out[i] = wp.curlnoise(wp.rand_init(seed), x[i], octaves, lacunarity, gain)
 
-@wp.kernel
-def curl3(seed: wp.int32, x: wp.array(dtype=wp.vec3), octaves: wp.uint32, lacunarity: float,
-          gain: float, out: wp.array(dtype=wp.vec3)):  # fmt: skip
-    i = wp.tid()
-    out[i] = wp.curlnoise(wp.rand_init(seed), x[i], octaves, lacunarity, gain)
-
-
-@wp.kernel
-def curl4(seed: wp.int32, x: wp.array(dtype=wp.vec4), octaves: wp.uint32, lacunarity: float,
-          gain: float, out: wp.array(dtype=wp.vec3)):  # fmt: skip
-    i = wp.tid()
-    out[i] = wp.curlnoise(wp.rand_init(seed), x[i], octaves, lacunarity, gain)
+    return curl
 
 
 @wp.kernel
@@ -617,8 +551,8 @@ def curl2_defaults(seed: wp.int32, x: wp.array(dtype=wp.vec2), out: wp.array(dty
 
 def _curl_cases():
     out = []
-    for kern, dim, octaves, lac, gain in ((curl2, 2, 3, 2.0, 0.5), (curl3, 3, 2, 1.7, 0.6),
-                                          (curl4, 4, 1, 2.0, 0.5)):  # fmt: skip
+    for dim, ctype, octaves, lac, gain in ((2, wp.vec2, 3, 2.0, 0.5), (3, wp.vec3, 2, 1.7, 0.6),
+                                           (4, wp.vec3, 1, 2.0, 0.5)):  # fmt: skip
         n = N_SMALL
 
         def make(rng, n=n, dim=dim, octaves=octaves, lac=lac, gain=gain):
@@ -631,6 +565,7 @@ def _curl_cases():
             return {"out": R.curlnoise(st, inp["x"], int(inp["octaves"]), inp["lacunarity"],
                                        inp["gain"])}  # fmt: skip
 
+        kern = _curl_kernel(_VEC[dim], ctype)
         out.append(Case(f"curlnoise_{dim}d", kern, n, make, ref, ("out",), tol=(1e-5, 1e-5)))
 
     def dmake(rng):
