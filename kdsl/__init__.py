@@ -33,7 +33,8 @@ from kdsl.types import (
 from kdsl.stdlib.api import *
 
 # isort: split
-# ``kdsl.autograd`` (Warp's ``warp.autograd``) is built on the runtime above.
-from kdsl import autograd
+# ``kdsl.autograd`` and ``kdsl.utils`` (Warp's ``warp.autograd``, ``warp.utils``) are built
+# on the runtime above.
+from kdsl import autograd, utils
 
 __version__ = "0.1.0"
