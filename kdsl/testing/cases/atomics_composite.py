@@ -22,16 +22,21 @@ def slots(rng: np.random.Generator) -> np.ndarray:
     return integers(rng, N, 0, SLOTS)
 
 
-@wp.kernel
-def atomic_vec3(
-    v: wp.array(dtype=wp.vec3), k: wp.array(dtype=wp.int32), total: wp.array(dtype=wp.vec3),
-    lo: wp.array(dtype=wp.vec3), hi: wp.array(dtype=wp.vec3), neg: wp.array(dtype=wp.vec3),
-):  # fmt: skip
-    i = wp.tid()
-    wp.atomic_add(total, k[i], v[i])
-    wp.atomic_min(lo, k[i], v[i])
-    wp.atomic_max(hi, k[i], v[i])
-    wp.atomic_sub(neg, k[i], v[i])
+def _vec_kernel(vtype):
+    """Componentwise add, min, max and sub of ``vtype`` vectors into contended slots."""
+
+    @wp.kernel
+    def atomic_vec(
+        v: wp.array(dtype=vtype), k: wp.array(dtype=wp.int32), total: wp.array(dtype=vtype),
+        lo: wp.array(dtype=vtype), hi: wp.array(dtype=vtype), neg: wp.array(dtype=vtype),
+    ):  # fmt: skip
+        i = wp.tid()
+        wp.atomic_add(total, k[i], v[i])
+        wp.atomic_min(lo, k[i], v[i])
+        wp.atomic_max(hi, k[i], v[i])
+        wp.atomic_sub(neg, k[i], v[i])
+
+    return atomic_vec
 
 
 def _vec_inputs(np_dtype, length):
@@ -53,28 +58,6 @@ def _vec_ref(ins):
     np.minimum.at(lo, k, v)
     np.maximum.at(hi, k, v)
     return {"total": total, "lo": lo, "hi": hi, "neg": -total}
-
-
-@wp.kernel
-def atomic_vec2d(v: wp.array(dtype=wp.vec2d), k: wp.array(dtype=wp.int32),
-                 total: wp.array(dtype=wp.vec2d), lo: wp.array(dtype=wp.vec2d),
-                 hi: wp.array(dtype=wp.vec2d), neg: wp.array(dtype=wp.vec2d)):  # fmt: skip
-    i = wp.tid()
-    wp.atomic_add(total, k[i], v[i])
-    wp.atomic_min(lo, k[i], v[i])
-    wp.atomic_max(hi, k[i], v[i])
-    wp.atomic_sub(neg, k[i], v[i])
-
-
-@wp.kernel
-def atomic_vec4i(v: wp.array(dtype=wp.vec4i), k: wp.array(dtype=wp.int32),
-                 total: wp.array(dtype=wp.vec4i), lo: wp.array(dtype=wp.vec4i),
-                 hi: wp.array(dtype=wp.vec4i), neg: wp.array(dtype=wp.vec4i)):  # fmt: skip
-    i = wp.tid()
-    wp.atomic_add(total, k[i], v[i])
-    wp.atomic_min(lo, k[i], v[i])
-    wp.atomic_max(hi, k[i], v[i])
-    wp.atomic_sub(neg, k[i], v[i])
 
 
 @wp.kernel
@@ -284,11 +267,11 @@ def _augassign_ref(ins):
 def composite_cases() -> list[Case]:
     """Vectors, matrices, float16, small integers, bools, n-d indices, edge values, +=."""
     cases = [
-        Case("atomic_vec3f_contention", atomic_vec3, N, _vec_inputs(np.float32, 3), _vec_ref,
-             ("total", "lo", "hi", "neg"), requires=("atomics",)),
-        Case("atomic_vec2d_contention", atomic_vec2d, N, _vec_inputs(np.float64, 2), _vec_ref,
-             ("total", "lo", "hi", "neg"), requires=("atomics", "fp64")),
-        Case("atomic_vec4i_contention", atomic_vec4i, N, _vec_inputs(np.int32, 4),
+        Case("atomic_vec3f_contention", _vec_kernel(wp.vec3), N, _vec_inputs(np.float32, 3),
+             _vec_ref, ("total", "lo", "hi", "neg"), requires=("atomics",)),
+        Case("atomic_vec2d_contention", _vec_kernel(wp.vec2d), N, _vec_inputs(np.float64, 2),
+             _vec_ref, ("total", "lo", "hi", "neg"), requires=("atomics", "fp64")),
+        Case("atomic_vec4i_contention", _vec_kernel(wp.vec4i), N, _vec_inputs(np.int32, 4),
              lambda ins: {k: v.astype(np.int64) for k, v in _vec_ref(ins).items()},
              ("total", "lo", "hi", "neg"), requires=("atomics",)),
         Case("atomic_mat22_add_exch", atomic_mat22, 64, _mat_inputs, _mat_ref,
