@@ -14,15 +14,16 @@ removes, merges or reorders them.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from kdsl.errors import KdslRuntimeError
-from kdsl.ir.catalog import CATALOG, CHECK, WRITES
-from kdsl.ir.core import Loc, Module, Operation
+from kdsl.ir.builder import create_op
+from kdsl.ir.catalog import CATALOG, CHECK, WRITES, OpDef
+from kdsl.ir.core import Loc, Module, Operation, Value
 from kdsl.ir.ops_mem import element_index
 from kdsl.ir.types import ArrayType, ScalarType, Type, elem_type
 
@@ -141,6 +142,33 @@ def debug_sites(module: Module) -> dict[int, Site]:
 def next_site(module: Module) -> int:
     """The first site number no check of ``module`` uses."""
     return max(debug_sites(module), default=-1) + 1
+
+
+#: Where a pass wants a check of an access: the check's operands and the op it goes
+#: right before (the access, or an earlier check of it).
+CheckPlan = tuple[list[Value], Operation]
+
+
+def insert_checks(
+    module: Module, check: OpDef, plan: Callable[[Operation], CheckPlan | None]
+) -> bool:
+    """Insert a ``check`` op for every access that ``plan`` asks one for; True if any.
+
+    Each check takes the access's location, the name of its array (``arg``) and the
+    next free ``site`` number. Checks inserted here are not visited themselves.
+    """
+    first = site = next_site(module)
+    for func in module.funcs:
+        for op in list(func.walk()):
+            planned = plan(op)
+            if planned is None:
+                continue
+            operands, anchor = planned
+            arg = op.operands[op.opdef.array_operand].name_hint or "array"
+            new = create_op(check.name, operands, [], {"arg": arg, "site": site}, loc=op.loc)
+            anchor.parent.insert_before(anchor, new)
+            site += 1
+    return site > first
 
 
 def bounds_message(kernel: str, arg: str, index: Sequence[int], shape: Sequence[int]) -> str:

@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import json
 import re
-from typing import Any
+from collections.abc import Callable
+from typing import Any, TypeVar
 
 from kdsl.errors import KdslVerifyError
 from kdsl.ir.builder import create_op
@@ -42,7 +43,10 @@ _TOKEN = re.compile(
 )
 
 
-_COMPOSITE_TYPES = frozenset({"vec", "mat", "quat", "transform", "array", "struct", "handle"})
+T = TypeVar("T")
+
+_NAMED_VECTORS = {cls.keyword: cls for cls in (QuatType, TransformType)}
+_COMPOSITE_TYPES = frozenset({"vec", "mat", "array", "struct", "handle", *_NAMED_VECTORS})
 
 
 class _Tok:
@@ -126,6 +130,28 @@ class Parser:
         self.pos += 1
         return tok
 
+    def parse_list(self, close: str, parse_item: Callable[[], T]) -> list[T]:
+        """Comma-separated items up to ``close`` (consumed); the opening is already read."""
+        items: list[T] = []
+        while not self.accept(close):
+            if items:
+                self.expect(",")
+            items.append(parse_item())
+        return items
+
+    def parse_separated(self, parse_item: Callable[[], T]) -> list[T]:
+        """One item or more, separated by commas."""
+        items = [parse_item()]
+        while self.accept(","):
+            items.append(parse_item())
+        return items
+
+    def parse_typed_name(self, kind: str, what: str) -> tuple[_Tok, Type]:
+        """``name: type`` (a struct field, a function or block argument)."""
+        tok = self.expect_kind(kind, what)
+        self.expect(":")
+        return tok, self.parse_type()
+
     # --- module level --------------------------------------------------------
 
     def parse_module(self) -> Module:
@@ -142,32 +168,20 @@ class Parser:
         self.expect("struct")
         name = self.expect_kind("ident", "a struct name").text
         self.expect("{")
-        fields: list[tuple[str, Type]] = []
-        while not self.accept("}"):
-            if fields:
-                self.expect(",")
-            fname = self.expect_kind("ident", "a field name").text
-            self.expect(":")
-            fields.append((fname, self.parse_type()))
-        self.module.add_struct(StructType(name, tuple(fields)))
+        fields = self.parse_list("}", lambda: self.parse_typed_name("ident", "a field name"))
+        self.module.add_struct(StructType(name, tuple((tok.text, t) for tok, t in fields)))
 
     def parse_func(self) -> Operation:
         start = self.expect("func.func")
         name = self.expect_kind("symbol", "a function name like @f").text[1:]
         self.scopes = [{}]
         self.expect("(")
-        arg_names, arg_types = [], []
-        while not self.accept(")"):
-            if arg_names:
-                self.expect(",")
-            arg_names.append(self.expect_kind("value", "an argument like %x"))
-            self.expect(":")
-            arg_types.append(self.parse_type())
+        args = self.parse_list(")", lambda: self.parse_typed_name("value", "an argument like %x"))
         self.expect("->")
         res_types = self.parse_type_list_parens()
         attrs = self.parse_attrs() if self.at_attrs() else {}
-        block = Block(arg_types, [self.hint(t.text) for t in arg_names])
-        for tok, arg in zip(arg_names, block.args):
+        block = Block([t for _, t in args], [self.hint(tok.text) for tok, _ in args])
+        for (tok, _), arg in zip(args, block.args):
             self.define(tok, arg)
         attrs = {"sym_name": name, **attrs, "res_types": res_types}
         self.expect("{")
@@ -187,24 +201,18 @@ class Parser:
         start = self.tok
         result_toks: list[_Tok] = []
         if self.tok.kind == "value":
-            result_toks.append(self.expect_kind("value", "a value"))
-            while self.accept(","):
-                result_toks.append(self.expect_kind("value", "a value"))
+            result_toks = self.parse_separated(lambda: self.expect_kind("value", "a value"))
             self.expect("=")
         name_tok = self.expect_kind("ident", "an op name")
         if name_tok.text not in CATALOG:
             raise self.error("unknown op", name_tok)
         operands: list[Value] = []
         if self.tok.kind == "value":
-            operands.append(self.use(self.expect_kind("value", "a value")))
-            while self.accept(","):
-                operands.append(self.use(self.expect_kind("value", "a value")))
+            operands = self.parse_separated(lambda: self.use(self.expect_kind("value", "a value")))
         attrs = self.parse_attrs() if self.at_attrs() else {}
         result_types: list[Type] = []
         if self.accept(":"):
-            result_types.append(self.parse_type())
-            while self.accept(","):
-                result_types.append(self.parse_type())
+            result_types = self.parse_separated(self.parse_type)
         if len(result_types) != len(result_toks):
             raise self.error(
                 f"{name_tok.text} names {len(result_toks)} results but gives "
@@ -231,13 +239,12 @@ class Parser:
         if self.accept("^"):
             self.expect_kind("ident", "a block label")
             self.expect("(")
-            while not self.accept(")"):
-                if block.args:
-                    self.expect(",")
-                tok = self.expect_kind("value", "a block argument")
-                self.expect(":")
-                arg = block.add_arg(self.parse_type(), self.hint(tok.text))
-                self.define(tok, arg)
+
+            def block_arg() -> None:
+                tok, t = self.parse_typed_name("value", "a block argument")
+                self.define(tok, block.add_arg(t, self.hint(tok.text)))
+
+            self.parse_list(")", block_arg)
             self.expect(":")
         self.parse_ops_until_brace(block)
         self.scopes.pop()
@@ -269,14 +276,12 @@ class Parser:
 
     def parse_attrs(self) -> dict[str, Any]:
         self.expect("{")
-        attrs: dict[str, Any] = {}
-        while not self.accept("}"):
-            if attrs:
-                self.expect(",")
-            key = self.expect_kind("ident", "an attribute name").text
-            self.expect("=")
-            attrs[key] = self.parse_attr_value()
-        return attrs
+        return dict(self.parse_list("}", self.parse_attr))
+
+    def parse_attr(self) -> tuple[str, Any]:
+        key = self.expect_kind("ident", "an attribute name").text
+        self.expect("=")
+        return key, self.parse_attr_value()
 
     def parse_attr_value(self) -> Any:
         tok = self.tok
@@ -291,12 +296,7 @@ class Parser:
             self.expect("inf")
             return float("-inf")
         if self.accept("["):
-            items: list[Any] = []
-            while not self.accept("]"):
-                if items:
-                    self.expect(",")
-                items.append(self.parse_attr_value())
-            return items
+            return self.parse_list("]", self.parse_attr_value)
         words = {"true": True, "false": False, "inf": float("inf"), "nan": float("nan")}
         if tok.kind == "ident" and tok.text in words:
             self.pos += 1
@@ -310,12 +310,7 @@ class Parser:
 
     def parse_type_list_parens(self) -> list[Type]:
         self.expect("(")
-        types: list[Type] = []
-        while not self.accept(")"):
-            if types:
-                self.expect(",")
-            types.append(self.parse_type())
-        return types
+        return self.parse_list(")", self.parse_type)
 
     def parse_int(self) -> int:
         tok = self.expect_kind("number", "an integer")
@@ -339,10 +334,8 @@ class Parser:
             c = self.parse_int()
             self.expect(",")
             t = MatrixType(r, c, self.parse_scalar())
-        elif name == "quat":
-            t = QuatType(self.parse_scalar())
-        elif name == "transform":
-            t = TransformType(self.parse_scalar())
+        elif name in _NAMED_VECTORS:
+            t = _NAMED_VECTORS[name](self.parse_scalar())
         elif name == "array":
             dtype = self.parse_type()
             self.expect(",")

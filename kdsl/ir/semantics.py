@@ -16,6 +16,7 @@ rounding do in kdsl. Every backend must match them (the conformance suite checks
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -50,9 +51,12 @@ def cast_scalar_array(x: np.ndarray, to: ScalarType) -> np.ndarray:
             t = np.trunc(np.where(np.isnan(x), 0.0, x.astype(np.float64)))
             # float(info.max) of a 64-bit type rounds up past the range, so compare
             # with >= and pick the exact bound.
-            inner = np.clip(t, float(info.min), float(info.max)).astype(to.np_dtype, casting="unsafe")
-            return np.where(t >= float(info.max), info.max,
-                            np.where(t <= float(info.min), info.min, inner)).astype(to.np_dtype)
+            inner = np.clip(t, float(info.min), float(info.max)).astype(
+                to.np_dtype, casting="unsafe"
+            )
+            return np.where(
+                t >= float(info.max), info.max, np.where(t <= float(info.min), info.min, inner)
+            ).astype(to.np_dtype)
     if x.dtype.kind == "b":
         return x.astype(to.np_dtype)
     # Integer to integer: wrap through the unsigned width.
@@ -61,35 +65,33 @@ def cast_scalar_array(x: np.ndarray, to: ScalarType) -> np.ndarray:
     )
 
 
-def int_div(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """C-style integer division (truncate toward zero); division by zero gives 0."""
-    zero = b == 0
-    safe_b = np.where(zero, 1, b).astype(b.dtype)
-    with np.errstate(all="ignore"):
-        q = np.floor_divide(a, safe_b)
-        r = a - q * safe_b
-        if a.dtype.kind == "i":
-            fix = (r != 0) & ((a < 0) != (safe_b < 0))
-            q = np.where(fix, q + 1, q).astype(a.dtype)
-    return np.where(zero, 0, q).astype(a.dtype)
+def _total(fn: Callable[[np.ndarray, np.ndarray], np.ndarray]):
+    """Integer ``fn(a, b)`` made total: it never sees a zero ``b`` and gives 0 there."""
+
+    def apply(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        zero = b == 0
+        safe_b = np.where(zero, 1, b).astype(b.dtype)
+        with np.errstate(all="ignore"):
+            out = fn(a, safe_b)
+        return np.where(zero, 0, out).astype(a.dtype)
+
+    return apply
 
 
-def int_floordiv(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Python-style floor division for integers; division by zero gives 0."""
-    zero = b == 0
-    safe_b = np.where(zero, 1, b).astype(b.dtype)
-    with np.errstate(all="ignore"):
-        q = np.floor_divide(a, safe_b)
-    return np.where(zero, 0, q).astype(a.dtype)
+def _trunc_div(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    q = np.floor_divide(a, b)
+    if a.dtype.kind == "i":
+        fix = (a - q * b != 0) & ((a < 0) != (b < 0))
+        q = np.where(fix, q + 1, q).astype(a.dtype)
+    return q
 
 
-def int_mod(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """C-style remainder (sign of the dividend); modulo zero gives 0."""
-    zero = b == 0
-    safe_b = np.where(zero, 1, b).astype(b.dtype)
-    with np.errstate(all="ignore"):
-        r = np.fmod(a, safe_b)
-    return np.where(zero, 0, r).astype(a.dtype)
+#: C-style integer division (truncate toward zero); division by zero gives 0.
+int_div = _total(_trunc_div)
+#: Python-style floor division for integers; division by zero gives 0.
+int_floordiv = _total(np.floor_divide)
+#: C-style remainder (sign of the dividend); modulo zero gives 0.
+int_mod = _total(np.fmod)
 
 
 def shift_left(a: np.ndarray, s: np.ndarray) -> np.ndarray:
@@ -114,8 +116,9 @@ def round_half_away(x: np.ndarray) -> np.ndarray:
     return np.where(frac >= 0.5, t + np.sign(x), t).astype(x.dtype)
 
 
-
-def _signed_zero_fix(a: np.ndarray, b: np.ndarray, r: np.ndarray, negative: np.ndarray) -> np.ndarray:
+def _signed_zero_fix(
+    a: np.ndarray, b: np.ndarray, r: np.ndarray, negative: np.ndarray
+) -> np.ndarray:
     both_zero = (a == 0) & (b == 0)
     zero = np.where(negative, -0.0, 0.0).astype(r.dtype)
     return np.where(both_zero, zero, r).astype(r.dtype)

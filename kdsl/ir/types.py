@@ -222,27 +222,37 @@ class MatrixType(Type):
 
 
 @dataclass(frozen=True, init=False)
-class QuatType(VectorType):
-    """A quaternion (x, y, z, w): stored like a 4-vector, typed apart from one."""
+class NamedVectorType(VectorType):
+    """A vector of a fixed length with a name of its own, typed apart from ``vec``.
+
+    Subclasses give the ``keyword`` of the text form (``quat<f32>``) and the length.
+    """
+
+    keyword: ClassVar[str]
+    fixed_length: ClassVar[int]
 
     def __init__(self, elem: ScalarType) -> None:
-        object.__setattr__(self, "length", 4)
+        object.__setattr__(self, "length", self.fixed_length)
         object.__setattr__(self, "elem", elem)
 
     def __str__(self) -> str:
-        return f"quat<{self.elem}>"
+        return f"{self.keyword}<{self.elem}>"
 
 
 @dataclass(frozen=True, init=False)
-class TransformType(VectorType):
+class QuatType(NamedVectorType):
+    """A quaternion (x, y, z, w): stored like a 4-vector, typed apart from one."""
+
+    keyword: ClassVar[str] = "quat"
+    fixed_length: ClassVar[int] = 4
+
+
+@dataclass(frozen=True, init=False)
+class TransformType(NamedVectorType):
     """A rigid transform (p.x, p.y, p.z, q.x, q.y, q.z, q.w): 7 scalars."""
 
-    def __init__(self, elem: ScalarType) -> None:
-        object.__setattr__(self, "length", 7)
-        object.__setattr__(self, "elem", elem)
-
-    def __str__(self) -> str:
-        return f"transform<{self.elem}>"
+    keyword: ClassVar[str] = "transform"
+    fixed_length: ClassVar[int] = 7
 
 
 @dataclass(frozen=True)
@@ -308,10 +318,8 @@ def with_elem(t: Type, elem: ScalarType) -> Type:
     """``t`` with its scalar element type replaced (used by casts and comparisons)."""
     if isinstance(t, ScalarType):
         return elem
-    if isinstance(t, QuatType):
-        return QuatType(elem)
-    if isinstance(t, TransformType):
-        return TransformType(elem)
+    if isinstance(t, NamedVectorType):
+        return type(t)(elem)
     if isinstance(t, VectorType):
         return VectorType(t.length, elem)
     if isinstance(t, MatrixType):

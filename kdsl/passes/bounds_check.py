@@ -19,8 +19,7 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 from kdsl.ir import Module, Operation
-from kdsl.ir.builder import create_op
-from kdsl.ir.ops_debug import CHECK_BOUNDS, next_site
+from kdsl.ir.ops_debug import CHECK_BOUNDS, CheckPlan, insert_checks
 from kdsl.passes.manager import ModulePass
 
 
@@ -31,6 +30,16 @@ def _already_checked(op: Operation, operands: list) -> bool:
     return prev is not None and prev.opdef is CHECK_BOUNDS and list(prev.operands) == operands
 
 
+def _plan(op: Operation) -> CheckPlan | None:
+    at = op.opdef.array_operand
+    if at is None:
+        return None
+    operands = list(op.operands[at:])
+    if _already_checked(op, operands):
+        return None
+    return operands, op
+
+
 @dataclass(frozen=True)
 class BoundsCheckPass(ModulePass):
     """Insert ``kd.check_bounds`` before array accesses (see the module docstring)."""
@@ -38,21 +47,4 @@ class BoundsCheckPass(ModulePass):
     name: ClassVar[str] = "bounds-check"
 
     def apply(self, module: Module) -> bool:
-        site = next_site(module)
-        changed = False
-        for func in module.funcs:
-            for op in list(func.walk()):
-                at = op.opdef.array_operand
-                if at is None:
-                    continue
-                operands = list(op.operands[at:])
-                if _already_checked(op, operands):
-                    continue
-                arg = operands[0].name_hint or "array"
-                check = create_op(
-                    CHECK_BOUNDS.name, operands, [], {"arg": arg, "site": site}, loc=op.loc
-                )
-                op.parent.insert_before(op, check)
-                site += 1
-                changed = True
-        return changed
+        return insert_checks(module, CHECK_BOUNDS, _plan)

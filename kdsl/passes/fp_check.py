@@ -15,8 +15,7 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 from kdsl.ir import Module, Operation, Value
-from kdsl.ir.builder import create_op
-from kdsl.ir.ops_debug import CHECK_BOUNDS, CHECK_FINITE, next_site
+from kdsl.ir.ops_debug import CHECK_BOUNDS, CHECK_FINITE, CheckPlan, insert_checks
 from kdsl.ir.types import MatrixType, ScalarType, Type, VectorType
 from kdsl.passes.manager import ModulePass
 
@@ -40,6 +39,20 @@ def _already_checked(op: Operation, value: Value) -> bool:
     return False
 
 
+def _plan(op: Operation) -> CheckPlan | None:
+    at = op.opdef.stored_operand
+    if at is None or not is_float_value(op.operands[at].type):
+        return None
+    value = op.operands[at]
+    if _already_checked(op, value):
+        return None
+    # Keep the bounds check right before its access (its idempotence test).
+    pos = op.parent.ops.index(op)
+    if pos > 0 and op.parent.ops[pos - 1].opdef is CHECK_BOUNDS:
+        return [value], op.parent.ops[pos - 1]
+    return [value], op
+
+
 @dataclass(frozen=True)
 class FpCheckPass(ModulePass):
     """Insert ``kd.check_finite`` before float stores (see the module docstring)."""
@@ -47,30 +60,4 @@ class FpCheckPass(ModulePass):
     name: ClassVar[str] = "fp-check"
 
     def apply(self, module: Module) -> bool:
-        site = next_site(module)
-        changed = False
-        for func in module.funcs:
-            for op in list(func.walk()):
-                at = op.opdef.stored_operand
-                if at is None or not is_float_value(op.operands[at].type):
-                    continue
-                value = op.operands[at]
-                if _already_checked(op, value):
-                    continue
-                arg = op.operands[op.opdef.array_operand].name_hint or "array"
-                check = create_op(
-                    CHECK_FINITE.name,
-                    [value],
-                    [],
-                    {"arg": arg, "site": site},
-                    loc=op.loc,
-                )
-                anchor = op
-                # Keep the bounds check right before its access (its idempotence test).
-                pos = op.parent.ops.index(op)
-                if pos > 0 and op.parent.ops[pos - 1].opdef is CHECK_BOUNDS:
-                    anchor = op.parent.ops[pos - 1]
-                op.parent.insert_before(anchor, check)
-                site += 1
-                changed = True
-        return changed
+        return insert_checks(module, CHECK_FINITE, _plan)
