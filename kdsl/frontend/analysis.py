@@ -67,9 +67,7 @@ def assigned_names(stmts: list[ast.stmt]) -> set[str]:
     return v.names
 
 
-def call_rebinds(
-    nodes: list[ast.AST], positions: Callable[[ast.Call], set[int]]
-) -> set[str]:
+def call_rebinds(nodes: list[ast.AST], positions: Callable[[ast.Call], set[int]]) -> set[str]:
     """Local names that calls with in-out parameters may rebind (``randf(state)``).
 
     ``positions(call)`` gives the argument positions the callee writes back

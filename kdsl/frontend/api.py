@@ -6,7 +6,8 @@ gradients) and every builtin of ``kdsl.frontend.builtins.BUILTINS``
 (``wp.sin``, ``wp.dot``, ``wp.atomic_add``, ...).
 """
 
-from kdsl.frontend.builtins import BUILTINS, Builtin
+from kdsl.frontend.builtins import BUILTINS
+from kdsl.frontend.builtins_base import Builtin
 from kdsl.frontend.custom_grad import adjoint, func_grad, func_replay
 from kdsl.frontend.inout import inout
 from kdsl.frontend.kernel import Function, Kernel, func, kernel

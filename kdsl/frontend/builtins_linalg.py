@@ -13,8 +13,9 @@ from __future__ import annotations
 import importlib
 from typing import Any
 
+from kdsl import types as public
 from kdsl.errors import KdslTypeError
-from kdsl.frontend.builtins import _define
+from kdsl.frontend.builtins_base import BuiltinTable
 from kdsl.frontend.builtins_math import assemble, components, require_float
 from kdsl.frontend.emitter import component_count
 from kdsl.frontend.values import describe, is_weak
@@ -30,6 +31,8 @@ from kdsl.ir.types import (
     VectorType,
     elem_type,
 )
+
+TABLE = BuiltinTable(__name__)
 
 
 def _vector(em, x: Any, name: str, node, float_only: bool = False) -> Value:
@@ -78,15 +81,15 @@ def _componentwise(op: str, name: str):
     return lower
 
 
-_define("cw_mul", (2, 2), "Componentwise product of two vectors or matrices of one type.",
-        "vector")(_componentwise("arith.mul", "cw_mul"))  # fmt: skip
-_define("cw_div", (2, 2), "Componentwise quotient of two vectors or matrices of one type "
-        "(integer components follow ``/``: division by zero gives 0).", "vector")(
+TABLE.define("cw_mul", (2, 2), "Componentwise product of two vectors or matrices of one type.",
+             "vector")(_componentwise("arith.mul", "cw_mul"))  # fmt: skip
+TABLE.define("cw_div", (2, 2), "Componentwise quotient of two vectors or matrices of one type "
+             "(integer components follow ``/``: division by zero gives 0).", "vector")(
     _componentwise("arith.div", "cw_div"))  # fmt: skip
 
 
-@_define("ddot", (2, 2), "Double dot product of two matrices: the sum of their componentwise "
-         "product.", "vector")  # fmt: skip
+@TABLE.define("ddot", (2, 2), "Double dot product of two matrices: the sum of their componentwise "
+              "product.", "vector")  # fmt: skip
 def _ddot(em, args, node):
     a, b = _same_composites(em, args, "ddot", node)
     if not isinstance(a.type, MatrixType):
@@ -99,19 +102,19 @@ def _diagonal(em, m: Value, node) -> list[Value]:
             for i in range(m.type.rows)]  # fmt: skip
 
 
-@_define("trace", (1, 1), "Sum of the diagonal of a square matrix.", "vector")
+@TABLE.define("trace", (1, 1), "Sum of the diagonal of a square matrix.", "vector")
 def _trace(em, args, node):
     return _sum(em, _diagonal(em, _matrix(em, args[0], "trace", node, square=True), node), node)
 
 
-@_define("get_diag", (1, 1), "The diagonal of a square matrix, as a vector.", "vector")
+@TABLE.define("get_diag", (1, 1), "The diagonal of a square matrix, as a vector.", "vector")
 def _get_diag(em, args, node):
     m = _matrix(em, args[0], "get_diag", node, square=True)
     return assemble(em, m.type.row_type, _diagonal(em, m, node), node)
 
 
-@_define("diag", (1, 1), "The square matrix with vector ``v`` on its diagonal, zeros elsewhere.",
-         "vector")  # fmt: skip
+@TABLE.define("diag", (1, 1), "The square matrix with vector ``v`` on its diagonal, zeros "
+              "elsewhere.", "vector")  # fmt: skip
 def _diag(em, args, node):
     v = _vector(em, args[0], "diag", node)
     n, et = v.type.length, v.type.elem
@@ -121,8 +124,8 @@ def _diag(em, args, node):
     return assemble(em, MatrixType(n, n, et), parts, node)
 
 
-@_define("skew", (1, 1), "The skew-symmetric matrix of a 3-vector: ``skew(a) @ b == cross(a, b)``.",
-         "vector")  # fmt: skip
+@TABLE.define("skew", (1, 1), "The skew-symmetric matrix of a 3-vector: "
+              "``skew(a) @ b == cross(a, b)``.", "vector")  # fmt: skip
 def _skew(em, args, node):
     v = _vector(em, args[0], "skew", node)
     if v.type.length != 3:
@@ -138,10 +141,8 @@ def _skew(em, args, node):
 
 
 def _dtype(em, x: Any, name: str, node) -> ScalarType:
-    from kdsl.types import type_of
-
     try:
-        t = type_of(x)
+        t = public.type_of(x)
     except (TypeError, KeyError):
         t = None
     if not isinstance(t, ScalarType):
@@ -157,8 +158,8 @@ def _static_int(em, x: Any, what: str, node) -> int:
     return x
 
 
-@_define("identity", (0, 2), "``identity(n, dtype)``: the n x n identity matrix of ``dtype``.",
-         "vector", keywords=("n", "dtype"))  # fmt: skip
+@TABLE.define("identity", (0, 2), "``identity(n, dtype)``: the n x n identity matrix of ``dtype``.",
+              "vector", keywords=("n", "dtype"))  # fmt: skip
 def _identity(em, args, node, **kw):
     given = dict(zip(("n", "dtype"), args))
     if set(given) & set(kw):
@@ -193,23 +194,23 @@ def _arg_extreme(name: str, pred: str):
     return lower
 
 
-_define("argmin", (1, 1), "Index (uint32) of the smallest component of a vector: the first on "
-        "ties; NaN components are skipped (all NaN gives 0).", "vector")(
+TABLE.define("argmin", (1, 1), "Index (uint32) of the smallest component of a vector: the first on "
+             "ties; NaN components are skipped (all NaN gives 0).", "vector")(
     _arg_extreme("argmin", "lt"))  # fmt: skip
-_define("argmax", (1, 1), "Index (uint32) of the largest component of a vector: the first on "
-        "ties; NaN components are skipped (all NaN gives 0).", "vector")(
+TABLE.define("argmax", (1, 1), "Index (uint32) of the largest component of a vector: the first on "
+             "ties; NaN components are skipped (all NaN gives 0).", "vector")(
     _arg_extreme("argmax", "gt"))  # fmt: skip
 
 
-@_define("norm_l1", (1, 1), "L1 norm of a float vector: the sum of ``abs`` of its components.",
-         "vector")  # fmt: skip
+@TABLE.define("norm_l1", (1, 1), "L1 norm of a float vector: the sum of ``abs`` of its components.",
+              "vector")  # fmt: skip
 def _norm_l1(em, args, node):
     v = _vector(em, args[0], "norm_l1", node, float_only=True)
     return _sum(em, components(em, em.emit("math.abs", v, node=node), node), node)
 
 
-@_define("norm_l2", (1, 1), "L2 (Euclidean) norm of a float vector; the same as ``length``.",
-         "vector")  # fmt: skip
+@TABLE.define("norm_l2", (1, 1), "L2 (Euclidean) norm of a float vector; the same as ``length``.",
+              "vector")  # fmt: skip
 def _norm_l2(em, args, node):
     return em.emit("vec.length", _vector(em, args[0], "norm_l2", node, float_only=True), node=node)
 
@@ -223,8 +224,8 @@ def _vec_delta(em, args, name: str, node) -> tuple[Value, Value]:
     return v, delta
 
 
-@_define("norm_huber", (2, 2), "Huber norm: ``0.5*|v|^2`` if ``|v| <= delta`` else "
-         "``delta*(|v| - 0.5*delta)``.", "vector")  # fmt: skip
+@TABLE.define("norm_huber", (2, 2), "Huber norm: ``0.5*|v|^2`` if ``|v| <= delta`` else "
+              "``delta*(|v| - 0.5*delta)``.", "vector")  # fmt: skip
 def _norm_huber(em, args, node):
     v, delta = _vec_delta(em, args, "norm_huber", node)
     n = em.emit("vec.length", v, node=node)
@@ -242,15 +243,15 @@ def _pseudo_huber(em, v: Value, delta: Value, node) -> Value:
                     node)  # fmt: skip
 
 
-@_define("norm_pseudo_huber", (2, 2), "Pseudo-Huber norm (Warp's form): "
-         "``delta * sqrt(1 + |v|^2 / delta^2)``.", "vector")  # fmt: skip
+@TABLE.define("norm_pseudo_huber", (2, 2), "Pseudo-Huber norm (Warp's form): "
+              "``delta * sqrt(1 + |v|^2 / delta^2)``.", "vector")  # fmt: skip
 def _norm_pseudo_huber(em, args, node):
     v, delta = _vec_delta(em, args, "norm_pseudo_huber", node)
     return _pseudo_huber(em, v, delta, node)
 
 
-@_define("smooth_normalize", (2, 2), "``v / norm_pseudo_huber(v, delta)``: a normalization that "
-         "is smooth at zero.", "vector")  # fmt: skip
+@TABLE.define("smooth_normalize", (2, 2), "``v / norm_pseudo_huber(v, delta)``: a "
+              "normalization that is smooth at zero.", "vector")  # fmt: skip
 def _smooth_normalize(em, args, node):
     v, delta = _vec_delta(em, args, "smooth_normalize", node)
     return em.emit("arith.div", v, _pseudo_huber(em, v, delta, node), node=node)
@@ -274,10 +275,10 @@ def _from_vectors(by_cols: bool):
     return lower
 
 
-_define("matrix_from_rows", (1, 16), "The matrix whose rows are the given vectors (of one type).",
-        "vector")(_from_vectors(False))  # fmt: skip
-_define("matrix_from_cols", (1, 16), "The matrix whose columns are the given vectors (of one "
-        "type).", "vector")(_from_vectors(True))  # fmt: skip
+TABLE.define("matrix_from_rows", (1, 16), "The matrix whose rows are the given vectors (of one "
+             "type).", "vector")(_from_vectors(False))  # fmt: skip
+TABLE.define("matrix_from_cols", (1, 16), "The matrix whose columns are the given vectors (of one "
+             "type).", "vector")(_from_vectors(True))  # fmt: skip
 
 
 def _infer_elem(em, args: list[Any], dtype: Any, name: str, node) -> ScalarType:
@@ -289,8 +290,9 @@ def _infer_elem(em, args: list[Any], dtype: Any, name: str, node) -> ScalarType:
     return F32  # weak literals alone: float32, as Warp
 
 
-@_define("vector", (0, 64), "``vector(*components, length=n, dtype=t)``: a vector built in a "
-         "kernel (zeros without components).", "vector", keywords=("length", "dtype"))  # fmt: skip
+@TABLE.define("vector", (0, 64), "``vector(*components, length=n, dtype=t)``: a vector built "
+              "in a kernel (zeros without components).", "vector",
+              keywords=("length", "dtype"))  # fmt: skip
 def _vector_ctor(em, args, node, length: Any = None, dtype: Any = None):
     et = _infer_elem(em, args, dtype, "vector", node)
     if length is None:
@@ -301,14 +303,20 @@ def _vector_ctor(em, args, node, length: Any = None, dtype: Any = None):
     return em.construct(VectorType(n, et), list(args), node)
 
 
-@_define("matrix", (0, 256), "``matrix(*components, shape=(r, c), dtype=t)``: a matrix built in "
-         "a kernel (zeros without components).", "vector", keywords=("shape", "dtype"))  # fmt: skip
+@TABLE.define("matrix", (0, 256), "``matrix(*components, shape=(r, c), dtype=t)``: a matrix "
+              "built in a kernel (zeros without components).", "vector",
+              keywords=("shape", "dtype"))  # fmt: skip
 def _matrix_ctor(em, args, node, shape: Any = None, dtype: Any = None):
     if not (isinstance(shape, tuple) and len(shape) == 2):
         raise em.error(KdslTypeError, "matrix() needs shape=(rows, cols) as constants", node)
     r, c = (_static_int(em, s, "matrix(): each shape entry", node) for s in shape)
     et = _infer_elem(em, args, dtype, "matrix", node)
     return em.construct(MatrixType(r, c, et), list(args), node)
+
+
+# ``wp.vector`` / ``wp.matrix`` are type factories in Python scope, constructors in kernels.
+TABLE.alias(public.vector, "vector")
+TABLE.alias(public.matrix, "matrix")
 
 
 # --- stdlib-backed ------------------------------------------------------------------
@@ -319,12 +327,16 @@ def _stdlib(module: str, name: str):
     return getattr(importlib.import_module(f"kdsl.stdlib.{module}"), name, None)
 
 
-@_define("determinant", (1, 1), "Determinant of a square 2x2, 3x3 or 4x4 float matrix.", "vector")
+@TABLE.define(
+    "determinant", (1, 1), "Determinant of a square 2x2, 3x3 or 4x4 float matrix.", "vector"
+)
 def _determinant(em, args, node):
     m = _matrix(em, args[0], "determinant", node, square=True)
     require_float(em, m, "determinant", node)
     if m.type.rows > 4:
-        raise em.error(KdslTypeError, f"determinant() takes 2x2 to 4x4 matrices, not {m.type}", node)
+        raise em.error(
+            KdslTypeError, f"determinant() takes 2x2 to 4x4 matrices, not {m.type}", node
+        )
     return em.call_user(_stdlib("linalg", "mat_determinant"), [m], node)
 
 
@@ -337,9 +349,9 @@ _INVERSES: list[tuple[type, str, str]] = [
 ]
 
 
-@_define("inverse", (1, 1), "Inverse of a 2x2, 3x3 or 4x4 float matrix (a singular one, "
-         "``determinant == 0``, gives the zero matrix), quaternion or transform.",
-         "vector")  # fmt: skip
+@TABLE.define("inverse", (1, 1), "Inverse of a 2x2, 3x3 or 4x4 float matrix (a singular one, "
+              "``determinant == 0``, gives the zero matrix), quaternion or transform.",
+              "vector")  # fmt: skip
 def _inverse(em, args, node):
     v = em.value(args[0], node) if not is_weak(args[0]) else None
     for cls, module, fname in _INVERSES:
@@ -358,5 +370,5 @@ def _inverse(em, args, node):
                    f"not {got}", node)  # fmt: skip
 
 
-_define("inverse_approx", (1, 1), "The same as ``inverse`` (kdsl computes it exactly on every "
-        "backend).", "vector")(_inverse)  # fmt: skip
+TABLE.define("inverse_approx", (1, 1), "The same as ``inverse`` (kdsl computes it exactly on every "
+             "backend).", "vector")(_inverse)  # fmt: skip

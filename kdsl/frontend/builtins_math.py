@@ -5,7 +5,7 @@ Each lowers to a few ``arith``/``math`` ops (no op of its own, so every backend 
 autodiff get them for free). Float semantics (see ``docs/semantics.md``): ``clamp``
 gives NaN for a NaN ``x`` (Warp gives the lower bound); the others follow Warp.
 The helpers ``components``/``assemble``/``map_scalar`` work on any scalar, vector or
-matrix value and are shared with ``builtins_linalg``.
+matrix value and are shared with ``builtins_linalg`` and ``builtins_core``.
 """
 
 from __future__ import annotations
@@ -15,10 +15,12 @@ from collections.abc import Callable
 from typing import Any
 
 from kdsl.errors import KdslTypeError
-from kdsl.frontend.builtins import _define, _float_default, _unified
+from kdsl.frontend.builtins_base import BuiltinTable, float_default, unified
 from kdsl.frontend.values import is_weak
 from kdsl.ir import Value
 from kdsl.ir.types import I32, MatrixType, ScalarType, Type, VectorType, elem_type
+
+TABLE = BuiltinTable(__name__)
 
 
 def components(em, v: Value, node) -> list[Value]:
@@ -80,27 +82,27 @@ def nan_passing(em, x: Value, r: Value, node) -> Value:
     return assemble(em, x.type, parts, node)
 
 
-@_define("clamp", (3, 3), "``clamp(x, lo, hi)``: ``min(max(x, lo), hi)``; a NaN ``x`` gives NaN.",
-         "math")  # fmt: skip
+@TABLE.define("clamp", (3, 3), "``clamp(x, lo, hi)``: ``min(max(x, lo), hi)``; a NaN ``x`` "
+              "gives NaN.", "math")  # fmt: skip
 def _clamp(em, args, node):
-    x, lo, hi = _unified(em, args, node)
+    x, lo, hi = unified(em, args, node)
     require_numeric(em, x, "clamp", node)
     r = em.emit("arith.min", em.emit("arith.max", x, lo, node=node), hi, node=node)
     return nan_passing(em, x, r, node)
 
 
 def _float_value(em, x: Any, name: str, node) -> Value:
-    return require_float(em, _float_default(em, x, node), name, node)
+    return require_float(em, float_default(em, x, node), name, node)
 
 
-@_define("lerp", (3, 3), "``lerp(a, b, t)``: ``a * (1 - t) + b * t`` (floats, vectors, matrices, "
-         "quaternions, transforms; ``t`` a scalar).", "math")  # fmt: skip
+@TABLE.define("lerp", (3, 3), "``lerp(a, b, t)``: ``a * (1 - t) + b * t`` (floats, vectors, "
+              "matrices, quaternions, transforms; ``t`` a scalar).", "math")  # fmt: skip
 def _lerp(em, args, node):
     a, b, t = args
     if is_weak(a) and is_weak(b):
         a, b = float(a), float(b)
     if not (is_weak(a) and is_weak(b)):
-        a, b = _unified(em, [a, b], node)
+        a, b = unified(em, [a, b], node)
         require_float(em, a, "lerp", node)
         t = em.value(t, node, want=elem_type(a.type))
     elif is_weak(t):
@@ -109,12 +111,12 @@ def _lerp(em, args, node):
     return em.binop("add", em.binop("mul", a, one_minus_t, node), em.binop("mul", b, t, node), node)
 
 
-@_define("smoothstep", (3, 3), "``smoothstep(a, b, x)``: cubic Hermite ``t*t*(3 - 2*t)`` of "
-         "``t = clamp((x - a) / (b - a), 0, 1)``.", "math")  # fmt: skip
+@TABLE.define("smoothstep", (3, 3), "``smoothstep(a, b, x)``: cubic Hermite ``t*t*(3 - 2*t)`` of "
+              "``t = clamp((x - a) / (b - a), 0, 1)``.", "math")  # fmt: skip
 def _smoothstep(em, args, node):
     if all(is_weak(v) for v in args):
         args = [float(v) for v in args]
-    a, b, x = _unified(em, args, node)
+    a, b, x = unified(em, args, node)
     require_float(em, x, "smoothstep", node)
     t = em.binop("div", em.binop("sub", x, a, node), em.binop("sub", b, a, node), node)
     t = _clamp(em, [t, 0.0, 1.0], node)
@@ -137,13 +139,13 @@ def _indicator(name: str, pred: str) -> Callable:
     return lower
 
 
-_define("step", (1, 1), "1 if ``x < 0`` else 0, in ``x``'s type (so NaN gives 0).", "math")(
+TABLE.define("step", (1, 1), "1 if ``x < 0`` else 0, in ``x``'s type (so NaN gives 0).", "math")(
     _indicator("step", "lt"))  # fmt: skip
-_define("nonzero", (1, 1), "1 if ``x != 0`` else 0, in ``x``'s type (so NaN gives 1).", "math")(
-    _indicator("nonzero", "ne"))  # fmt: skip
+TABLE.define("nonzero", (1, 1), "1 if ``x != 0`` else 0, in ``x``'s type (so NaN gives 1).",
+             "math")(_indicator("nonzero", "ne"))  # fmt: skip
 
 
-@_define("frac", (1, 1), "Fractional part ``x - trunc(x)`` (keeps the sign of ``x``).", "math")
+@TABLE.define("frac", (1, 1), "Fractional part ``x - trunc(x)`` (keeps the sign of ``x``).", "math")
 def _frac(em, args, node):
     x = _float_value(em, args[0], "frac", node)
     return em.emit("arith.sub", x, em.emit("math.trunc", x, node=node), node=node)
@@ -157,13 +159,13 @@ def _scaled(name: str, factor: float) -> Callable:
     return lower
 
 
-_define("degrees", (1, 1), "``x`` radians in degrees: ``x * (180 / pi)``.", "math")(
+TABLE.define("degrees", (1, 1), "``x`` radians in degrees: ``x * (180 / pi)``.", "math")(
     _scaled("degrees", 180.0 / math.pi))  # fmt: skip
-_define("radians", (1, 1), "``x`` degrees in radians: ``x * (pi / 180)``.", "math")(
+TABLE.define("radians", (1, 1), "``x`` degrees in radians: ``x * (pi / 180)``.", "math")(
     _scaled("radians", math.pi / 180.0))  # fmt: skip
 
 
-@_define("bit_count", (1, 1), "Number of set bits of an integer's two's-complement form (int32).",
-         "math")  # fmt: skip
+@TABLE.define("bit_count", (1, 1), "Number of set bits of an integer's two's-complement form "
+              "(int32).", "math")  # fmt: skip
 def _bit_count(em, args, node):
     return em.emit("math.bit_count", em.value(args[0], node), node=node)

@@ -74,7 +74,7 @@ class FunctionCompiler(StatementLowering):
         results = list(op.results)
         inout = overload.inout_params()
         if inout:
-            results, written = results[: len(results) - len(inout)], results[-len(inout):]
+            results, written = results[: len(results) - len(inout)], results[-len(inout) :]
             self.write_back(inout, written, args, node)
         if not results:
             return None

@@ -43,7 +43,7 @@ from kdsl.errors import KdslError, KdslSyntaxError, KdslTypeError, source_line
 from kdsl.frontend.analysis import always_returns
 from kdsl.frontend.compiler import FunctionCompiler
 from kdsl.frontend.inout import static_callee
-from kdsl.frontend.kernel import Function, Overload, _symbol, _Target
+from kdsl.frontend.kernel import CompileTarget, Function, Overload, unique_symbol
 from kdsl.frontend.source import ParsedSource
 from kdsl.ir import Loc, Operation
 from kdsl.ir.types import MatrixType, ScalarType, StructType, Type, VectorType
@@ -164,14 +164,14 @@ def _signatures(fn: Function) -> str:
 # --- the functions as compile targets ---------------------------------------------
 
 
-class CustomTarget(_Target):
+class CustomTarget(CompileTarget):
     """A gradient (``role = "grad"``) or replay function of one primal overload."""
 
     def __init__(self, fn: Callable[..., Any], primal: Function, role: str) -> None:
         self.fn = fn
         self.name = fn.__name__
         self.role = role
-        self.key = _symbol(fn, f"#{role}")
+        self.key = unique_symbol(fn, f"#{role}")
         #: The overload it belongs to (set when the decorator matches the signature).
         self.primal: Overload | None = None
         self.primal_fn = primal

@@ -11,7 +11,8 @@ import numpy as np
 
 from kdsl.errors import KdslError, KdslNameError, KdslSyntaxError, KdslTypeError
 from kdsl.frontend import geometry, structs
-from kdsl.frontend.builtins import PYTHON_ALIASES, PYTHON_CASTS, Builtin, cast
+from kdsl.frontend.builtins import PYTHON_ALIASES, PYTHON_CASTS
+from kdsl.frontend.builtins_base import Builtin, cast
 from kdsl.frontend.emitter import Emitter, component_count
 from kdsl.frontend.static import static
 from kdsl.frontend.structs import is_indexed
@@ -29,13 +30,17 @@ from kdsl.ir.types import (
     VectorType,
 )
 
-_BINOPS = {
+#: Python's binary operators (``ast`` node types) -> the operator names ``binop`` takes;
+#: also the augmented assignments' (``x += y``) in ``statements.py``.
+BINOPS = {
     ast.Add: "add", ast.Sub: "sub", ast.Mult: "mul", ast.Div: "div", ast.FloorDiv: "floordiv",
     ast.Mod: "mod", ast.Pow: "pow", ast.BitAnd: "and", ast.BitOr: "or", ast.BitXor: "xor",
     ast.LShift: "shl", ast.RShift: "shr", ast.MatMult: "matmul",
 }  # fmt: skip
 _CMPOPS = {ast.Eq: "eq", ast.NotEq: "ne", ast.Lt: "lt", ast.LtE: "le", ast.Gt: "gt", ast.GtE: "ge"}
-_COMPONENTS = {"x": 0, "y": 1, "z": 2, "w": 3}
+#: Vector component attributes (``v.x`` ... ``v.w``) -> their index, read here and
+#: assigned in ``statements.py``.
+COMPONENTS = {"x": 0, "y": 1, "z": 2, "w": 3}
 
 
 class ExpressionLowering(Emitter):
@@ -82,8 +87,8 @@ class ExpressionLowering(Emitter):
             return ShapeOf(v)
         if geometry.has_part(t, attr):  # transform.p, transform.q
             return geometry.part(self, v, attr, node)
-        if isinstance(t, VectorType) and attr in _COMPONENTS:
-            k = _COMPONENTS[attr]
+        if isinstance(t, VectorType) and attr in COMPONENTS:
+            k = COMPONENTS[attr]
             if k >= t.length:
                 raise self.error(KdslTypeError, f"a {t} has no component '.{attr}'", node)
             return self.emit("vec.extract", v, self.const(k, I32, node), node=node)
@@ -99,7 +104,7 @@ class ExpressionLowering(Emitter):
     # --- operators ----------------------------------------------------------------
 
     def visit_BinOp(self, node: ast.BinOp) -> Any:
-        op = _BINOPS.get(type(node.op))
+        op = BINOPS.get(type(node.op))
         return self.binop(op, self.visit(node.left), self.visit(node.right), node)
 
     def binop(self, op: str, a: Any, b: Any, node: ast.AST) -> Any:

@@ -8,8 +8,8 @@ this module connects Warp's spellings to it:
   ``-`` stay componentwise, as in Warp;
 - ``t.p`` / ``t.q`` read a transform's translation and rotation, and ``t.p = v`` /
   ``t.q = q`` (also ``t.p += v``) replace them (``part``, ``with_part``);
-- ``normalize(q)`` of a zero quaternion is the identity, as in Warp (a zero vector
-  stays zero);
+- ``normalize(q)`` of a zero quaternion is the identity, as in Warp, and a zero vector
+  stays zero (``normalize_quat``, which ``builtins_core``'s ``normalize`` asks first);
 - the builtins ``quat_identity`` and ``transform_identity`` take a ``dtype``, and
   ``quaternion(...)`` / ``transformation(...)`` (type factories in Python scope)
   build values in kernels, as in Warp.
@@ -20,8 +20,9 @@ from __future__ import annotations
 import ast
 from typing import Any
 
+from kdsl import types as public
 from kdsl.errors import KdslTypeError
-from kdsl.frontend.builtins import BUILTINS, PYTHON_ALIASES, Builtin, Lower
+from kdsl.frontend.builtins_base import BuiltinTable
 from kdsl.frontend.library import library_function
 from kdsl.frontend.values import is_weak
 from kdsl.ir import Value
@@ -41,6 +42,8 @@ _PARTS = {
     "q": ("transform_get_rotation", "transform_set_rotation_copy"),
 }
 
+TABLE = BuiltinTable(__name__)
+
 
 def binop(em, op: str, x: Value, y: Value, node: ast.AST) -> Value | None:
     """``x op y`` for quaternion and transform operands, or None for the generic rule."""
@@ -55,6 +58,14 @@ def binop(em, op: str, x: Value, y: Value, node: ast.AST) -> Value | None:
         return None  # componentwise (scaling, +, -) or a type error from the arith rule
     fn = "quat_multiply" if isinstance(x.type, QuatType) else "transform_multiply"
     return em.call_user(library_function(fn), [x, y], node)
+
+
+def normalize_quat(em, x: Any, node: ast.AST) -> Value | None:
+    """``normalize(x)`` for a quaternion ``x`` (a zero one gives the identity, as in Warp),
+    or None for the generic rule (``vec.normalize``)."""
+    if isinstance(x, Value) and isinstance(x.type, QuatType):
+        return em.call_user(library_function("quat_normalize"), [x], node)
+    return None
 
 
 def has_part(t: Type, attr: str) -> bool:
@@ -80,12 +91,10 @@ def _dtype_arg(em, args: list[Any], kwargs: dict[str, Any], node: ast.AST, name:
 
 def _float_dtype(em, dtype: Any, node: ast.AST, name: str) -> ScalarType:
     """The float type ``dtype`` names (float32 when None), or a located error."""
-    from kdsl.types import type_of
-
     if dtype is None:
         return F32
     try:
-        t = type_of(dtype)
+        t = public.type_of(dtype)
     except TypeError:
         t = None
     if is_weak(dtype) or not (isinstance(t, ScalarType) and t.is_float):
@@ -93,26 +102,15 @@ def _float_dtype(em, dtype: Any, node: ast.AST, name: str) -> ScalarType:
     return t
 
 
-def _define(name: str, doc: str, arity: tuple[int, int], keywords: tuple[str, ...] = ()):
-    def deco(fn: Lower) -> Lower:
-        if name in BUILTINS:
-            raise ValueError(f"builtin {name!r} is defined twice")
-        group = "quaternion" if name.startswith("quat") else "transform"
-        BUILTINS[name] = Builtin(name, fn, doc, arity, group, keywords)
-        return fn
-
-    return deco
-
-
-@_define("quat_identity", "``quat_identity(dtype=float32)``: the identity rotation (0, 0, 0, 1).",
-         (0, 1), ("dtype",))  # fmt: skip
+@TABLE.define("quat_identity", (0, 1), "``quat_identity(dtype=float32)``: the identity rotation "
+              "(0, 0, 0, 1).", "quaternion", ("dtype",))  # fmt: skip
 def _quat_identity(em, args, node, **kwargs):
     t = QuatType(_dtype_arg(em, args, kwargs, node, "quat_identity"))
     return em.construct(t, [0, 0, 0, 1], node)
 
 
-@_define("transform_identity", "``transform_identity(dtype=float32)``: zero translation, "
-         "identity rotation.", (0, 1), ("dtype",))  # fmt: skip
+@TABLE.define("transform_identity", (0, 1), "``transform_identity(dtype=float32)``: zero "
+              "translation, identity rotation.", "transform", ("dtype",))  # fmt: skip
 def _transform_identity(em, args, node, **kwargs):
     t = TransformType(_dtype_arg(em, args, kwargs, node, "transform_identity"))
     return em.construct(t, [0, 0, 0, 0, 0, 0, 1], node)
@@ -126,17 +124,17 @@ def _elem_of(em, args: list[Any], dtype: Any, node: ast.AST, name: str) -> Scala
     return elem_type(typed.type) if typed is not None else F32
 
 
-@_define("quaternion", "``quaternion(x, y, z, w)``, ``quaternion(ijk, real)``, ``quaternion(q)`` "
-         "(a cast) or ``quaternion()`` (zeros), each with an optional ``dtype=``.", (0, 4),
-         ("dtype",))  # fmt: skip
+@TABLE.define("quaternion", (0, 4), "``quaternion(x, y, z, w)``, ``quaternion(ijk, real)``, "
+              "``quaternion(q)`` (a cast) or ``quaternion()`` (zeros), each with an optional "
+              "``dtype=``.", "quaternion", ("dtype",))  # fmt: skip
 def _quaternion(em, args, node, dtype=None):
     t = QuatType(_elem_of(em, args, dtype, node, "quaternion"))
     return em.construct(t, list(args), node)
 
 
-@_define("transformation", "``transformation(p, q)``, ``transformation(p)`` (identity rotation), "
-         "seven components, or ``transformation()`` (zeros), each with an optional ``dtype=``.",
-         (0, 7), ("dtype",))  # fmt: skip
+@TABLE.define("transformation", (0, 7), "``transformation(p, q)``, ``transformation(p)`` "
+              "(identity rotation), seven components, or ``transformation()`` (zeros), each with "
+              "an optional ``dtype=``.", "transform", ("dtype",))  # fmt: skip
 def _transformation(em, args, node, dtype=None):
     t = TransformType(_elem_of(em, args, dtype, node, "transformation"))
     args = list(args)
@@ -149,25 +147,6 @@ def _transformation(em, args, node, dtype=None):
     return em.construct(t, args, node)
 
 
-def _alias_type_factories() -> None:
-    # wp.quaternion / wp.transformation are type factories in Python scope.
-    from kdsl import types as public
-
-    PYTHON_ALIASES[public.quaternion] = BUILTINS["quaternion"]
-    PYTHON_ALIASES[public.transformation] = BUILTINS["transformation"]
-
-
-_alias_type_factories()
-
-
-def _normalize_quats(generic: Lower) -> Lower:
-    def lower(em, args, node):
-        x = args[0]
-        if isinstance(x, Value) and isinstance(x.type, QuatType):
-            return em.call_user(library_function("quat_normalize"), [x], node)
-        return generic(em, args, node)
-
-    return lower
-
-
-BUILTINS["normalize"].lower = _normalize_quats(BUILTINS["normalize"].lower)
+# ``wp.quaternion`` / ``wp.transformation`` are type factories in Python scope.
+TABLE.alias(public.quaternion, "quaternion")
+TABLE.alias(public.transformation, "transformation")

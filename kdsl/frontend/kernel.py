@@ -15,15 +15,20 @@ from kdsl.ir import Module, verify_module
 from kdsl.ir.types import Type
 
 
-def _symbol(fn: Callable[..., Any], extra: str = "") -> str:
-    """A unique, readable symbol: the name plus a short hash of where it is defined."""
+def unique_symbol(fn: Callable[..., Any], extra: str = "") -> str:
+    """A unique, readable symbol for ``fn``: its name plus a short hash of where it is
+    defined (and of ``extra``, which tells apart several targets of one function)."""
     where = f"{fn.__module__}.{fn.__qualname__}:{fn.__code__.co_firstlineno}{extra}"
     digest = hashlib.sha1(where.encode()).hexdigest()[:8]
     return f"{fn.__name__}_{digest}"
 
 
-class _Target:
-    """Shared by kernels and overloads: the parsed source and parameter types."""
+class CompileTarget:
+    """A Python function the frontend compiles: its parsed source and parameter types.
+
+    The base of kernels, ``@kdsl.func`` overloads and custom gradient and replay
+    functions (``custom_grad.CustomTarget``); a subclass sets ``fn``.
+    """
 
     fn: Callable[..., Any]
 
@@ -55,7 +60,7 @@ class _Target:
         return self._inout
 
 
-class Kernel(_Target):
+class Kernel(CompileTarget):
     """A compiled-on-demand kernel. Launch it with ``kdsl.launch``.
 
     Attributes: ``name``, ``key`` (its unique symbol in IR modules), ``arg_names``,
@@ -69,7 +74,7 @@ class Kernel(_Target):
         self.fn = fn
         self.func = fn
         self.name = fn.__name__
-        self.key = _symbol(fn)
+        self.key = unique_symbol(fn)
         self.module = fn.__module__
         self.options = {"enable_backward": True, **options}
         self.arg_names = list(inspect.signature(fn).parameters)
@@ -80,7 +85,7 @@ class Kernel(_Target):
 
     @property
     def arg_types(self) -> list[Type]:  # type: ignore[override]
-        return _trimmed(lambda: _Target.arg_types(self))
+        return _trimmed(lambda: CompileTarget.arg_types(self))
 
     @property
     def tid_ndim(self) -> int:
@@ -99,7 +104,7 @@ class Kernel(_Target):
         unit = ModuleCompiler(self.key)
         fc = FunctionCompiler(unit, self, "kernel")
         try:
-            func = fc.compile(self.key, _Target.arg_types(self))
+            func = fc.compile(self.key, CompileTarget.arg_types(self))
         except KdslError as e:
             raise e.add_context(f"while compiling kernel '{self.name}'") from None
         # The kernel goes first, then the functions in the order they were compiled.
@@ -120,7 +125,7 @@ class Kernel(_Target):
         return f"<kdsl.Kernel {self.name}>"
 
 
-class Overload(_Target):
+class Overload(CompileTarget):
     """One signature of a ``@kdsl.func``.
 
     ``custom_grad``/``custom_replay``: its ``@kdsl.func_grad``/``@kdsl.func_replay``
@@ -130,7 +135,7 @@ class Overload(_Target):
     def __init__(self, fn: Callable[..., Any], index: int) -> None:
         self.fn = fn
         self.name = fn.__name__
-        self.key = _symbol(fn, f"#{index}")
+        self.key = unique_symbol(fn, f"#{index}")
         self.custom_grad: Any = None
         self.custom_replay: Any = None
 

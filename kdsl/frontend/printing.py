@@ -23,7 +23,7 @@ import re
 from typing import Any
 
 from kdsl.errors import KdslSyntaxError, KdslTypeError
-from kdsl.frontend.builtins import BUILTINS, PYTHON_ALIASES, Builtin, cast
+from kdsl.frontend.builtins_base import Builtin, BuiltinTable, cast
 from kdsl.frontend.values import describe, is_weak
 from kdsl.ir import Value
 from kdsl.ir.ops_print import Conversion, FormatError, parse_format
@@ -306,6 +306,7 @@ def _emit_print(em, fmt: str, operands: list[Value], node: ast.AST) -> None:
     em.b.create("kd.print", operands, [], {"format": fmt}, loc=em.loc(node))
 
 
+TABLE = BuiltinTable(__name__)
 #: ``print`` is reached through Python's own ``print`` only (no ``kdsl.print``, which a
 #: star import would let shadow Python's).
 PRINT = AstBuiltin(
@@ -314,11 +315,10 @@ PRINT = AstBuiltin(
     "formats for floats (%g), vectors, matrices, quaternions and transforms.",
     (0, 64), "utility", keywords=("sep", "end"),
 )  # fmt: skip
-PYTHON_ALIASES[py.print] = PRINT
-
-BUILTINS["printf"] = AstBuiltin(
+TABLE.alias(py.print, PRINT)
+TABLE.add(AstBuiltin(
     "printf", _printf,
     "``printf(fmt, *args)``: C-style formatted output; ``fmt`` is a compile-time string "
     "checked against the argument types.",
     (1, 64), "utility",
-)  # fmt: skip
+))  # fmt: skip

@@ -10,7 +10,7 @@ from kdsl.frontend import geometry, structs
 from kdsl.frontend.analysis import BREAK, CONTINUE, RETURN, always_exits, exits
 from kdsl.frontend.builtins import BUILTINS
 from kdsl.frontend.control import BRK, CONT, MAX_UNROLL, RET, ControlFlowLowering
-from kdsl.frontend.expressions import _BINOPS, _COMPONENTS
+from kdsl.frontend.expressions import BINOPS, COMPONENTS
 from kdsl.frontend.static import static
 from kdsl.frontend.structs import is_indexed
 from kdsl.frontend.values import ShapeOf, describe, is_weak
@@ -86,7 +86,7 @@ class StatementLowering(ControlFlowLowering):
         if isinstance(node.op, ast.Add | ast.Sub) and self.atomic_update(node):
             return
         current = self.visit(node.target)
-        op = _BINOPS[type(node.op)]
+        op = BINOPS[type(node.op)]
         self.assign(node.target, self.binop(op, current, self.visit(node.value), node), node)
 
     def atomic_update(self, node: ast.AugAssign) -> bool:
@@ -194,8 +194,8 @@ class StatementLowering(ControlFlowLowering):
             raise self.error(KdslSyntaxError, f"cannot assign to an attribute of {describe(base)}",
                              target)  # fmt: skip
         t = base.type
-        if isinstance(t, VectorType) and target.attr in _COMPONENTS:
-            k = _COMPONENTS[target.attr]
+        if isinstance(t, VectorType) and target.attr in COMPONENTS:
+            k = COMPONENTS[target.attr]
             if k >= t.length:
                 raise self.error(KdslTypeError, f"a {t} has no component '.{target.attr}'", target)
             v = self.value(value, target, want=t.elem)
