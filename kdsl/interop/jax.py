@@ -10,7 +10,6 @@ error. JAX is imported only when one of these functions runs.
 
 from __future__ import annotations
 
-import sys
 from typing import Any
 
 import numpy as np
@@ -20,23 +19,20 @@ from kdsl.interop.dlpack import Exporter, from_dlpack
 from kdsl.interop.dtypes import (
     InteropDeviceError,
     InteropTypeError,
-    kdsl_scalar,
     public_scalar,
     scalar_from_numpy_dtype,
 )
+from kdsl.interop.frameworks import Framework
 from kdsl.runtime.array import array
 from kdsl.runtime.device import Device, get_device
 
-
-def _jax() -> Any:
-    import jax
-
-    return jax
+JAX = Framework("JAX", "jax")
+_jax = JAX.load
 
 
 def is_tracer(value: Any) -> bool:
     """True for a JAX tracer (an abstract value inside jit/grad/vmap); never imports JAX."""
-    jax = sys.modules.get("jax")
+    jax = JAX.loaded()
     if jax is None:
         return False
     tracer = getattr(getattr(jax, "core", None), "Tracer", None)
@@ -66,14 +62,8 @@ def device_from_jax(jax_device: Any) -> Device:
         return get_device("cpu")
     if platform in ("gpu", "cuda"):
         index = getattr(jax_device, "local_hardware_id", None)
-        index = jax_device.id if index is None else index
-        try:
-            return get_device(f"cuda:{index}")
-        except KdslError as e:
-            raise InteropDeviceError(f"JAX device {jax_device}: {e.message}") from None
-    raise InteropDeviceError(
-        f"JAX device {jax_device!r} has no kdsl equivalent (kdsl runs on 'cpu' and 'cuda:N')"
-    )
+        return JAX.cuda_device(jax_device.id if index is None else index, jax_device)
+    raise JAX.no_device(f"JAX device {jax_device!r}")
 
 
 def device_to_jax(warp_device: Any) -> Any:
@@ -103,7 +93,7 @@ def dtype_from_jax(jax_dtype: Any) -> type:
 
 def dtype_to_jax(warp_dtype: Any) -> Any:
     """The JAX scalar type (``jax.numpy.float32``...) of a kdsl scalar type."""
-    return getattr(_jax().numpy, kdsl_scalar(warp_dtype, "JAX").jax)
+    return JAX.dtype_to(warp_dtype, _jax().numpy)
 
 
 def from_jax(jax_array: Any, dtype: Any = None) -> array:

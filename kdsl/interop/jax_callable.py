@@ -28,13 +28,11 @@ import inspect
 from collections.abc import Callable
 from typing import Any
 
-import numpy as np
-
 from kdsl.errors import KdslError
 from kdsl.interop import jax_ffi as F
 from kdsl.interop import xla_ffi
 from kdsl.runtime.array import array
-from kdsl.runtime.device import Device, get_device
+from kdsl.runtime.device import Device
 
 
 class GraphMode(enum.IntEnum):
@@ -68,7 +66,7 @@ def _param_types(func: Callable[..., Any], what: str) -> tuple[list[str], list[A
     return names, types
 
 
-class FfiCallable:
+class FfiCallable(F.FfiTarget):
     """A Python function callable from JAX (made by ``jax_callable``)."""
 
     def __init__(
@@ -82,21 +80,14 @@ class FfiCallable:
     ) -> None:
         self.func = func
         fname = getattr(func, "__name__", type(func).__name__)
-        self.what = f"jax_callable '{fname}'"
-        names, types = _param_types(func, self.what)
-        self.inputs, self.outputs = F.split_params(
-            self.what, names, types, num_outputs, in_out_argnames
-        )
+        what = f"jax_callable '{fname}'"
+        names, types = _param_types(func, what)
         self.graph_mode = GraphMode(graph_mode)
-        self.vmap_method = vmap_method
-        self.output_dims = output_dims
-        arrays = [p for p in self.inputs if p.is_array]
-        self.in_out = [p for p in arrays if p.in_out]
-        self.aliases = {arrays.index(p): j for j, p in enumerate(self.in_out)}
-        self.calls = F.CallTable()
         self.graphs: dict[Any, Any] = {}  # GraphMode.KDSL: one CUDA graph per call and buffers
-        self.name = F.unique_name("callable", fname)
-        F.register_target(self.name, self._execute, self._traits)
+        super().__init__(
+            what, names, types, num_outputs, in_out_argnames, vmap_method, output_dims,
+            F.unique_name("callable", fname),
+        )  # fmt: skip
 
     def _traits(self, platform: str) -> int:
         if platform == "CUDA" and self.graph_mode is GraphMode.JAX:
@@ -106,45 +97,17 @@ class FfiCallable:
     def __call__(self, *args: Any, output_dims: Any = None, vmap_method: Any = None) -> list[Any]:
         """Trace a call: returns the outputs (a list; in-out arrays first)."""
         jax = F.jax_module()
-        if len(args) != len(self.inputs):
-            names = ", ".join(p.name for p in self.inputs)
-            raise F.JaxFfiError(
-                f"{self.what}: expected {len(self.inputs)} input(s) ({names}), got {len(args)}"
-            )
-        cpu = get_device("cpu")
-        arrays, statics, first = [], {}, None
-        for p, v in zip(self.inputs, args):
-            if p.is_array:
-                F.check_array(self.what, p, v)
-                arrays.append(v)
-                first = first or tuple(v.shape[: p.ndim])
-            else:
-                statics[p.name] = F.static_value(self.what, p, v, cpu)
-        out_types = [jax.ShapeDtypeStruct(v.shape, v.dtype)
-                     for p, v in zip(self.inputs, args) if p.in_out]  # fmt: skip
+        arrays, statics = self._trace_args(args)
         dims = self.output_dims if output_dims is None else output_dims
-        out_types += F.output_types(self.what, jax, self.outputs, dims, first)
-        method = self.vmap_method if vmap_method is None else vmap_method
-        if method is not None and method not in F.VMAP_METHODS:
-            raise F.JaxFfiError(f"{self.what}: vmap_method must be one of {F.VMAP_METHODS}")
-        call_id = self.calls.add(F.static_key(statics), statics)
-        call = jax.ffi.ffi_call(
-            self.name, out_types, vmap_method=method, input_output_aliases=self.aliases or None
-        )
-        return call(*arrays, **{F.CALL_ATTR: np.int64(call_id)})
+        out_types = F.output_types(self.what, jax, self.outputs, dims, self._first_dims(args))
+        return self._call(jax, args, arrays, out_types, vmap_method, F.static_key(statics), statics)
 
     def _arguments(self, frame: Any, device: Device, statics: dict) -> tuple[list, list]:
-        ins = iter(xla_ffi.buffers(frame.args))
-        outs = xla_ffi.buffers(frame.rets)
-        pure = iter(outs[len(self.in_out) :])
-        values, ptrs, n_in_out = [], [], 0
-        for p in (*self.inputs, *self.outputs):
-            if not p.is_array:
+        values, ptrs = [], []
+        for p, buf in self._buffers(frame):
+            if buf is None:
                 values.append(statics[p.name])
                 continue
-            buf = next(ins) if p in self.inputs else next(pure)
-            if p.in_out:
-                buf, n_in_out = outs[n_in_out], n_in_out + 1
             view, _ = F.fold_batch(F.FfiBuffer(buf, device).view(), p)
             values.append(array._wrap(view, p.type.dtype, device))
             ptrs.append((buf.data or 0, view.shape))

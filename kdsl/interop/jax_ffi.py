@@ -21,7 +21,7 @@ from __future__ import annotations
 import ctypes
 import itertools
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -381,3 +381,91 @@ def jax_devices_to_preload(jax: Any) -> list[Device]:
         return [device_from_jax(d) for d in jax.local_devices()]
     except KdslError:
         return []
+
+
+class FfiTarget:
+    """What a ``jax_kernel`` and a ``jax_callable`` share: one registered FFI target.
+
+    It splits the parameters into inputs and outputs, aliases the in-out inputs to
+    their outputs, keeps the trace-time data of each call in a ``CallTable``, and
+    puts calls into traced programs. A subclass sets its own attributes before
+    calling ``__init__`` (which registers the target) and gives
+    ``_execute(frame, platform)`` and ``_traits(platform)``.
+    """
+
+    def __init__(self, what: str, names: Sequence[str], types: Sequence[T.Type], num_outputs: int,
+                 in_out_argnames: Any, vmap_method: str | None, output_dims: Any, name: str):  # fmt: skip
+        self.what = what
+        self.inputs, self.outputs = split_params(what, names, types, num_outputs, in_out_argnames)
+        self.vmap_method = vmap_method
+        self.output_dims = output_dims
+        arrays = [p for p in self.inputs if p.is_array]
+        self.in_out = [p for p in arrays if p.in_out]
+        # Input i (counting array inputs) is output j: XLA then passes one buffer.
+        self.aliases = {arrays.index(p): j for j, p in enumerate(self.in_out)}
+        self.calls = CallTable()
+        self.name = name
+        register_target(name, self._execute, self._traits)
+
+    def _execute(self, frame: Any, platform: str) -> None:
+        raise NotImplementedError
+
+    def _traits(self, platform: str) -> int:
+        raise NotImplementedError
+
+    def _trace_args(self, args: tuple, hint: str = "") -> tuple[list, dict[str, Any]]:
+        """The array arguments of a call and its static values by name, checked."""
+        if len(args) != len(self.inputs):
+            names = ", ".join(p.name for p in self.inputs)
+            raise JaxFfiError(
+                f"{self.what}: expected {len(self.inputs)} input(s) ({names}), got {len(args)}"
+                + hint
+            )
+        cpu = get_device("cpu")
+        arrays, statics = [], {}
+        for p, v in zip(self.inputs, args):
+            if p.is_array:
+                check_array(self.what, p, v)
+                arrays.append(v)
+            else:
+                statics[p.name] = static_value(self.what, p, v, cpu)
+        return arrays, statics
+
+    def _first_dims(self, args: tuple) -> tuple[int, ...] | None:
+        """The kdsl shape of the first array argument (None without one)."""
+        for p, v in zip(self.inputs, args):
+            if p.is_array:
+                return tuple(int(d) for d in v.shape[: p.ndim])
+        return None
+
+    def _call(
+        self, jax: Any, args: tuple, arrays: list, out_types: list, vmap_method: Any, key: Any,
+        data: Any,
+    ) -> list[Any]:  # fmt: skip
+        """Put a call into the traced program: the in-out outputs, then ``out_types``."""
+        in_out = [jax.ShapeDtypeStruct(v.shape, v.dtype)
+                  for p, v in zip(self.inputs, args) if p.in_out]  # fmt: skip
+        method = self.vmap_method if vmap_method is None else vmap_method
+        if method is not None and method not in VMAP_METHODS:
+            raise JaxFfiError(f"{self.what}: vmap_method must be one of {VMAP_METHODS}")
+        call_id = self.calls.add(key, data)
+        call = jax.ffi.ffi_call(
+            self.name, in_out + out_types, vmap_method=method,
+            input_output_aliases=self.aliases or None,
+        )  # fmt: skip
+        return call(*arrays, **{CALL_ATTR: np.int64(call_id)})
+
+    def _buffers(self, frame: Any) -> Iterator[tuple[Param, Any]]:
+        """Each parameter of an executing call with its XLA buffer (None when static)."""
+        ins = iter(xla_ffi.buffers(frame.args))
+        outs = xla_ffi.buffers(frame.rets)
+        pure = iter(outs[len(self.in_out) :])
+        n_in_out = 0
+        for p in (*self.inputs, *self.outputs):
+            if not p.is_array:
+                yield p, None
+                continue
+            buf = next(ins) if p in self.inputs else next(pure)
+            if p.in_out:  # the aliased output buffer holds the input's data
+                buf, n_in_out = outs[n_in_out], n_in_out + 1
+            yield p, buf

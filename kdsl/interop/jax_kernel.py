@@ -12,15 +12,12 @@ from __future__ import annotations
 
 from typing import Any
 
-import numpy as np
-
 from kdsl.interop import jax_ffi as F
 from kdsl.interop import xla_ffi
 from kdsl.runtime.descriptor import ArrayDescriptor
-from kdsl.runtime.device import get_device
 
 
-class FfiKernel:
+class FfiKernel(F.FfiTarget):
     """A kdsl kernel callable from JAX (made by ``jax_kernel``)."""
 
     def __init__(
@@ -35,24 +32,14 @@ class FfiKernel:
         if not hasattr(kernel, "arg_types") or not hasattr(kernel, "build_module"):
             raise F.JaxFfiError(f"jax_kernel() takes a @kdsl.kernel, not {type(kernel).__name__}")
         self.kernel = kernel
-        self.what = f"jax_kernel '{kernel.name}'"
-        self.inputs, self.outputs = F.split_params(
-            self.what, kernel.arg_names, kernel.arg_types, num_outputs, in_out_argnames
-        )
-        self.vmap_method = vmap_method
         self.launch_dims = launch_dims
-        self.output_dims = output_dims
-        arrays = [p for p in self.inputs if p.is_array]
-        self.in_out = [p for p in arrays if p.in_out]
-        # Input i (counting array inputs) is output j: XLA then passes one buffer.
-        self.aliases = {arrays.index(p): j for j, p in enumerate(self.in_out)}
-        self.calls = F.CallTable()
-        self.name = F.unique_name("kernel", kernel.key)
-        F.register_target(self.name, self._execute, self._traits)
         self._preloaded: set[str] = set()
+        super().__init__(
+            f"jax_kernel '{kernel.name}'", kernel.arg_names, kernel.arg_types, num_outputs,
+            in_out_argnames, vmap_method, output_dims, F.unique_name("kernel", kernel.key),
+        )  # fmt: skip
 
-    @staticmethod
-    def _traits(platform: str) -> int:
+    def _traits(self, platform: str) -> int:
         # A kernel launch may be captured into XLA's CUDA graphs (command buffers).
         return xla_ffi.TRAIT_COMMAND_BUFFER_COMPATIBLE if platform == "CUDA" else 0
 
@@ -62,34 +49,14 @@ class FfiKernel:
     ) -> list[Any]:  # fmt: skip
         """Trace a launch: returns the outputs (a list; in-out arrays first)."""
         jax = F.jax_module()
-        if len(args) != len(self.inputs):
-            names = ", ".join(p.name for p in self.inputs)
-            raise F.JaxFfiError(
-                f"{self.what}: expected {len(self.inputs)} input(s) ({names}), got "
-                f"{len(args)}; outputs are not passed (num_outputs counts them)"
-            )
-        cpu = get_device("cpu")
-        arrays, statics = [], {}
-        for p, v in zip(self.inputs, args):
-            if p.is_array:
-                F.check_array(self.what, p, v)
-                arrays.append(v)
-            else:
-                statics[p.name] = F.static_value(self.what, p, v, cpu)
+        hint = "; outputs are not passed (num_outputs counts them)"
+        arrays, statics = self._trace_args(args, hint)
         dims = self._launch_dims(launch_dims, args)
-        out_types = [jax.ShapeDtypeStruct(a.shape, a.dtype)
-                     for a, p in zip(arrays, (q for q in self.inputs if q.is_array)) if p.in_out]  # fmt: skip
         default_out = self.output_dims if output_dims is None else output_dims
-        out_types += F.output_types(self.what, jax, self.outputs, default_out, dims)
-        method = self.vmap_method if vmap_method is None else vmap_method
-        if method is not None and method not in F.VMAP_METHODS:
-            raise F.JaxFfiError(f"{self.what}: vmap_method must be one of {F.VMAP_METHODS}")
-        call_id = self.calls.add((F.static_key(statics), dims), (statics, dims))
+        out_types = F.output_types(self.what, jax, self.outputs, default_out, dims)
         self._preload(jax)
-        call = jax.ffi.ffi_call(
-            self.name, out_types, vmap_method=method, input_output_aliases=self.aliases or None
-        )
-        return call(*arrays, **{F.CALL_ATTR: np.int64(call_id)})
+        key = (F.static_key(statics), dims)
+        return self._call(jax, args, arrays, out_types, vmap_method, key, (statics, dims))
 
     def _launch_dims(self, launch_dims: Any, args: tuple) -> tuple[int, ...]:
         dims = self.launch_dims if launch_dims is None else launch_dims
@@ -98,13 +65,13 @@ class FfiKernel:
             if not 1 <= len(out) <= 4:
                 raise F.JaxFfiError(f"{self.what}: launch_dims must have 1 to 4 dims, got {dims}")
             return out
-        for p, v in zip(self.inputs, args):
-            if p.is_array:
-                return tuple(int(d) for d in v.shape[: p.ndim])
-        raise F.JaxFfiError(
-            f"{self.what}: the kernel has no array input to infer the launch dims from; "
-            f"give launch_dims"
-        )
+        first = self._first_dims(args)
+        if first is None:
+            raise F.JaxFfiError(
+                f"{self.what}: the kernel has no array input to infer the launch dims from; "
+                f"give launch_dims"
+            )
+        return first
 
     def _preload(self, jax: Any) -> None:
         # Compile now, not inside XLA's call (which may be under CUDA graph capture).
@@ -120,17 +87,11 @@ class FfiKernel:
 
         statics, dims = self.calls[xla_ffi.attributes(frame.attrs)[F.CALL_ATTR]]
         device = F.call_device(frame, platform)
-        ins = iter(xla_ffi.buffers(frame.args))
-        outs = xla_ffi.buffers(frame.rets)
-        pure = iter(outs[len(self.in_out) :])
-        values, batch, n_in_out = [], 1, 0
-        for p in (*self.inputs, *self.outputs):
-            if not p.is_array:
+        values, batch = [], 1
+        for p, buf in self._buffers(frame):
+            if buf is None:
                 values.append(statics[p.name])
                 continue
-            buf = next(ins) if p in self.inputs else next(pure)
-            if p.in_out:  # the aliased output buffer holds the input's data
-                buf, n_in_out = outs[n_in_out], n_in_out + 1
             view, b = F.fold_batch(F.FfiBuffer(buf, device).view(), p)
             batch = max(batch, b)
             values.append(ArrayDescriptor(view, p.type.dtype, device))

@@ -14,13 +14,8 @@ from typing import Any
 
 from kdsl.errors import KdslError
 from kdsl.interop.dlpack import buffer_from_dlpack, to_dlpack
-from kdsl.interop.dtypes import (
-    InteropDeviceError,
-    framework_name,
-    kdsl_scalar,
-    public_scalar,
-    scalar_from_name,
-)
+from kdsl.interop.dtypes import InteropDeviceError
+from kdsl.interop.frameworks import Framework, attach_grad
 from kdsl.interop.views import describe_buffer, view_buffer
 from kdsl.ir import types as T
 from kdsl.runtime import cuda_memory as mem
@@ -29,12 +24,9 @@ from kdsl.runtime.descriptor import ArrayDescriptor
 from kdsl.runtime.device import Device, get_device
 from kdsl.runtime.stream import Stream, get_stream
 
-
-def _paddle() -> Any:
-    import paddle
-    import paddle.utils.dlpack  # makes paddle.utils.dlpack an attribute
-
-    return paddle
+# paddle.utils.dlpack is imported too: ``import paddle`` does not make it an attribute.
+PADDLE = Framework("Paddle", "paddle", ("paddle.utils.dlpack",))
+_paddle = PADDLE.load
 
 
 def device_from_paddle(paddle_device: Any) -> Device:
@@ -44,19 +36,17 @@ def device_from_paddle(paddle_device: Any) -> Device:
         if kind == "cpu":
             return get_device("cpu")
         if kind in ("gpu", "cuda"):
-            return _cuda(int(index) if index.isdigit() else 0, paddle_device)
+            return PADDLE.cuda_device(int(index) if index.isdigit() else 0, paddle_device)
         raise InteropDeviceError(f"Paddle device {paddle_device!r} has no kdsl equivalent")
     place = paddle_device
     if _is(place, "is_cpu_place") or _is(place, "is_cuda_pinned_place"):
         return get_device("cpu")
     if _is(place, "is_gpu_place"):
-        return _cuda(int(place.gpu_device_id()), place)
+        return PADDLE.cuda_device(int(place.gpu_device_id()), place)
     getter = getattr(place, "get_device_id", None)  # paddle.CUDAPlace
     if getter is not None:
-        return _cuda(int(getter()), place)
-    raise InteropDeviceError(
-        f"Paddle place {place!r} has no kdsl equivalent (kdsl runs on 'cpu' and 'cuda:N')"
-    )
+        return PADDLE.cuda_device(int(getter()), place)
+    raise PADDLE.no_device(f"Paddle place {place!r}")
 
 
 def _is(place: Any, test: str) -> bool:
@@ -64,38 +54,26 @@ def _is(place: Any, test: str) -> bool:
     return bool(fn()) if callable(fn) else False
 
 
-def _cuda(index: int, source: Any) -> Device:
-    try:
-        return get_device(f"cuda:{index}")
-    except KdslError as e:
-        raise InteropDeviceError(f"Paddle device {source}: {e.message}") from None
-
-
 def device_to_paddle(warp_device: Any) -> str:
     """The Paddle device string of a kdsl device (``"cpu"``, ``"gpu:0"``)."""
-    dev = get_device(warp_device)
-    return "cpu" if dev.is_cpu else f"gpu:{dev.ordinal}"
+    return PADDLE.device_string(warp_device, "gpu")
 
 
 def dtype_from_paddle(paddle_dtype: Any) -> type:
     """The kdsl scalar class of a Paddle dtype; bfloat16 and complex raise ``TypeError``."""
-    return public_scalar(_scalar_of(paddle_dtype))
-
-
-def _scalar_of(paddle_dtype: Any) -> T.ScalarType:
-    return scalar_from_name(framework_name(paddle_dtype), f"Paddle dtype {paddle_dtype}")
+    return PADDLE.dtype_from(paddle_dtype)
 
 
 def dtype_to_paddle(warp_dtype: Any) -> Any:
     """The Paddle dtype of a kdsl scalar type; uint16/32/64 map to the signed type of their width."""
-    return getattr(_paddle(), kdsl_scalar(warp_dtype, "Paddle").paddle)
+    return PADDLE.dtype_to(warp_dtype, _paddle())
 
 
 def _view(t: Any, dtype: Any) -> tuple[Any, T.Type, Device]:
     paddle = _paddle()
     if not isinstance(t, paddle.Tensor):
         raise KdslError(f"from_paddle() takes a paddle.Tensor, not {type(t).__name__}")
-    _scalar_of(t.dtype)  # bfloat16/complex: a clear error before touching the data
+    PADDLE.scalar(t.dtype)  # bfloat16/complex: a clear error before touching the data
     buf, dev = buffer_from_dlpack(paddle.utils.dlpack.to_dlpack(t))
     what = describe_buffer(str(t.dtype), "tensor", t.shape)
     buf, kt = view_buffer(buf, dtype, what)
@@ -122,24 +100,16 @@ def from_paddle(
     if requires_grad is None:
         requires_grad = not t.stop_gradient
     if requires_grad:
-        g = grad
-        if g is None:
-            if t.grad is None:
-                t.grad_ = _paddle().zeros_like(t)
-            g = t.grad
-        if isinstance(g, array):
-            a.grad = g
-        else:
-            gbuf, gt, gdev = _view(g, kt)
-            a.grad = array._wrap(gbuf, gt, gdev)
-        a.requires_grad = True
+        if grad is None and t.grad is None:
+            t.grad_ = _paddle().zeros_like(t)
+        attach_grad(a, t.grad if grad is None else grad, _view)
     return a
 
 
 def _tensor_of(a: array) -> Any:
     paddle = _paddle()
     et = T.elem_type(a._t)
-    twin = scalar_from_name(et.paddle, "Paddle")
+    twin = PADDLE.twin(et)
     src = a
     if twin != et:  # Paddle has no uint16/32/64: same bits, signed
         with mem.scope(a.device):
@@ -151,10 +121,7 @@ def _tensor_of(a: array) -> Any:
 
 def to_paddle(a: array, requires_grad: bool | None = None) -> Any:
     """A Paddle tensor sharing kdsl array ``a``'s memory (no copy); see ``to_torch``."""
-    if not isinstance(a, array):
-        raise KdslError(f"to_paddle() takes a kdsl array, not {type(a).__name__}")
-    if a._t is None:
-        raise KdslError("to_paddle(): the array has no dtype (array(dtype=Any))")
+    PADDLE.check_export(a, "to_paddle")
     out = _tensor_of(a)
     if requires_grad is None:
         requires_grad = a.requires_grad

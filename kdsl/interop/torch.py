@@ -17,13 +17,8 @@ import numpy as np
 
 from kdsl.errors import KdslError
 from kdsl.interop.dlpack import Exporter
-from kdsl.interop.dtypes import (
-    InteropDeviceError,
-    framework_name,
-    kdsl_scalar,
-    public_scalar,
-    scalar_from_name,
-)
+from kdsl.interop.dtypes import InteropDeviceError, framework_name
+from kdsl.interop.frameworks import Framework, attach_grad
 from kdsl.interop.views import describe_buffer, view_buffer
 from kdsl.ir import types as T
 from kdsl.runtime import cuda_memory as mem
@@ -32,18 +27,13 @@ from kdsl.runtime.descriptor import ArrayDescriptor
 from kdsl.runtime.device import Device, get_device
 from kdsl.runtime.stream import Stream, get_stream
 
-
-def _torch() -> Any:
-    import torch
-
-    return torch
+TORCH = Framework("torch", "torch")
+_torch = TORCH.load
 
 
 def is_tensor(value: Any) -> bool:
     """True for a ``torch.Tensor``, without importing torch when nothing else has."""
-    import sys
-
-    torch = sys.modules.get("torch")
+    torch = TORCH.loaded()
     return torch is not None and isinstance(value, torch.Tensor)
 
 
@@ -57,34 +47,26 @@ def device_from_torch(torch_device: Any) -> Device:
     if d.type == "cpu":
         return get_device("cpu")
     if d.type == "cuda":
-        index = d.index if d.index is not None else torch.cuda.current_device()
-        try:
-            return get_device(f"cuda:{index}")
-        except KdslError as e:
-            raise InteropDeviceError(f"torch device {d}: {e.message}") from None
-    raise InteropDeviceError(
-        f"torch device '{d}' has no kdsl equivalent (kdsl runs on 'cpu' and 'cuda:N')"
-    )
+        return TORCH.cuda_device(d.index if d.index is not None else torch.cuda.current_device(), d)
+    raise TORCH.no_device(f"torch device '{d}'")
 
 
 def device_to_torch(warp_device: Any) -> str:
     """The torch device string of a kdsl device (``"cpu"``, ``"cuda:0"``)."""
-    dev = get_device(warp_device)
-    return "cpu" if dev.is_cpu else f"cuda:{dev.ordinal}"
+    return TORCH.device_string(warp_device, "cuda")
 
 
 def dtype_from_torch(torch_dtype: Any) -> type:
     """The kdsl scalar class of a torch dtype; bfloat16 and complex raise ``TypeError``."""
-    return public_scalar(scalar_of(torch_dtype))
+    return TORCH.dtype_from(torch_dtype)
 
 
-def scalar_of(torch_dtype: Any) -> T.ScalarType:
-    return scalar_from_name(framework_name(torch_dtype), f"torch dtype {torch_dtype}")
+scalar_of = TORCH.scalar
 
 
 def dtype_to_torch(warp_dtype: Any) -> Any:
     """The torch dtype of a kdsl scalar type; uint16/32/64 map to the signed type of their width."""
-    return getattr(_torch(), kdsl_scalar(warp_dtype, "torch").torch)
+    return TORCH.dtype_to(warp_dtype, _torch())
 
 
 def _tensor_buffer(t: Any, dev: Device) -> Any:
@@ -141,29 +123,28 @@ def from_torch(
     if requires_grad is None:
         requires_grad = bool(t.requires_grad)
     if requires_grad:
-        g = grad
-        if g is None:
-            if t.grad is None:
-                t.grad = _torch().zeros_like(t, requires_grad=False)
-            g = t.grad
-        if isinstance(g, array):
-            a.grad = g
-        else:
-            if tuple(g.shape) != tuple(t.shape):
-                raise KdslError(
-                    f"from_torch(): grad has shape {tuple(g.shape)}, the tensor {tuple(t.shape)}"
-                )
-            gbuf, gt, gdev = _view(g, kt)
-            if gdev != dev:
-                raise KdslError(f"from_torch(): grad is on '{gdev}', the tensor on '{dev}'")
-            a.grad = array._wrap(gbuf, gt, gdev)
-        a.requires_grad = True  # grad is set: nothing is allocated
+        if grad is None and t.grad is None:
+            t.grad = _torch().zeros_like(t, requires_grad=False)
+        view = lambda g, kt: _grad_view(t, dev, g, kt)  # noqa: E731
+        attach_grad(a, t.grad if grad is None else grad, view)
     return a
+
+
+def _grad_view(t: Any, dev: Device, g: Any, dtype: Any) -> tuple[Any, T.Type, Device]:
+    """``_view`` of a gradient tensor ``g``, which must match tensor ``t`` in shape and device."""
+    if tuple(g.shape) != tuple(t.shape):
+        raise KdslError(
+            f"from_torch(): grad has shape {tuple(g.shape)}, the tensor {tuple(t.shape)}"
+        )
+    gbuf, gt, gdev = _view(g, dtype)
+    if gdev != dev:
+        raise KdslError(f"from_torch(): grad is on '{gdev}', the tensor on '{dev}'")
+    return gbuf, gt, gdev
 
 
 def _tensor_of(buf: Any, t: T.Type, dev: Device) -> Any:
     et = T.elem_type(t)
-    twin = scalar_from_name(et.torch, "torch")
+    twin = TORCH.twin(et)
     if twin != et:  # torch has no full uint16/32/64 support: same bits, signed
         with mem.scope(dev):
             buf = buf.view(twin.np_dtype)
@@ -178,10 +159,7 @@ def to_torch(a: array, requires_grad: bool | None = None) -> Any:
     ``requires_grad`` (default: ``a.requires_grad``) the tensor requires grad and its
     ``.grad`` shares ``a.grad`` (allocated when missing).
     """
-    if not isinstance(a, array):
-        raise KdslError(f"to_torch() takes a kdsl array, not {type(a).__name__}")
-    if a._t is None:
-        raise KdslError("to_torch(): the array has no dtype (array(dtype=Any))")
+    TORCH.check_export(a, "to_torch")
     out = _tensor_of(a._buf, a._t, a.device)
     if requires_grad is None:
         requires_grad = a.requires_grad

@@ -60,28 +60,31 @@ def _make(
     return array._wrap(buf, t, dev, requires_grad)
 
 
-def zeros(
-    shape: Any = None,
-    dtype: Any = float,
-    device: Any = None,
-    requires_grad: bool = False,
-    length: int | None = None,
-    pinned: bool = False,
-) -> array:
-    """A zero-filled array; ``shape`` is an int or tuple (``length=`` also accepted)."""
-    return _make(shape, length, dtype, device, requires_grad, 0)
+def _filled(name: str, fill: Any, doc: str):  # the inner signature is the return type
+    """A constructor with Warp's signature whose arrays start as ``fill`` (None: unspecified)."""
+
+    def constructor(
+        shape: Any = None,
+        dtype: Any = float,
+        device: Any = None,
+        requires_grad: bool = False,
+        length: int | None = None,
+        pinned: bool = False,
+    ) -> array:
+        return _make(shape, length, dtype, device, requires_grad, fill)
+
+    constructor.__name__ = constructor.__qualname__ = name
+    constructor.__doc__ = doc
+    return constructor
 
 
-def empty(
-    shape: Any = None,
-    dtype: Any = float,
-    device: Any = None,
-    requires_grad: bool = False,
-    length: int | None = None,
-    pinned: bool = False,
-) -> array:
-    """An array whose contents are unspecified (``length=`` also accepted)."""
-    return _make(shape, length, dtype, device, requires_grad, None)
+zeros = _filled(
+    "zeros", 0, "A zero-filled array; ``shape`` is an int or tuple (``length=`` also accepted)."
+)
+empty = _filled(
+    "empty", None, "An array whose contents are unspecified (``length=`` also accepted)."
+)
+ones = _filled("ones", 1, "An array of ones.")
 
 
 def full(
@@ -97,18 +100,6 @@ def full(
     if dtype is Any or dtype is None:
         dtype = dtype_of_value(value)
     return _make(shape, length, dtype, device, requires_grad, value)
-
-
-def ones(
-    shape: Any = None,
-    dtype: Any = float,
-    device: Any = None,
-    requires_grad: bool = False,
-    length: int | None = None,
-    pinned: bool = False,
-) -> array:
-    """An array of ones."""
-    return _make(shape, length, dtype, device, requires_grad, 1)
 
 
 def _like(src: array, device: Any, requires_grad: bool | None, init: Any) -> array:
