@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from kdsl.errors import KdslError, KdslLaunchError
-from kdsl.ir.core import Module
+from kdsl.ir.core import Block, Module, Operation, Value
 from kdsl.passes import DEFAULT_PIPELINE
 
 #: A launch grid: the extent of each dimension (one to four of them).
@@ -197,6 +197,15 @@ def check_tid_ndims(kernel: str, dims: Sequence[int], tid_ndims: Iterable[int]) 
                 f"kernel '{kernel}' uses a {nd}-d thread index but was launched with "
                 f"{len(dims)}-d dim={tuple(dims)}"
             )
+
+
+def split_block(block: Block) -> tuple[list[Operation], list[Value]]:
+    """The ops of ``block`` that lower one by one (all but its terminator), and the values
+    the terminator yields (none without one): what every backend's block lowering reads."""
+    term = block.terminator
+    if term is None:
+        return list(block.ops), []
+    return block.ops[:-1], list(term.operands)
 
 
 def source_version(version: str, sources: Iterable[Path]) -> str:

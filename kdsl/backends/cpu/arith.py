@@ -77,32 +77,32 @@ def _safe_divisor(em: Emitter, et: T.ScalarType, b: ir.Value):
     return B.select(B.or_(is_zero, is_m1), one, b), is_zero, is_m1
 
 
-def int_div(em: Emitter, et: T.ScalarType, a: ir.Value, b: ir.Value) -> ir.Value:
-    """C division truncating toward zero; ``x / 0`` is 0 and ``MIN / -1`` wraps."""
+def _quotient(em: Emitter, et: T.ScalarType, a: ir.Value, b: ir.Value, floor: bool) -> ir.Value:
+    """``a / b`` truncated toward zero, or floored; ``x / 0`` is 0 and ``MIN / -1`` wraps."""
     B = em.b
     safe, is_zero, is_m1 = _safe_divisor(em, et, b)
-    if et.is_signed:
-        q = B.select(is_m1, B.neg(a), B.sdiv(a, safe))
-    else:
+    if not et.is_signed:
         q = B.udiv(a, safe)
+    else:
+        q = B.sdiv(a, safe)
+        if floor:
+            r = B.srem(a, safe)
+            zero = em.const(a.type, 0)
+            # Round down when the remainder is nonzero and its sign differs from b's.
+            adjust = B.and_(B.icmp_signed("!=", r, zero), B.icmp_signed("<", B.xor(r, safe), zero))
+            q = B.sub(q, B.zext(adjust, a.type))
+        q = B.select(is_m1, B.neg(a), q)
     return B.select(is_zero, em.const(a.type, 0), q)
+
+
+def int_div(em: Emitter, et: T.ScalarType, a: ir.Value, b: ir.Value) -> ir.Value:
+    """C division truncating toward zero; ``x / 0`` is 0 and ``MIN / -1`` wraps."""
+    return _quotient(em, et, a, b, floor=False)
 
 
 def int_floordiv(em: Emitter, et: T.ScalarType, a: ir.Value, b: ir.Value) -> ir.Value:
     """Floor division; ``x // 0`` is 0."""
-    B = em.b
-    safe, is_zero, is_m1 = _safe_divisor(em, et, b)
-    if et.is_signed:
-        q = B.sdiv(a, safe)
-        r = B.srem(a, safe)
-        zero = em.const(a.type, 0)
-        # Round down when the remainder is nonzero and its sign differs from b's.
-        adjust = B.and_(B.icmp_signed("!=", r, zero), B.icmp_signed("<", B.xor(r, safe), zero))
-        q = B.sub(q, B.zext(adjust, a.type))
-        q = B.select(is_m1, B.neg(a), q)
-    else:
-        q = B.udiv(a, safe)
-    return B.select(is_zero, em.const(a.type, 0), q)
+    return _quotient(em, et, a, b, floor=True)
 
 
 def int_mod(em: Emitter, et: T.ScalarType, a: ir.Value, b: ir.Value) -> ir.Value:

@@ -8,8 +8,9 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from kdsl.backends import checks_common
 from kdsl.backends.base import Args, Backend, CompiledKernel, Dims, Job, launch_size, source_version
-from kdsl.backends.cpu import checks, jit, pool, printing
+from kdsl.backends.cpu import jit, pool, printing
 from kdsl.backends.cpu.abi import ArgPacker, Packed
 from kdsl.backends.cpu.lower import kernel_names, kernel_symbol, lower_kernels, tid_ndims
 from kdsl.ir.core import Module
@@ -163,12 +164,12 @@ class CpuBackend(Backend):
     def _launch_checked(self, compiled: CompiledKernel, dims: Dims, args: Args, total: int) -> None:
         """A debug build's launch: a fresh error record, raised from after the run."""
         k: CpuKernel = compiled.payload
-        record = checks.new_record()
+        record = checks_common.new_record()
         packed = Packed(k.arg_types, args, (record.ctypes.data,))
         extents = (ctypes.c_int64 * len(dims))(*dims)
         pool.run_range(k.fn, total, packed.address, ctypes.addressof(extents))
         name = compiled.metadata.get("name") or compiled.symbol
-        checks.raise_for_record(record, k.sites, name, compiled.symbol, dims)
+        checks_common.raise_for_record(record, k.sites, name, compiled.symbol, dims)
 
 
 def _nothing() -> None:

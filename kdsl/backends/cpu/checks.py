@@ -1,20 +1,9 @@
 """Lowerings of the debug checks (``kd.check_bounds``, ``kd.check_finite``) and their record.
 
 A kernel compiled in debug mode (or with ``verify_fp``) takes one more entry in
-its ``args`` array: a pointer to an error record of ``RECORD_LEN`` i64 words,
-zeroed by the launch. Internal functions get the same pointer as an extra last
-parameter. The layout:
-
-=========  ==========================================================
-word       meaning
-=========  ==========================================================
-0          site + 1 of the first failed bounds check (0: none failed)
-1          its thread's linear index (-1 inside a called function)
-2..5       its indices (sign-extended), 6..9 the array's shape
-10         site + 1 of the first failed finite check (0: none failed)
-11         its thread's linear index
-12         1 for NaN, 2 for Inf
-=========  ==========================================================
+its ``args`` array: a pointer to the error record of ``kdsl.backends.checks_common``
+(its layout is there), zeroed by the launch. Internal functions get the same pointer
+as an extra last parameter.
 
 A failing check claims its slot with a compare-and-swap from 0, so only the
 first failure (in time) writes the rest; a launch running on one thread (small
@@ -31,29 +20,16 @@ from __future__ import annotations
 
 from llvmlite import ir
 
-from kdsl.backends.checks_common import (  # noqa: F401 - re-exported for the cpu backend
-    BOUNDS,
-    BOUNDS_IDX,
-    BOUNDS_SHAPE,
-    BOUNDS_TID,
-    FP,
-    FP_KIND,
-    FP_TID,
-    MAX_NDIM,
-    RECORD_LEN,
-    new_record,
-    raise_for_record,
-)
+from kdsl.backends import checks_common as R
 from kdsl.backends.cpu import types as LT
 from kdsl.backends.cpu.composite import components
-from kdsl.backends.cpu.emitter import Emitter, Lowering
+from kdsl.backends.cpu.emitter import Emitter
 from kdsl.errors import KdslCapabilityError
 from kdsl.ir import types as T
 from kdsl.ir.core import Operation
+from kdsl.ir.lowering import LOWERINGS
 
-_BOUNDS, _BOUNDS_TID, _BOUNDS_IDX, _BOUNDS_SHAPE = BOUNDS, BOUNDS_TID, BOUNDS_IDX, BOUNDS_SHAPE
-_FP, _FP_TID, _FP_KIND = FP, FP_TID, FP_KIND
-_MAX_NDIM = MAX_NDIM
+CPU = LOWERINGS.for_backend("cpu")
 
 
 def _i64(v: int) -> ir.Constant:
@@ -102,7 +78,7 @@ def stop_if_failed(em: Emitter) -> None:
     if em.error_record is None:
         return
     B = em.b
-    failed = B.icmp_unsigned("!=", B.load(_slot(em, _BOUNDS), typ=LT.I64, align=8), _i64(0))
+    failed = B.icmp_unsigned("!=", B.load(_slot(em, R.BOUNDS), typ=LT.I64, align=8), _i64(0))
     stop, cont = em.new_block("call.failed"), em.new_block("call.ok")
     B.cbranch(failed, stop, cont).set_weights([1, 1000])
     B.position_at_end(stop)
@@ -134,12 +110,12 @@ def _check_bounds(em: Emitter, op: Operation) -> None:
     )
     B.cbranch(ok, cont, fail).set_weights([1000, 1])
     B.position_at_end(fail)
-    B.cbranch(_claim(em, _BOUNDS, op.attrs["site"]), write, stop)
+    B.cbranch(_claim(em, R.BOUNDS, op.attrs["site"]), write, stop)
     B.position_at_end(write)
-    _put(em, _BOUNDS_TID, _tid64(em))
-    for k in range(min(len(idx), _MAX_NDIM)):
-        _put(em, _BOUNDS_IDX + k, idx[k])
-        _put(em, _BOUNDS_SHAPE + k, shape[k])
+    _put(em, R.BOUNDS_TID, _tid64(em))
+    for k in range(min(len(idx), R.MAX_NDIM)):
+        _put(em, R.BOUNDS_IDX + k, idx[k])
+        _put(em, R.BOUNDS_SHAPE + k, shape[k])
     B.branch(stop)
     B.position_at_end(stop)
     abort_thread(em)
@@ -168,15 +144,13 @@ def _check_finite(em: Emitter, op: Operation) -> None:
     fail, write, cont = (em.new_block(n) for n in ("finite.fail", "finite.write", "finite.ok"))
     B.cbranch(B.or_(nan, inf), fail, cont).set_weights([1, 1000])
     B.position_at_end(fail)
-    B.cbranch(_claim(em, _FP, op.attrs["site"]), write, cont)
+    B.cbranch(_claim(em, R.FP, op.attrs["site"]), write, cont)
     B.position_at_end(write)
-    _put(em, _FP_TID, _tid64(em))
-    _put(em, _FP_KIND, B.select(nan, _i64(1), _i64(2)))
+    _put(em, R.FP_TID, _tid64(em))
+    _put(em, R.FP_KIND, B.select(nan, _i64(1), _i64(2)))
     B.branch(cont)
     B.position_at_end(cont)
 
 
-TABLE: dict[str, Lowering] = {
-    "kd.check_bounds": _check_bounds,
-    "kd.check_finite": _check_finite,
-}
+CPU.register("kd.check_bounds", _check_bounds)
+CPU.register("kd.check_finite", _check_finite)

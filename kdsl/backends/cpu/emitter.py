@@ -19,6 +19,7 @@ from typing import Any
 
 from llvmlite import ir
 
+from kdsl.backends.base import split_block
 from kdsl.backends.cpu import types as LT
 from kdsl.backends.cpu.composite import Parts
 from kdsl.errors import KdslCapabilityError
@@ -203,12 +204,10 @@ class Emitter:
     def lower_block(self, block: Block, args: Sequence[Any] = ()) -> list[Any]:
         """Lower ``block`` with its arguments bound; gives its terminator's operands."""
         self.bind(block.args, args)
-        term = block.terminator
-        for op in block.ops:
-            if op is term and op.opdef.is_terminator:
-                break
+        ops, yielded = split_block(block)
+        for op in ops:
             self.lower_op(op)
-        return [self.values[v] for v in term.operands] if term is not None else []
+        return [self.values[v] for v in yielded]
 
     # -- helpers --------------------------------------------------------------
     def intrinsic(

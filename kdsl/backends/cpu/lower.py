@@ -110,6 +110,30 @@ def emit_kernel(state: ModuleState, func: Operation, llname: str) -> ir.Function
     return fn
 
 
+def _count_head(
+    B: ir.IRBuilder,
+    name: str,
+    lo: ir.Value,
+    hi: ir.Value,
+    entry: ir.Block,
+    head: ir.Block,
+    body: ir.Block,
+    exit_: ir.Block,
+) -> ir.Value:
+    """The head of an i32 loop counting from ``lo`` (entered from ``entry``) while ``< hi``.
+
+    The builder is left in ``body``; the counter, a phi named ``name``, is returned for the
+    caller to add its latch's value.
+    """
+    B.branch(head)
+    B.position_at_end(head)
+    i = B.phi(LT.I32, name=name)
+    i.add_incoming(lo, entry)
+    B.cbranch(B.icmp_signed("<", i, hi), body, exit_)
+    B.position_at_end(body)
+    return i
+
+
 def _flat_loop(em: Emitter, body: Block, params: list, start: ir.Value, end: ir.Value) -> None:
     """The thread loop of a kernel with a 1-d index: one counted loop over ``[start, end)``.
 
@@ -121,12 +145,7 @@ def _flat_loop(em: Emitter, body: Block, params: list, start: ir.Value, end: ir.
     # induction variable; launches are limited to 2**31 threads.
     lo, hi = B.trunc(start, LT.I32), B.trunc(end, LT.I32)
     head, body_bb, done = (fn.append_basic_block(n) for n in ("thread.head", "thread.body", "exit"))
-    B.branch(head)
-    B.position_at_end(head)
-    i = B.phi(LT.I32, name="tid")
-    i.add_incoming(lo, entry)
-    B.cbranch(B.icmp_signed("<", i, hi), body_bb, done)
-    B.position_at_end(body_bb)
+    i = _count_head(B, "tid", lo, hi, entry, head, body_bb, done)
     em.linear = i
     em.index = []
     _thread_body(em, body, params, i, head)
@@ -165,12 +184,7 @@ def _row_loops(
     outer = _split_index(em, row, extents[:-1])
     base32 = B.trunc(row_base, LT.I32)
     lo, hi = B.trunc(first, LT.I32), B.trunc(last, LT.I32)
-    B.branch(col_head)
-    B.position_at_end(col_head)
-    col = B.phi(LT.I32, name="tid.col")
-    col.add_incoming(lo, row_body)
-    B.cbranch(B.icmp_signed("<", col, hi), col_body, row_next)
-    B.position_at_end(col_body)
+    col = _count_head(B, "tid.col", lo, hi, row_body, col_head, col_body, row_next)
     em.linear = B.add(base32, col, flags=["nsw"])
     em.index = [*outer, col]
     _thread_body(em, body, params, col, col_head)

@@ -13,6 +13,8 @@ components of a vector or matrix element are consecutive scalars (row-major).
 
 from __future__ import annotations
 
+import math
+
 from llvmlite import ir
 
 from kdsl.errors import KdslCapabilityError
@@ -45,12 +47,7 @@ def scalar_type(t: T.ScalarType) -> ir.Type:
 
 def count(t: T.Type) -> int:
     """Number of scalars in a scalar, vector or matrix value."""
-    if isinstance(t, T.ScalarType):
-        return 1
-    n = 1
-    for d in T.value_shape(t):
-        n *= d
-    return n
+    return math.prod(T.value_shape(t))
 
 
 def descriptor_type(ndim: int) -> ir.LiteralStructType:

@@ -14,10 +14,13 @@ from __future__ import annotations
 from kdsl.backends import checks_common as R
 from kdsl.backends.cuda import ctypes_ as CT
 from kdsl.backends.cuda.arith import is_f16
-from kdsl.backends.cuda.emitter import FuncEmitter, Lowering
+from kdsl.backends.cuda.emitter import FuncEmitter
 from kdsl.errors import KdslCapabilityError
 from kdsl.ir import types as T
 from kdsl.ir.core import Operation
+from kdsl.ir.lowering import LOWERINGS
+
+CUDA = LOWERINGS.for_backend("cuda")
 
 
 def _require_debug(em: FuncEmitter, op: Operation) -> None:
@@ -83,7 +86,5 @@ def _check_finite(em: FuncEmitter, op: Operation) -> None:
     em.close()
 
 
-TABLE: dict[str, Lowering] = {
-    "kd.check_bounds": _check_bounds,
-    "kd.check_finite": _check_finite,
-}
+CUDA.register("kd.check_bounds", _check_bounds)
+CUDA.register("kd.check_finite", _check_finite)

@@ -13,6 +13,7 @@ shape[N]; long long strides[N]; }`` with strides in bytes.
 
 from __future__ import annotations
 
+import math
 import re
 
 from kdsl.errors import KdslCapabilityError
@@ -36,12 +37,7 @@ def unsigned_c(t: T.ScalarType) -> str:
 
 def count(t: T.Type) -> int:
     """Number of scalar components of a scalar, vector or matrix."""
-    if isinstance(t, T.ScalarType):
-        return 1
-    n = 1
-    for d in T.value_shape(t):
-        n *= d
-    return n
+    return math.prod(T.value_shape(t))
 
 
 def composite_name(t: T.Type) -> str:

@@ -21,6 +21,7 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from typing import Any
 
+from kdsl.backends.base import split_block
 from kdsl.backends.cuda import ctypes_ as CT
 from kdsl.errors import KdslCapabilityError
 from kdsl.ir import types as T
@@ -224,12 +225,10 @@ class FuncEmitter:
         """Lower ``block`` with its arguments bound; gives its terminator's operands."""
         for a, name in zip(block.args, args):
             self.bind(a, name)
-        term = block.terminator
-        for op in block.ops:
-            if op is term and op.opdef.is_terminator:
-                break
+        ops, yielded = split_block(block)
+        for op in ops:
             self.lower_op(op)
-        return [self.names[v] for v in term.operands] if term is not None else []
+        return [self.names[v] for v in yielded]
 
     def assign(
         self, targets: Sequence[str], values: Sequence[str], types: Sequence[T.Type]

@@ -65,70 +65,51 @@ def float_minmax(src: Source, which: str) -> str:
     return name
 
 
+def _int_template(src: Source, name: str, body: str) -> str:
+    """Add ``template <typename T> T name(T a, T b)`` with C ``body`` once; gives ``name``."""
+    src.need(name, lambda: f"template <typename T> {_FI} T {name}(T a, T b) {{\n{body}\n}}")
+    return name
+
+
+#: Division by zero gives 0, and by -1 (signed) negates in unsigned math, so MIN wraps.
+_DIV_EDGES = (
+    "  if (b == (T)0) return (T)0;\n"
+    "  if ((T)-1 < (T)0 && b == (T)-1) return (T)(0ull - (unsigned long long)a);\n"
+)
+
+
 def int_div(src: Source) -> str:
     """``kd_idiv``: C division (truncating) where ``x / 0`` is 0 and ``MIN / -1`` wraps."""
-    src.need(
-        "kd_idiv",
-        lambda: (
-            f"""template <typename T> {_FI} T kd_idiv(T a, T b) {{
-  if (b == (T)0) return (T)0;
-  if ((T)-1 < (T)0 && b == (T)-1) return (T)(0ull - (unsigned long long)a);
-  return (T)(a / b);
-}}"""
-        ),
-    )
-    return "kd_idiv"
+    return _int_template(src, "kd_idiv", _DIV_EDGES + "  return (T)(a / b);")
 
 
 def int_floordiv(src: Source) -> str:
     """``kd_ifloordiv``: floor division; ``x // 0`` is 0."""
-    src.need(
-        "kd_ifloordiv",
-        lambda: (
-            f"""template <typename T> {_FI} T kd_ifloordiv(T a, T b) {{
-  if (b == (T)0) return (T)0;
-  if ((T)-1 < (T)0 && b == (T)-1) return (T)(0ull - (unsigned long long)a);
-  T q = (T)(a / b);
-  T r = (T)(a % b);
-  if ((T)-1 < (T)0 && r != (T)0 && ((r < (T)0) != (b < (T)0))) q = (T)(q - 1);
-  return q;
-}}"""
-        ),
+    body = _DIV_EDGES + (
+        "  T q = (T)(a / b);\n  T r = (T)(a % b);\n"
+        "  if ((T)-1 < (T)0 && r != (T)0 && ((r < (T)0) != (b < (T)0))) q = (T)(q - 1);\n"
+        "  return q;"
     )
-    return "kd_ifloordiv"
+    return _int_template(src, "kd_ifloordiv", body)
 
 
 def int_mod(src: Source) -> str:
     """``kd_imod``: C remainder (sign of the dividend); ``x % 0`` is 0."""
-    src.need(
-        "kd_imod",
-        lambda: (
-            f"""template <typename T> {_FI} T kd_imod(T a, T b) {{
-  if (b == (T)0 || ((T)-1 < (T)0 && b == (T)-1)) return (T)0;
-  return (T)(a % b);
-}}"""
-        ),
-    )
-    return "kd_imod"
+    body = "  if (b == (T)0 || ((T)-1 < (T)0 && b == (T)-1)) return (T)0;\n  return (T)(a % b);"
+    return _int_template(src, "kd_imod", body)
 
 
 def shifts(src: Source, which: str) -> str:
     """``kd_shl`` / ``kd_shr`` with kdsl's out-of-range rule."""
+    # Compared unsigned, a negative amount is huge: one test covers both ends.
+    body = "  unsigned long long s = (unsigned long long)b;\n"
     if which == "shl":
-        body = "  if (s >= sizeof(T) * 8) return (T)0;\n  return (T)((unsigned long long)a << s);"
+        body += "  if (s >= sizeof(T) * 8) return (T)0;\n  return (T)((unsigned long long)a << s);"
     else:
         # A negative signed value shifted by the width or more gives -1 (the sign fill);
         # for a signed T, C's >> on a negative value is arithmetic in CUDA.
-        body = "  if (s >= sizeof(T) * 8) return (T)(a < (T)0 ? -1 : 0);\n  return (T)(a >> s);"
-    src.need(
-        f"kd_{which}",
-        lambda: (
-            f"template <typename T> {_FI} T kd_{which}(T a, T b) {{\n"
-            # Compared unsigned, a negative amount is huge: one test covers both ends.
-            f"  unsigned long long s = (unsigned long long)b;\n{body}\n}}"
-        ),
-    )
-    return f"kd_{which}"
+        body += "  if (s >= sizeof(T) * 8) return (T)(a < (T)0 ? -1 : 0);\n  return (T)(a >> s);"
+    return _int_template(src, f"kd_{which}", body)
 
 
 def element_ptr(src: Source, ndim: int) -> str:

@@ -117,6 +117,17 @@ def _small_bits(et: T.ScalarType) -> tuple[str, str]:
     return f"((unsigned int){{}} & {mask:#x}u)", f"({CT.scalar_c(et)}){{}}"
 
 
+def _word_around(et: T.ScalarType) -> str:
+    """C lines declaring the aligned 32-bit word ``w`` around an 8- or 16-bit ``*p``, and
+    where in it ``*p`` lies (``shift``, ``mask``)."""
+    mask = (1 << et.bits) - 1
+    return (
+        "  unsigned int *w = (unsigned int *)((unsigned long long)p & ~3ull);\n"
+        "  unsigned int shift = ((unsigned int)(unsigned long long)p & 3u) * 8u;\n"
+        f"  unsigned int mask = {mask:#x}u << shift;\n"
+    )
+
+
 def atomic_helper(src: Source, kind: str, et: T.ScalarType) -> str:
     """The name of ``kd_atomic_<kind>_<tag>(T *p, T v)``, which gives the old value."""
     c = src.ctype(et)
@@ -138,11 +149,8 @@ def atomic_helper(src: Source, kind: str, et: T.ScalarType) -> str:
                 f"  }} while (old != seen);\n  return {frm.format('old')};\n}}"
             )
         to, frm = _small_bits(et)
-        mask = (1 << et.bits) - 1
+        head += _word_around(et)
         return head + (
-            "  unsigned int *w = (unsigned int *)((unsigned long long)p & ~3ull);\n"
-            "  unsigned int shift = ((unsigned int)(unsigned long long)p & 3u) * 8u;\n"
-            f"  unsigned int mask = {mask:#x}u << shift;\n"
             "  unsigned int old = *(volatile unsigned int *)w, seen;\n"
             f"  do {{\n    seen = old;\n    {c} cur = {frm.format('((seen & mask) >> shift)')};\n"
             f"    {c} nv = {new};\n"
@@ -166,18 +174,15 @@ def cas_helper(src: Source, et: T.ScalarType) -> str:
     def make() -> str:
         head = f"{_FI} {c} {name}({c} *p, {c} cmp, {c} v) {{\n"
         if et.bits >= 32:
-            u = "unsigned long long" if et.bits == 64 else "unsigned int"
+            u = CT.unsigned_c(et)
             to, frm = _bits(et)
             return head + (
                 f"  {u} old = atomicCAS(({u} *)p, {to.format('cmp')}, {to.format('v')});\n"
                 f"  return {frm.format('old')};\n}}"
             )
         to, frm = _small_bits(et)
-        mask = (1 << et.bits) - 1
+        head += _word_around(et)
         return head + (
-            "  unsigned int *w = (unsigned int *)((unsigned long long)p & ~3ull);\n"
-            "  unsigned int shift = ((unsigned int)(unsigned long long)p & 3u) * 8u;\n"
-            f"  unsigned int mask = {mask:#x}u << shift;\n"
             f"  unsigned int want = {to.format('cmp')} << shift;\n"
             f"  unsigned int put = {to.format('v')} << shift;\n"
             "  unsigned int old = *(volatile unsigned int *)w, seen;\n"

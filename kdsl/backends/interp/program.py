@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from kdsl.backends.base import Args, Dims, check_tid_ndims
+from kdsl.backends.base import Args, Dims, check_tid_ndims, split_block
 from kdsl.errors import KdslCapabilityError, KdslError, KdslRuntimeError
 from kdsl.ir.core import Block, Module, Operation, Region, Value
 from kdsl.ir.lowering import LOWERINGS
@@ -93,16 +93,9 @@ class _FunctionCompiler:
 
     def block(self, block: Block) -> CompiledBlock:
         arg_slots = [self.slot(a) for a in block.args]
-        steps: list[Step] = []
-        term = block.terminator
-        for op in block.ops:
-            if op is term and op.opdef.is_terminator:
-                continue
-            step = self.op(op)
-            if step is not None:
-                steps.append(step)
-        term_slots = [self.slot(v) for v in term.operands] if term is not None else []
-        return CompiledBlock(arg_slots, steps, term_slots)
+        ops, yielded = split_block(block)
+        steps = [step for step in map(self.op, ops) if step is not None]
+        return CompiledBlock(arg_slots, steps, [self.slot(v) for v in yielded])
 
     def op(self, op: Operation) -> Step | None:
         rule = LOWERINGS.get(op.opdef, "interp")
