@@ -136,6 +136,12 @@ class OpRegistry:
         self._ops[name] = opdef
         return opdef
 
+    def define_terminator(self, name: str, doc: str, **kwargs: Any) -> OpDef:
+        """Define an op that ends a block: the ``TERMINATOR`` trait and no results."""
+        return self.define(
+            name, doc, traits=frozenset({TERMINATOR}), type_rule=no_results, **kwargs
+        )
+
     def add_rule(self, name: str, rule: str, fn: Any) -> None:
         """Attach an extra rule (such as a VJP) to an existing op, once."""
         opdef = self[name]

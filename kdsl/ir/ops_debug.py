@@ -22,21 +22,14 @@ import numpy as np
 
 from kdsl.errors import KdslRuntimeError
 from kdsl.ir.builder import create_op
-from kdsl.ir.catalog import CATALOG, CHECK, WRITES, OpDef
+from kdsl.ir.catalog import CATALOG, CHECK, WRITES, InterpRule, OpDef, TypeRule
 from kdsl.ir.core import Loc, Module, Operation, Value
-from kdsl.ir.ops_mem import element_index
-from kdsl.ir.types import ArrayType, ScalarType, Type, elem_type
+from kdsl.ir.ops_mem import check_access, element_index
+from kdsl.ir.types import ScalarType, Type, elem_type
 
 
 def _bounds_rule(ts: Sequence[Type], attrs: dict[str, Any]) -> list[Type]:
-    a, idx = ts[0], ts[1:]
-    if not isinstance(a, ArrayType):
-        raise TypeError(f"kd.check_bounds checks an array, not {a}")
-    if len(idx) != a.ndim:
-        raise TypeError(f"a {a.ndim}-d array needs {a.ndim} indices, got {len(idx)}")
-    for t in idx:
-        if not (isinstance(t, ScalarType) and t.is_int):
-            raise TypeError(f"an array index must be an integer, not {t}")
+    check_access(ts[0], ts[1:], "kd.check_bounds checks an array")
     return []
 
 
@@ -48,22 +41,24 @@ def _verify_site(op: Operation) -> None:
         raise TypeError(f"{op.name}: arg must be a string")
 
 
+def _define_check(name: str, doc: str, type_rule: TypeRule, interp: InterpRule, example: str):
+    """A check op: its only effect stops a failing thread; ``arg`` and ``site`` attributes."""
+    return CATALOG.define(
+        name, doc, traits=frozenset({WRITES, CHECK}), type_rule=type_rule, verifier=_verify_site,
+        interp=interp, required_attrs=("arg", "site"), example=example, group="debug",
+    )  # fmt: skip
+
+
 def _bounds_interp(ctx, op, a, *idx):
     element_index(ctx, op, a, 0, idx)  # raises the same error a load would
 
 
-CHECK_BOUNDS = CATALOG.define(
+CHECK_BOUNDS = _define_check(
     "kd.check_bounds",
     "Debug mode: stop with an error when an index is outside the array's shape. "
     "``arg`` names the array (for messages); ``site`` numbers the check in its module.",
-    traits=frozenset({WRITES, CHECK}),
-    type_rule=_bounds_rule,
-    verifier=_verify_site,
-    interp=_bounds_interp,
-    required_attrs=("arg", "site"),
-    example='kd.check_bounds %0, %1 {arg = "y", site = 0}',
-    group="debug",
-)
+    _bounds_rule, _bounds_interp, 'kd.check_bounds %0, %1 {arg = "y", site = 0}',
+)  # fmt: skip
 
 
 def _finite_rule(ts: Sequence[Type], attrs: dict[str, Any]) -> list[Type]:
@@ -95,19 +90,13 @@ def _finite_interp(ctx, op, v):
         raise KdslRuntimeError(msg, op.loc, kernel)
 
 
-CHECK_FINITE = CATALOG.define(
+CHECK_FINITE = _define_check(
     "kd.check_finite",
     "Debug mode (``verify_fp``): stop with an error when a float value (any lane) is NaN "
     "or infinite. ``arg`` names the array the value is stored into; ``site`` numbers "
     "the check in its module.",
-    traits=frozenset({WRITES, CHECK}),
-    type_rule=_finite_rule,
-    verifier=_verify_site,
-    interp=_finite_interp,
-    required_attrs=("arg", "site"),
-    example='kd.check_finite %3 {arg = "y", site = 1}',
-    group="debug",
-)
+    _finite_rule, _finite_interp, 'kd.check_finite %3 {arg = "y", site = 1}',
+)  # fmt: skip
 
 
 #: The ops that hold a ``site`` attribute.

@@ -8,7 +8,7 @@ returns nothing. ``func.call`` refers to a function of the same module by name.
 
 from __future__ import annotations
 
-from kdsl.ir.catalog import CATALOG, TERMINATOR, no_results
+from kdsl.ir.catalog import CATALOG
 
 
 def func_result_types(func) -> list:
@@ -46,28 +46,16 @@ def _call_interp(ctx, op, *args):
 
 
 FUNC = CATALOG.define(
-    "func.func",
-    "A function or kernel (see the module docstring).",
-    verifier=_func_verify,
-    num_regions=1,
-    required_attrs=("sym_name", "kind"),
+    "func.func", "A function or kernel (see the module docstring).",
+    verifier=_func_verify, num_regions=1, required_attrs=("sym_name", "kind"), group="functions",
     example='func.func @f(%x: f32) -> (f32) {kind = "func"} {\n  func.return %x\n}',
-    group="functions",
-)
+)  # fmt: skip
 CALL = CATALOG.define(
-    "func.call",
-    "Call a function of the module by name; gives its results.",
-    interp=_call_interp,
-    required_attrs=("callee",),
+    "func.call", "Call a function of the module by name; gives its results.",
+    interp=_call_interp, required_attrs=("callee",), group="functions",
     example='%1 = func.call %0 {callee = "f"} : f32',
-    group="functions",
-)
-RETURN = CATALOG.define(
-    "func.return",
-    "Return from a function with its result values (none for a kernel).",
-    traits=frozenset({TERMINATOR}),
-    type_rule=no_results,
-    verifier=_return_verify,
-    example="func.return %0",
-    group="functions",
-)
+)  # fmt: skip
+RETURN = CATALOG.define_terminator(
+    "func.return", "Return from a function with its result values (none for a kernel).",
+    verifier=_return_verify, example="func.return %0", group="functions",
+)  # fmt: skip

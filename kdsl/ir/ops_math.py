@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from kdsl.ir import semantics as sem
-from kdsl.ir.catalog import CATALOG, PURE, SPECULATABLE
+from kdsl.ir.catalog import CATALOG, PURE, SPECULATABLE, InterpRule, TypeRule
 from kdsl.ir.ops_arith import is_numeric
 from kdsl.ir.types import BOOL, I32, ScalarType, Type, elem_type
 
@@ -77,6 +77,17 @@ BINARY_MATH: dict[str, tuple[Any, str]] = {
 }
 
 
+def _define(name: str, doc: str, rule: TypeRule, interp: InterpRule, example: str) -> None:
+    """Define ``math.<name>``, pure and speculatable like every op here.
+
+    ``example`` is the text-form example with ``{}`` where the op's name goes.
+    """
+    CATALOG.define(
+        f"math.{name}", doc, traits=_PURE, type_rule=rule, interp=interp,
+        example=example.format(f"math.{name}"), group="math",
+    )  # fmt: skip
+
+
 def _unary_rule(name: str, float_only: bool):
     def rule(ts: Sequence[Type], attrs: dict[str, Any]) -> list[Type]:
         (a,) = ts
@@ -98,11 +109,7 @@ def _unary_interp(fn):
 
 
 for _name, (_fn, _float_only, _doc) in UNARY_MATH.items():
-    CATALOG.define(
-        f"math.{_name}", _doc, traits=_PURE,
-        type_rule=_unary_rule(_name, _float_only), interp=_unary_interp(_fn),
-        example=f"%1 = math.{_name} %0 : f32", group="math",
-    )  # fmt: skip
+    _define(_name, _doc, _unary_rule(_name, _float_only), _unary_interp(_fn), "%1 = {} %0 : f32")
 
 
 def _pred_rule(name: str):
@@ -123,11 +130,7 @@ def _pred_interp(fn):
 
 
 for _name, (_fn, _doc) in PREDICATES.items():
-    CATALOG.define(
-        f"math.{_name}", _doc, traits=_PURE,
-        type_rule=_pred_rule(_name), interp=_pred_interp(_fn),
-        example=f"%1 = math.{_name} %0 : bool", group="math",
-    )  # fmt: skip
+    _define(_name, _doc, _pred_rule(_name), _pred_interp(_fn), "%1 = {} %0 : bool")
 
 
 def _binary_rule(name: str):
@@ -145,17 +148,15 @@ def _binary_rule(name: str):
 def _binary_interp(fn):
     def interp(ctx, op, a, b):
         with np.errstate(all="ignore"):
-            return sem.unwrap(np.asarray(fn(np.asarray(a), np.asarray(b))).astype(np.asarray(a).dtype))
+            return sem.unwrap(
+                np.asarray(fn(np.asarray(a), np.asarray(b))).astype(np.asarray(a).dtype)
+            )
 
     return interp
 
 
 for _name, (_fn, _doc) in BINARY_MATH.items():
-    CATALOG.define(
-        f"math.{_name}", _doc, traits=_PURE,
-        type_rule=_binary_rule(_name), interp=_binary_interp(_fn),
-        example=f"%2 = math.{_name} %0, %1 : f32", group="math",
-    )  # fmt: skip
+    _define(_name, _doc, _binary_rule(_name), _binary_interp(_fn), "%2 = {} %0, %1 : f32")
 
 
 def _bit_count_rule(ts: Sequence[Type], attrs: dict[str, Any]) -> list[Type]:
@@ -171,9 +172,10 @@ def _bit_count_interp(ctx, op, a):
     return np.int32(np.unpackbits(np.ascontiguousarray(a).reshape(1).view(np.uint8)).sum())
 
 
-CATALOG.define(
-    "math.bit_count",
+_define(
+    "bit_count",
     "Number of set bits in an integer's two's-complement representation (an i32).",
-    traits=_PURE, type_rule=_bit_count_rule, interp=_bit_count_interp,
-    example="%1 = math.bit_count %0 : i32", group="math",
-)  # fmt: skip
+    _bit_count_rule,
+    _bit_count_interp,
+    "%1 = {} %0 : i32",
+)

@@ -38,13 +38,9 @@ TID = CATALOG.define(
     "Index of the running thread. With ``ndim = 1`` it is the linear index over the "
     "whole launch; with ``ndim = n`` (the launch must have n dimensions) it is "
     "component ``dim`` of the n-dimensional index.",
-    traits=frozenset({PURE, SPECULATABLE}),
-    verifier=_tid_verify,
-    interp=_tid_interp,
-    required_attrs=("dim", "ndim"),
-    example="%0 = kd.tid {dim = 0, ndim = 1} : i32",
-    group="memory",
-)
+    traits=frozenset({PURE, SPECULATABLE}), verifier=_tid_verify, interp=_tid_interp,
+    required_attrs=("dim", "ndim"), example="%0 = kd.tid {dim = 0, ndim = 1} : i32", group="memory",
+)  # fmt: skip
 
 
 def _shape_rule(ts: Sequence[Type], attrs: dict[str, Any]) -> list[Type]:
@@ -58,20 +54,22 @@ def _shape_rule(ts: Sequence[Type], attrs: dict[str, Any]) -> list[Type]:
 
 
 ARRAY_SHAPE = CATALOG.define(
-    "kd.array_shape",
-    "Extent of dimension ``dim`` of an array.",
-    traits=frozenset({PURE, SPECULATABLE}),
-    type_rule=_shape_rule,
-    interp=lambda ctx, op, a: np.int32(a.shape[op.attrs["dim"]]),
-    required_attrs=("dim",),
-    example="%1 = kd.array_shape %0 {dim = 0} : i32",
-    group="memory",
-)
+    "kd.array_shape", "Extent of dimension ``dim`` of an array.",
+    traits=frozenset({PURE, SPECULATABLE}), type_rule=_shape_rule,
+    interp=lambda ctx, op, a: np.int32(a.shape[op.attrs["dim"]]), required_attrs=("dim",),
+    example="%1 = kd.array_shape %0 {dim = 0} : i32", group="memory",
+)  # fmt: skip
 
 
-def _check_access(a: Type, idx: Sequence[Type]) -> ArrayType:
+def check_access(
+    a: Type, idx: Sequence[Type], what: str = "only arrays can be indexed this way"
+) -> ArrayType:
+    """``a`` as an array that the index types ``idx`` address one element of.
+
+    Raises ``TypeError`` otherwise; ``what`` begins the message for a non-array.
+    """
     if not isinstance(a, ArrayType):
-        raise TypeError(f"only arrays can be indexed this way, not {a}")
+        raise TypeError(f"{what}, not {a}")
     if len(idx) != a.ndim:
         raise TypeError(f"a {a.ndim}-d array needs {a.ndim} indices, got {len(idx)}")
     for t in idx:
@@ -81,7 +79,7 @@ def _check_access(a: Type, idx: Sequence[Type]) -> ArrayType:
 
 
 def _load_rule(ts: Sequence[Type], attrs: dict[str, Any]) -> list[Type]:
-    return [_check_access(ts[0], ts[1:]).dtype]
+    return [check_access(ts[0], ts[1:]).dtype]
 
 
 def element_index(ctx, op, arr: np.ndarray, array_operand: int, idx: Sequence[Any]) -> tuple:
@@ -124,20 +122,15 @@ def _load_interp(ctx, op, a, *idx):
 
 
 LOAD = CATALOG.define(
-    "kd.load",
-    "Read one element of an array.",
-    traits=frozenset({READS}),
-    type_rule=_load_rule,
-    interp=_load_interp,
-    array_operand=0,
-    example="%2 = kd.load %0, %1 : f32",
-    group="memory",
-)
+    "kd.load", "Read one element of an array.",
+    traits=frozenset({READS}), type_rule=_load_rule, interp=_load_interp, array_operand=0,
+    example="%2 = kd.load %0, %1 : f32", group="memory",
+)  # fmt: skip
 
 
 def _store_rule(ts: Sequence[Type], attrs: dict[str, Any]) -> list[Type]:
     v, a = ts[0], ts[1]
-    at = _check_access(a, ts[2:])
+    at = check_access(a, ts[2:])
     if v != at.dtype:
         raise TypeError(f"cannot store a {v} into an array of {at.dtype}")
     return []
@@ -149,16 +142,10 @@ def _store_interp(ctx, op, v, a, *idx):
 
 
 STORE = CATALOG.define(
-    "kd.store",
-    "Write a value into one element of an array: ``kd.store %value, %array, %i...``.",
-    traits=frozenset({WRITES}),
-    type_rule=_store_rule,
-    interp=_store_interp,
-    array_operand=1,
-    stored_operand=0,
-    example="kd.store %2, %0, %1",
-    group="memory",
-)
+    "kd.store", "Write a value into one element of an array: ``kd.store %value, %array, %i...``.",
+    traits=frozenset({WRITES}), type_rule=_store_rule, interp=_store_interp,
+    array_operand=1, stored_operand=0, example="kd.store %2, %0, %1", group="memory",
+)  # fmt: skip
 
 
 def _atomic_rule(ts: Sequence[Type], attrs: dict[str, Any]) -> list[Type]:
@@ -166,7 +153,7 @@ def _atomic_rule(ts: Sequence[Type], attrs: dict[str, Any]) -> list[Type]:
     if kind not in ATOMIC_KINDS:
         raise TypeError(f"unknown atomic kind {kind!r}")
     v, a = ts[0], ts[1]
-    at = _check_access(a, ts[2:])
+    at = check_access(a, ts[2:])
     if v != at.dtype:
         raise TypeError(f"cannot atomically {kind} a {v} into an array of {at.dtype}")
     et = elem_type(v)
@@ -197,20 +184,15 @@ ATOMIC_RMW = CATALOG.define(
     "max, and, or, xor, exch); gives the old value. Vectors and matrices work "
     "componentwise (each component is one atomic update). Integers wrap; float "
     "min/max follow ``arith.min``/``arith.max`` (NaN loses, -0.0 < +0.0).",
-    traits=frozenset({READS, WRITES}),
-    type_rule=_atomic_rule,
-    interp=_atomic_interp,
-    array_operand=1,
-    stored_operand=0,
-    required_attrs=("kind",),
+    traits=frozenset({READS, WRITES}), type_rule=_atomic_rule, interp=_atomic_interp,
+    array_operand=1, stored_operand=0, required_attrs=("kind",), group="memory",
     example='%3 = kd.atomic_rmw %2, %0, %1 {kind = "add"} : f32',
-    group="memory",
-)
+)  # fmt: skip
 
 
 def _cas_rule(ts: Sequence[Type], attrs: dict[str, Any]) -> list[Type]:
     compare, v, a = ts[0], ts[1], ts[2]
-    at = _check_access(a, ts[3:])
+    at = check_access(a, ts[3:])
     if v != at.dtype or compare != at.dtype:
         raise TypeError(
             f"atomic cas needs a compare value and a new value of the array's type "
@@ -241,10 +223,7 @@ ATOMIC_CAS = CATALOG.define(
     "%array, %i...`` stores ``value`` where the element's bits equal ``compare``'s and "
     "gives the old value. Floats compare by bits (NaN can match, -0.0 does not match "
     "+0.0), as the hardware does. Vectors and matrices work componentwise.",
-    traits=frozenset({READS, WRITES}),
-    type_rule=_cas_rule,
-    interp=_cas_interp,
+    traits=frozenset({READS, WRITES}), type_rule=_cas_rule, interp=_cas_interp,
     array_operand=2,  # writes only where the compare matches: no stored_operand
-    example="%4 = kd.atomic_cas %2, %3, %0, %1 : i32",
-    group="memory",
-)
+    example="%4 = kd.atomic_cas %2, %3, %0, %1 : i32", group="memory",
+)  # fmt: skip

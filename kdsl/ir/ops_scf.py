@@ -23,7 +23,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-from kdsl.ir.catalog import CATALOG, RECURSIVE_EFFECTS, TERMINATOR, no_results
+from kdsl.ir.catalog import CATALOG, RECURSIVE_EFFECTS, OpDef
 from kdsl.ir.types import BOOL, ScalarType, Type
 
 
@@ -33,6 +33,13 @@ def _types(values) -> list[Type]:
 
 def _fmt(ts: Sequence[Type]) -> str:
     return "(" + ", ".join(map(str, ts)) + ")"
+
+
+def _define_structured(name: str, doc: str, **kwargs: Any) -> OpDef:
+    """A structured op: its effects are those of the ops in its regions."""
+    return CATALOG.define(
+        name, doc, traits=frozenset({RECURSIVE_EFFECTS}), group="control flow", **kwargs
+    )
 
 
 def _check_yield(region, want: Sequence[Type], what: str, term: str = "scf.yield") -> None:
@@ -65,17 +72,13 @@ def _results(op, values: Sequence[Any]):
     return tuple(values) if op.results else None
 
 
-IF = CATALOG.define(
+IF = _define_structured(
     "scf.if",
     "Run the then region if the condition holds, else the else region; the results "
     "are what the region that ran yields.",
-    traits=frozenset({RECURSIVE_EFFECTS}),
-    verifier=_if_verify,
-    interp=_if_interp,
-    num_regions=2,
+    verifier=_if_verify, interp=_if_interp, num_regions=2,
     example="%1 = scf.if %0 : f32 {\n  scf.yield %a\n} {\n  scf.yield %b\n}",
-    group="control flow",
-)
+)  # fmt: skip
 
 
 def _for_verify(op) -> None:
@@ -104,19 +107,12 @@ def _for_interp(ctx, op, lb, ub, step, *init):
     return _results(op, carried)
 
 
-FOR = CATALOG.define(
-    "scf.for",
-    "A counted loop with loop-carried values (see the module docstring).",
-    traits=frozenset({RECURSIVE_EFFECTS}),
-    verifier=_for_verify,
-    interp=_for_interp,
-    num_regions=1,
-    example=(
-        "%3 = scf.for %lb, %ub, %st, %x0 : f32 {\n^bb(%i: i32, %x: f32):\n"
-        "  %y = arith.add %x, %x : f32\n  scf.yield %y\n}"
-    ),
-    group="control flow",
-)
+FOR = _define_structured(
+    "scf.for", "A counted loop with loop-carried values (see the module docstring).",
+    verifier=_for_verify, interp=_for_interp, num_regions=1,
+    example="%3 = scf.for %lb, %ub, %st, %x0 : f32 {\n^bb(%i: i32, %x: f32):\n"
+    "  %y = arith.add %x, %x : f32\n  scf.yield %y\n}",
+)  # fmt: skip
 
 
 def _while_verify(op) -> None:
@@ -145,20 +141,13 @@ def _while_interp(ctx, op, *init):
         carried = list(ctx.run_region(after, passed))
 
 
-WHILE = CATALOG.define(
-    "scf.while",
-    "A loop with a condition region and a body region (see the module docstring).",
-    traits=frozenset({RECURSIVE_EFFECTS}),
-    verifier=_while_verify,
-    interp=_while_interp,
-    num_regions=2,
-    example=(
-        '%r = scf.while %x0 : i32 {\n^bb(%x: i32):\n  %c = arith.cmp %x, %n {pred = "lt"} : bool\n'
-        "  scf.condition %c, %x\n} {\n^bb(%y: i32):\n  %z = arith.add %y, %one : i32\n"
-        "  scf.yield %z\n}"
-    ),
-    group="control flow",
-)
+WHILE = _define_structured(
+    "scf.while", "A loop with a condition region and a body region (see the module docstring).",
+    verifier=_while_verify, interp=_while_interp, num_regions=2,
+    example='%r = scf.while %x0 : i32 {\n^bb(%x: i32):\n'
+    '  %c = arith.cmp %x, %n {pred = "lt"} : bool\n  scf.condition %c, %x\n} {\n'
+    "^bb(%y: i32):\n  %z = arith.add %y, %one : i32\n  scf.yield %z\n}",
+)  # fmt: skip
 
 
 def _condition_verify(op) -> None:
@@ -176,21 +165,11 @@ def _yield_verify(op) -> None:
         raise TypeError("scf.yield must end a region of scf.if, scf.for or scf.while")
 
 
-YIELD = CATALOG.define(
-    "scf.yield",
-    "Ends a region of scf.if/for/while, passing values to the parent op.",
-    traits=frozenset({TERMINATOR}),
-    type_rule=no_results,
-    verifier=_yield_verify,
-    example="scf.yield %0, %1",
-    group="control flow",
-)
-CONDITION = CATALOG.define(
-    "scf.condition",
-    "Ends the before region of scf.while: a bool, then the values passed on.",
-    traits=frozenset({TERMINATOR}),
-    type_rule=no_results,
-    verifier=_condition_verify,
-    example="scf.condition %c, %x",
-    group="control flow",
-)
+YIELD = CATALOG.define_terminator(
+    "scf.yield", "Ends a region of scf.if/for/while, passing values to the parent op.",
+    verifier=_yield_verify, example="scf.yield %0, %1", group="control flow",
+)  # fmt: skip
+CONDITION = CATALOG.define_terminator(
+    "scf.condition", "Ends the before region of scf.while: a bool, then the values passed on.",
+    verifier=_condition_verify, example="scf.condition %c, %x", group="control flow",
+)  # fmt: skip
