@@ -55,7 +55,7 @@ class Framework:
         return sys.modules.get(self.module)
 
     def cuda_device(self, index: int, source: Any) -> Device:
-        """The kdsl device ``cuda:index``; ``source`` (the framework's device) names it in errors."""
+        """The kdsl device ``cuda:index``; ``source`` (the framework's own device) names it."""
         try:
             return get_device(f"cuda:{index}")
         except KdslError as e:

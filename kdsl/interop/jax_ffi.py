@@ -394,7 +394,7 @@ class FfiTarget:
     """
 
     def __init__(self, what: str, names: Sequence[str], types: Sequence[T.Type], num_outputs: int,
-                 in_out_argnames: Any, vmap_method: str | None, output_dims: Any, name: str):  # fmt: skip
+                 in_out_argnames: Any, vmap_method: Any, output_dims: Any, name: str):  # fmt: skip
         self.what = what
         self.inputs, self.outputs = split_params(what, names, types, num_outputs, in_out_argnames)
         self.vmap_method = vmap_method

@@ -52,14 +52,19 @@ ExtensionBase._fields_ = [
     ("struct_size", c_size_t), ("type", c_int), ("next", ctypes.POINTER(ExtensionBase)),
 ]  # fmt: skip
 
+# The fields every versioned struct of the API starts with (its size, then its extensions).
+_HEADER = [("struct_size", c_size_t), ("extension_start", ctypes.POINTER(ExtensionBase))]
+
+
+def _sized(struct: type[ctypes.Structure], *fields: Any) -> Any:
+    """An argument struct for an API call: its size, no extensions, then ``fields``."""
+    return struct(ctypes.sizeof(struct), None, *fields)
+
 
 class ApiVersion(ctypes.Structure):
     """``XLA_FFI_Api_Version``."""
 
-    _fields_ = [
-        ("struct_size", c_size_t), ("extension_start", ctypes.POINTER(ExtensionBase)),
-        ("major_version", c_int), ("minor_version", c_int),
-    ]  # fmt: skip
+    _fields_ = [*_HEADER, ("major_version", c_int), ("minor_version", c_int)]
 
 
 class Metadata(ctypes.Structure):
@@ -81,8 +86,7 @@ class Buffer(ctypes.Structure):
     """``XLA_FFI_Buffer``: one input or output array (dense, row-major)."""
 
     _fields_ = [
-        ("struct_size", c_size_t), ("extension_start", ctypes.POINTER(ExtensionBase)),
-        ("dtype", c_int), ("data", c_void_p), ("rank", c_int64),
+        *_HEADER, ("dtype", c_int), ("data", c_void_p), ("rank", c_int64),
         ("dims", ctypes.POINTER(c_int64)),
     ]  # fmt: skip
 
@@ -109,8 +113,8 @@ class Args(ctypes.Structure):
     """``XLA_FFI_Args`` (and, with the same layout, ``XLA_FFI_Rets``)."""
 
     _fields_ = [
-        ("struct_size", c_size_t), ("extension_start", ctypes.POINTER(ExtensionBase)),
-        ("size", c_int64), ("types", ctypes.POINTER(c_int)), ("args", ctypes.POINTER(c_void_p)),
+        *_HEADER, ("size", c_int64), ("types", ctypes.POINTER(c_int)),
+        ("args", ctypes.POINTER(c_void_p)),
     ]  # fmt: skip
 
 
@@ -118,8 +122,7 @@ class Attrs(ctypes.Structure):
     """``XLA_FFI_Attrs``."""
 
     _fields_ = [
-        ("struct_size", c_size_t), ("extension_start", ctypes.POINTER(ExtensionBase)),
-        ("size", c_int64), ("types", ctypes.POINTER(c_int)),
+        *_HEADER, ("size", c_int64), ("types", ctypes.POINTER(c_int)),
         ("names", ctypes.POINTER(ctypes.POINTER(ByteSpan))), ("attrs", ctypes.POINTER(c_void_p)),
     ]  # fmt: skip
 
@@ -127,28 +130,19 @@ class Attrs(ctypes.Structure):
 class ErrorCreateArgs(ctypes.Structure):
     """``XLA_FFI_Error_Create_Args``."""
 
-    _fields_ = [
-        ("struct_size", c_size_t), ("extension_start", ctypes.POINTER(ExtensionBase)),
-        ("message", ctypes.c_char_p), ("errc", c_int),
-    ]  # fmt: skip
+    _fields_ = [*_HEADER, ("message", ctypes.c_char_p), ("errc", c_int)]
 
 
 class StreamGetArgs(ctypes.Structure):
     """``XLA_FFI_Stream_Get_Args``."""
 
-    _fields_ = [
-        ("struct_size", c_size_t), ("extension_start", ctypes.POINTER(ExtensionBase)),
-        ("ctx", c_void_p), ("stream", c_void_p),
-    ]  # fmt: skip
+    _fields_ = [*_HEADER, ("ctx", c_void_p), ("stream", c_void_p)]
 
 
 class DeviceOrdinalGetArgs(ctypes.Structure):
     """``XLA_FFI_DeviceOrdinal_Get_Args``."""
 
-    _fields_ = [
-        ("struct_size", c_size_t), ("extension_start", ctypes.POINTER(ExtensionBase)),
-        ("ctx", c_void_p), ("device_ordinal", ctypes.c_int32),
-    ]  # fmt: skip
+    _fields_ = [*_HEADER, ("ctx", c_void_p), ("device_ordinal", ctypes.c_int32)]
 
 
 ErrorCreate = ctypes.CFUNCTYPE(c_void_p, ctypes.POINTER(ErrorCreateArgs))
@@ -167,8 +161,7 @@ class Api(ctypes.Structure):
     """``XLA_FFI_Api``: the function table; the entries kdsl calls are typed."""
 
     _fields_ = [
-        ("struct_size", c_size_t), ("extension_start", ctypes.POINTER(ExtensionBase)),
-        ("api_version", ApiVersion), ("internal_api", c_void_p),
+        *_HEADER, ("api_version", ApiVersion), ("internal_api", c_void_p),
         ("XLA_FFI_Error_Create", ErrorCreate), ("XLA_FFI_Error_GetMessage", c_void_p),
         ("XLA_FFI_Error_Destroy", c_void_p), ("XLA_FFI_Handler_Register", c_void_p),
         ("XLA_FFI_Stream_Get", StreamGet),
@@ -181,8 +174,7 @@ class CallFrame(ctypes.Structure):
     """``XLA_FFI_CallFrame``: everything one handler call gets."""
 
     _fields_ = [
-        ("struct_size", c_size_t), ("extension_start", ctypes.POINTER(ExtensionBase)),
-        ("api", ctypes.POINTER(Api)), ("ctx", c_void_p), ("stage", c_int),
+        *_HEADER, ("api", ctypes.POINTER(Api)), ("ctx", c_void_p), ("stage", c_int),
         ("args", Args), ("rets", Args), ("attrs", Attrs), ("future", c_void_p),
     ]  # fmt: skip
 
@@ -251,7 +243,7 @@ def attributes(attrs: Attrs) -> dict[str, Any]:
 
 def stream_of(frame: Any) -> int:
     """The CUDA stream (``cudaStream_t`` as an int) of a GPU call."""
-    args = StreamGetArgs(ctypes.sizeof(StreamGetArgs), None, frame.ctx, None)
+    args = _sized(StreamGetArgs, frame.ctx, None)
     err = frame.api.contents.XLA_FFI_Stream_Get(ctypes.byref(args))
     if err:
         raise RuntimeError("XLA_FFI_Stream_Get failed")
@@ -263,7 +255,7 @@ def device_ordinal(frame: Any) -> int | None:
     api = frame.api.contents
     if api.struct_size < ctypes.sizeof(Api):
         return None
-    args = DeviceOrdinalGetArgs(ctypes.sizeof(DeviceOrdinalGetArgs), None, frame.ctx, 0)
+    args = _sized(DeviceOrdinalGetArgs, frame.ctx, 0)
     if api.XLA_FFI_DeviceOrdinal_Get(ctypes.byref(args)):
         return None
     return int(args.device_ordinal)
@@ -271,5 +263,5 @@ def device_ordinal(frame: Any) -> int | None:
 
 def make_error(frame: Any, message: str) -> int:
     """An ``XLA_FFI_Error*`` carrying ``message`` (XLA takes ownership and raises it)."""
-    args = ErrorCreateArgs(ctypes.sizeof(ErrorCreateArgs), None, message.encode(), ERROR_INTERNAL)
+    args = _sized(ErrorCreateArgs, message.encode(), ERROR_INTERNAL)
     return frame.api.contents.XLA_FFI_Error_Create(ctypes.byref(args))

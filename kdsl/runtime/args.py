@@ -78,14 +78,10 @@ def convert(t: T.Type, value: Any, device: Device) -> Any:
 
 def _array(t: T.ArrayType, value: Any, device: Device) -> Any:
     if type(value) is ArrayDescriptor:
-        return _descriptor(t, value, device)
+        _check_kdsl_array(t, device, value.device, value.dtype, value.ndim)
+        return value.buf
     if isinstance(value, array):
-        if value.device != device:
-            raise ArgError(f"expected an array on device '{device}', got one on '{value.device}'")
-        if value._t != t.dtype:
-            raise ArgError(f"expected an array of {t.dtype}, got an array of {value._t}")
-        if value.ndim != t.ndim:
-            raise ArgError(f"expected a {t.ndim}-d array, got a {value.ndim}-d array")
+        _check_kdsl_array(t, device, value.device, value._t, value.ndim)
         return value._buf
     if mem.is_cuda_buffer(value):
         if device.is_cpu:
@@ -124,14 +120,14 @@ def has_attribute(value: Any, name: str) -> bool:
         return False
 
 
-def _descriptor(t: T.ArrayType, value: ArrayDescriptor, device: Device) -> Any:
-    if value.device != device:
-        raise ArgError(f"expected an array on device '{device}', got one on '{value.device}'")
-    if value.dtype != t.dtype:
-        raise ArgError(f"expected an array of {t.dtype}, got an array of {value.dtype}")
-    if value.ndim != t.ndim:
-        raise ArgError(f"expected a {t.ndim}-d array, got a {value.ndim}-d array")
-    return value.buf
+def _check_kdsl_array(t: T.ArrayType, device: Device, on: Device, dtype: Any, ndim: int) -> None:
+    """Raise unless a kdsl array (or descriptor) on ``on`` fits parameter ``t`` on ``device``."""
+    if on != device:
+        raise ArgError(f"expected an array on device '{device}', got one on '{on}'")
+    if dtype != t.dtype:
+        raise ArgError(f"expected an array of {t.dtype}, got an array of {dtype}")
+    if ndim != t.ndim:
+        raise ArgError(f"expected a {t.ndim}-d array, got a {ndim}-d array")
 
 
 def check_foreign(

@@ -9,21 +9,13 @@ only when a CUDA device is used.
 
 from __future__ import annotations
 
-from types import TracebackType
 from typing import Any
 
 import numpy as np
 
 from kdsl.errors import KdslError
-from kdsl.runtime.device import Device
+from kdsl.runtime.device import Device, cupy
 from kdsl.runtime.stream import Stream, get_stream
-
-
-def cupy() -> Any:
-    """The CuPy module (imported on first use)."""
-    import cupy
-
-    return cupy
 
 
 def xp(device: Device) -> Any:
@@ -80,16 +72,12 @@ class scope:
         self.stream.cupy.__enter__()
         return self.stream
 
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
+    def __exit__(self, *exc_info: object) -> None:
         if self.device.is_cpu:
             return
-        self.stream.cupy.__exit__(exc_type, exc, tb)
-        self._dev.__exit__(exc_type, exc, tb)
+        self.stream.cupy.__exit__(*exc_info)
+        self._dev.__exit__(*exc_info)
+        exc = exc_info[1]
         if exc is not None and isinstance(exc, cupy().cuda.memory.OutOfMemoryError):
             raise _oom(self.device, self._nbytes, exc) from None
 

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import os
 import sys
-from types import TracebackType
 from typing import Any
 
 from kdsl.errors import KdslError
@@ -39,7 +38,7 @@ class Device:
         return self.kind == "cuda"
 
     def _props(self) -> dict:
-        return _cupy().cuda.runtime.getDeviceProperties(self.ordinal)
+        return cupy().cuda.runtime.getDeviceProperties(self.ordinal)
 
     @property
     def name(self) -> str:
@@ -60,18 +59,19 @@ class Device:
     @property
     def total_memory(self) -> int:
         """Bytes of memory on the device (physical RAM for the CPU)."""
-        if self.is_cpu:
-            return _host_pages("SC_PHYS_PAGES")
-        with _cupy().cuda.Device(self.ordinal) as d:
-            return int(d.mem_info[1])
+        return self._memory("SC_PHYS_PAGES", 1)
 
     @property
     def free_memory(self) -> int:
         """Bytes the driver reports free now (CuPy's pool holds some it does not count)."""
+        return self._memory("SC_AVPHYS_PAGES", 0)
+
+    def _memory(self, host_pages: str, field: int) -> int:
+        # ``host_pages``: the sysconf name on the CPU; ``field``: free 0 or total 1 of mem_info.
         if self.is_cpu:
-            return _host_pages("SC_AVPHYS_PAGES")
-        with _cupy().cuda.Device(self.ordinal) as d:
-            return int(d.mem_info[0])
+            return _host_pages(host_pages)
+        with cupy().cuda.Device(self.ordinal) as d:
+            return int(d.mem_info[field])
 
     @property
     def stream(self) -> Any:
@@ -87,12 +87,12 @@ class Device:
             return True
         if self.is_cpu or o.is_cpu:
             return False
-        return bool(_cupy().cuda.runtime.deviceCanAccessPeer(self.ordinal, o.ordinal))
+        return bool(cupy().cuda.runtime.deviceCanAccessPeer(self.ordinal, o.ordinal))
 
     def make_current(self) -> None:
         """Make this the current CUDA device of the calling thread (no-op on the CPU)."""
         if self.is_cuda:
-            _cupy().cuda.Device(self.ordinal).use()
+            cupy().cuda.Device(self.ordinal).use()
 
     def __str__(self) -> str:
         return self.alias
@@ -121,7 +121,8 @@ def _host_pages(name: str) -> int:
         return 0
 
 
-def _cupy() -> Any:
+def cupy() -> Any:
+    """The CuPy module, imported on first use (``import kdsl`` never loads it)."""
     import cupy
 
     return cupy
@@ -210,17 +211,12 @@ class ScopedDevice:
 
     def __enter__(self) -> Device:
         self._saved = (_default, _current_cuda)
-        self._saved_cupy = _cupy().cuda.runtime.getDevice() if self.device.is_cuda else None
+        self._saved_cupy = cupy().cuda.runtime.getDevice() if self.device.is_cuda else None
         set_device(self.device)
         return self.device
 
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
+    def __exit__(self, *exc_info: object) -> None:
         global _default, _current_cuda
         _default, _current_cuda = self._saved
         if self._saved_cupy is not None:
-            _cupy().cuda.runtime.setDevice(self._saved_cupy)
+            cupy().cuda.runtime.setDevice(self._saved_cupy)

@@ -16,7 +16,6 @@ no-ops, while asking for a stream or event of the CPU is an error, as in Warp.
 
 from __future__ import annotations
 
-from types import TracebackType
 from typing import Any
 
 from kdsl.errors import KdslError
@@ -25,17 +24,12 @@ from kdsl.runtime.device import (
     ScopedDevice,
     cuda_device_count,
     cuda_initialized,
+    cupy,
     get_device,
 )
 
 _current: dict[int, Stream] = {}  # device ordinal -> its current stream
 _used: set[int] = set()  # ordinals that have had a kdsl stream (what synchronize() waits for)
-
-
-def _cupy() -> Any:
-    import cupy
-
-    return cupy
 
 
 def _cuda_device(device: Any, what: str) -> Device:
@@ -48,7 +42,27 @@ def _cuda_device(device: Any, what: str) -> Device:
     return dev
 
 
-class Stream:
+class _CudaWork:
+    """What a ``Stream`` and an ``Event`` share: a CuPy stream or event (``.cupy``) of a device.
+
+    Their work is what was enqueued on the stream so far, or what came before the
+    event's last record.
+    """
+
+    cupy: Any
+    device: Device
+
+    @property
+    def is_complete(self) -> bool:
+        """True when the stream's (or event's) work has finished."""
+        return bool(self.cupy.done)
+
+    def synchronize(self) -> None:
+        """Block the host until the stream's (or event's) work has finished."""
+        self.cupy.synchronize()
+
+
+class Stream(_CudaWork):
     """A CUDA stream on one device.
 
     ``Stream(device=None, priority=0, cuda_stream=None, blocking=True)`` creates a
@@ -65,7 +79,7 @@ class Stream:
         blocking: bool = True,
     ) -> None:
         dev = _cuda_device(device, "Stream()")
-        cp = _cupy()
+        cp = cupy()
         with cp.cuda.Device(dev.ordinal):
             if cuda_stream is not None:
                 self.cupy = cp.cuda.ExternalStream(int(cuda_stream), dev.ordinal)
@@ -90,11 +104,6 @@ class Stream:
         """True when the stream synchronizes with the legacy default stream."""
         return not self.cupy.is_non_blocking
 
-    @property
-    def is_complete(self) -> bool:
-        """True when all work enqueued so far has finished."""
-        return bool(self.cupy.done)
-
     def record_event(self, event: Event | None = None) -> Event:
         """Record ``event`` (a new one when None) at this point of the stream; returns it."""
         if event is None:
@@ -103,13 +112,13 @@ class Stream:
             raise KdslError(
                 f"an event of '{event.device}' cannot be recorded on a stream of '{self.device}'"
             )
-        with _cupy().cuda.Device(self.device.ordinal):
+        with cupy().cuda.Device(self.device.ordinal):
             event.cupy.record(self.cupy)
         return event
 
     def wait_event(self, event: Event) -> None:
         """Make later work on this stream wait until ``event`` (any device's) completes."""
-        with _cupy().cuda.Device(self.device.ordinal):
+        with cupy().cuda.Device(self.device.ordinal):
             self.cupy.wait_event(event.cupy)
 
     def wait_stream(self, other_stream: Stream, event: Event | None = None) -> None:
@@ -122,10 +131,6 @@ class Stream:
                 other_stream._event = Event(other_stream.device)
             event = other_stream._event
         self.wait_event(other_stream.record_event(event))
-
-    def synchronize(self) -> None:
-        """Block the host until all work enqueued on this stream has finished."""
-        self.cupy.synchronize()
 
     def __cuda_stream__(self) -> tuple[int, int]:
         # The CUDA stream protocol (cuda.core, CuPy, PyTorch read it).
@@ -143,7 +148,7 @@ class Stream:
         return f"Stream(device='{self.device}', cuda_stream={self.cuda_stream:#x})"
 
 
-class Event:
+class Event(_CudaWork):
     """A CUDA event on one device; ``enable_timing=True`` allows ``get_event_elapsed_time``."""
 
     def __init__(
@@ -160,7 +165,7 @@ class Event:
             )
         if interprocess and enable_timing:
             raise KdslError("an interprocess event cannot have timing enabled")
-        cp = _cupy()
+        cp = cupy()
         with cp.cuda.Device(dev.ordinal):
             self.cupy = cp.cuda.Event(disable_timing=not enable_timing, interprocess=interprocess)
         self.device = dev
@@ -171,18 +176,9 @@ class Event:
         """The raw ``cudaEvent_t`` handle as an int."""
         return int(self.cupy.ptr)
 
-    @property
-    def is_complete(self) -> bool:
-        """True when the work before the event's last record has finished."""
-        return bool(self.cupy.done)
-
     def record(self, stream: Stream | None = None) -> Event:
         """Record this event on ``stream`` (the device's current stream when None)."""
         return (stream or get_stream(self.device)).record_event(self)
-
-    def synchronize(self) -> None:
-        """Block the host until the event completes."""
-        self.cupy.synchronize()
 
     def __repr__(self) -> str:
         return f"Event(device='{self.device}', enable_timing={self.enable_timing})"
@@ -233,18 +229,13 @@ class ScopedStream:
         set_stream(self.stream, sync=self.sync_enter)
         return self.stream
 
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
+    def __exit__(self, *exc_info: object) -> None:
         if self.stream is None:
             return
         if self.sync_exit:
             self.saved_stream.wait_stream(self.stream)
         set_stream(self.saved_stream)
-        self._scope.__exit__(exc_type, exc, tb)
+        self._scope.__exit__(*exc_info)
 
 
 def record_event(event: Event | None = None) -> Event:
@@ -269,14 +260,14 @@ def get_event_elapsed_time(start_event: Event, end_event: Event, synchronize: bo
             raise KdslError("get_event_elapsed_time() needs events made with enable_timing=True")
     if synchronize:
         end_event.synchronize()
-    return float(_cupy().cuda.get_elapsed_time(start_event.cupy, end_event.cupy))
+    return float(cupy().cuda.get_elapsed_time(start_event.cupy, end_event.cupy))
 
 
 def synchronize() -> None:
     """Block the host until all work kdsl enqueued on every device has finished."""
     if not cuda_initialized():
         return  # without CuPy loaded nothing can be pending
-    cp = _cupy()
+    cp = cupy()
     for ordinal in sorted(_used):
         if ordinal < cuda_device_count():
             with cp.cuda.Device(ordinal) as d:
@@ -287,7 +278,7 @@ def synchronize_device(device: Any = None) -> None:
     """Block the host until all work on ``device`` has finished (a no-op for the CPU)."""
     dev = get_device(device)
     if dev.is_cuda:
-        with _cupy().cuda.Device(dev.ordinal) as d:
+        with cupy().cuda.Device(dev.ordinal) as d:
             d.synchronize()
 
 
