@@ -400,17 +400,17 @@ def _define_curlnoise(P, R):
             return vec3(s3[1] - s2[2], s1[2] - s3[0], s2[0] - s1[1])
 
     @func
-    def curlnoise(state: uint32, p: P) -> R:
+    def curlnoise(state: uint32, p: P) -> R:  # noqa: F811 - overloads
         """``curlnoise(state, p)``: one octave of curl noise."""
         return curlnoise(state, p, uint32(1), 2.0, 0.5)
 
     @func
-    def curlnoise(state: uint32, p: P, octaves: uint32) -> R:
+    def curlnoise(state: uint32, p: P, octaves: uint32) -> R:  # noqa: F811 - overloads
         """``curlnoise(state, p, octaves)``: curl noise, lacunarity 2, gain 0.5."""
         return curlnoise(state, p, octaves, 2.0, 0.5)
 
     @func
-    def curlnoise(state: uint32, p: P, octaves: uint32, lacunarity: float32) -> R:
+    def curlnoise(state: uint32, p: P, octaves: uint32, lacunarity: float32) -> R:  # noqa: F811 - overloads
         """``curlnoise(state, p, octaves, lacunarity)``: curl noise, gain 0.5."""
         return curlnoise(state, p, octaves, lacunarity, 0.5)
 
