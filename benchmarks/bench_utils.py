@@ -57,10 +57,14 @@ def _workloads(n: int, device: str):
         a = wp.array(x, device=device)
         o = wp.empty(n, dtype=a.dtype, device=device)
         dx = xp.asarray(x)
-        out[name] = (lambda a=a, o=o: wp.utils.array_scan(a, o), lambda dx=dx: xp.cumsum(dx), (x,))
+        do = xp.empty_like(dx)
+        ref = lambda dx=dx, do=do: xp.cumsum(dx, out=do)  # noqa: E731
+        out[name] = (lambda a=a, o=o: wp.utils.array_scan(a, o), ref, (x,))
     a = wp.array(fkeys, device=device)
     dx = xp.asarray(fkeys)
-    out["sum float32"] = (lambda a=a: wp.utils.array_sum(a), lambda dx=dx: dx.sum(), (fkeys,))
+    # Both sides bring the sum back to the host, as array_sum(values) does.
+    out["sum float32"] = (lambda a=a: wp.utils.array_sum(a), lambda dx=dx: float(dx.sum()),
+                          (fkeys,))  # fmt: skip
     return out
 
 

@@ -41,11 +41,12 @@ def array_scan(in_array, out_array, inclusive: bool = True) -> None:
                          f"not {x.dtype}")  # fmt: skip
     with on_device(a):
         if a.device.is_cuda:
-            sums = xp.cumsum(x, axis=0, dtype=x.dtype)
-            if inclusive:
-                y[...] = sums
+            if inclusive and x.data.ptr != y.data.ptr:
+                xp.cumsum(x, axis=0, dtype=x.dtype, out=y)  # CUB's scan, no temporary
+            elif inclusive:
+                y[...] = xp.cumsum(x, axis=0, dtype=x.dtype)
             else:
-                y[1:] = sums[:-1]
+                y[1:] = xp.cumsum(x[:-1], axis=0, dtype=x.dtype)
                 y[0] = 0
         elif inclusive:
             _host_cumsum(x, y)

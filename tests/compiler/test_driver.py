@@ -76,7 +76,8 @@ def test_binaries_are_built_once_per_key_and_target(tmp_path, monkeypatch):
     assert first.key("t0") != first.key("t1")
 
 
-def test_options_and_checks_key_the_cache():
+def test_options_and_checks_key_the_cache(tmp_path, monkeypatch):
+    monkeypatch.setenv("KDSL_CACHE_DIR", str(tmp_path))  # a fresh disk layer: builds counted
     b = Recording()
     compile_kernel(b, parse_module(SRC), "k", {"tag": "checks-key"})
     compile_kernel(b, parse_module(SRC), "k", {"tag": "checks-key", "debug": True})
