@@ -12,17 +12,22 @@ from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
 from kdsl.ir.builder import normalize_constant
-from kdsl.ir.catalog import CATALOG, PURE, READS, SPECULATABLE, WRITES
+from kdsl.ir.catalog import (
+    CATALOG,
+    CONSTANT_LIKE,
+    PURE,
+    READS,
+    RECURSIVE_EFFECTS,
+    SPECULATABLE,
+    WRITES,
+)
 from kdsl.ir.core import Block, Module, Operation, OpResult, Region, Value
 from kdsl.ir.types import ScalarType
 
-#: Region ops whose only effects are those of the ops nested in them.
-STRUCTURED = frozenset({"scf.if", "scf.for", "scf.while"})
-
 
 def constant_of(v: Value) -> tuple[bool, Any]:
-    """``(True, value)`` if ``v`` is the result of an ``arith.constant``."""
-    if isinstance(v, OpResult) and v.op.name == "arith.constant":
+    """``(True, value)`` if ``v`` is the result of a constant-like op (``arith.constant``)."""
+    if isinstance(v, OpResult) and CONSTANT_LIKE in v.op.opdef.traits:
         return True, v.op.attrs["value"]
     return False, None
 
@@ -54,7 +59,7 @@ def may_write(op: Operation) -> bool:
         if WRITES in traits:
             return True
         known = PURE in traits or READS in traits or inner.opdef.is_terminator
-        if not known and inner.name not in STRUCTURED:
+        if not known and RECURSIVE_EFFECTS not in traits:
             return True  # e.g. func.call: unknown effects
     return False
 
@@ -63,7 +68,7 @@ def is_trivially_dead(op: Operation) -> bool:
     """MLIR's ``wouldOpBeTriviallyDead``: unused results and no effect but reads."""
     if op.opdef.is_terminator or any(r.uses for r in op.results):
         return False
-    if op.regions and op.name not in STRUCTURED:
+    if op.regions and not has_trait(op, RECURSIVE_EFFECTS):
         return False
     return not may_write(op)
 
