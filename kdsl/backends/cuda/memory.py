@@ -158,7 +158,7 @@ def atomic_helper(src: Source, kind: str, et: T.ScalarType) -> str:
             f"  }} while (old != seen);\n  return {frm.format('((old & mask) >> shift)')};\n}}"
         )
 
-    src.need(f"fn:{name}", make)
+    src.need(f"fn:{name}", make, feature=f"atomic.{kind}")
     return name
 
 
@@ -192,7 +192,7 @@ def cas_helper(src: Source, et: T.ScalarType) -> str:
             f"  return {frm.format('((old & mask) >> shift)')};\n}}"
         )
 
-    src.need(f"fn:{name}", make)
+    src.need(f"fn:{name}", make, feature="atomic.cas")
     return name
 
 
