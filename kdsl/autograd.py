@@ -35,6 +35,7 @@ from kdsl.ir import types as T
 from kdsl.runtime import cuda_memory as mem
 from kdsl.runtime.array import array
 from kdsl.runtime.launch import launch
+from kdsl.runtime.modules import backward_enabled
 from kdsl.runtime.tape import LaunchRecord, Tape
 
 __all__ = [
@@ -193,7 +194,7 @@ def _problem(
                 f"kernel '{function.name}' takes {len(names)} arguments ({', '.join(names)}) "
                 f"but {len(inputs)} inputs and {len(outputs)} outputs were given"
             )
-        if need_backward and (function.options or {}).get("enable_backward", True) is False:
+        if need_backward and not backward_enabled(function):
             raise KdslError(
                 f"kernel '{function.name}' was declared with enable_backward=False: it has no "
                 "adjoint to compute a Jacobian from"
@@ -511,7 +512,7 @@ def gradcheck_tape(
         names = {rec.kernel.key, rec.kernel.name}
         if (white and not names & white) or names & black:
             continue
-        if rec.kernel.options.get("enable_backward", True) is False:
+        if not backward_enabled(rec.kernel):
             continue
         if not any(_differentiable(a) for a in rec.inputs) or not any(
             _differentiable(a) for a in rec.outputs

@@ -29,6 +29,9 @@ verify_fp: bool = False
 #: The most memory (bytes) the backward pass of one launch may take for the tapes of
 #: its dynamic loops (see docs/autodiff.md); above it the adjoint launch is refused.
 max_tape_bytes: int = 2 * 1024**3
+#: The lowest level of message the logger emits (``kdsl.LOG_DEBUG`` 10, ``LOG_INFO`` 20,
+#: ``LOG_WARNING`` 30, ``LOG_ERROR`` 40), Warp's ``warp.config.log_level``.
+log_level: int = 20
 #: When the pass manager verifies the IR: "auto", "each" or "end" (see above).
 verify_passes: str = os.environ.get("KDSL_VERIFY_PASSES") or "auto"
 

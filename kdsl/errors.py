@@ -65,7 +65,22 @@ class KdslCapabilityError(KdslError):
 
 
 class KdslLaunchError(KdslError):
-    """Bad arguments to ``kdsl.launch`` (count, dtype, ndim, device)."""
+    """Bad arguments to ``kdsl.launch`` (count, dtype, ndim, device).
+
+    ``loc`` is the user's ``launch`` call; ``kernel_loc`` (when known) the ``def`` line
+    of the kernel launched, rendered after it.
+    """
+
+    kernel_loc: Loc | None = None
+    kernel_name: str | None = None
+
+    def __str__(self) -> str:
+        text = super().__str__()
+        if self.kernel_loc is not None:
+            text += f"\n  kernel '{self.kernel_name}' is defined at:\n" + render_loc(
+                self.kernel_loc, self.kernel_name
+            )
+        return text
 
 
 class KdslRuntimeError(KdslError):

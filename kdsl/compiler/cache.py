@@ -325,6 +325,11 @@ class MemoryCache:
         """Remember ``value`` for ``key``."""
         self._values[key] = value
 
+    def clear(self) -> None:
+        """Forget every value (``kdsl.clear_kernel_cache``): each key is built again."""
+        with self._lock:
+            self._values.clear()
+
 
 MEMORY = MemoryCache()
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import hashlib
 import inspect
+import weakref
 from collections.abc import Callable
 from functools import cached_property
 from typing import Any
@@ -76,12 +77,13 @@ class Kernel(CompileTarget):
         self.name = fn.__name__
         self.key = unique_symbol(fn)
         self.module = fn.__module__
-        self.options = {"enable_backward": True, **options}
+        self.options = dict(options)  # its module's options fill in the rest (runtime.modules)
         self.arg_names = list(inspect.signature(fn).parameters)
         self.source_file = inspect.getsourcefile(fn) or fn.__code__.co_filename
         self._tid_ndim: int | None = None
         self.__doc__ = fn.__doc__
         self.__name__ = fn.__name__
+        _KERNELS.setdefault(self.module, weakref.WeakValueDictionary())[id(self)] = self
 
     @property
     def arg_types(self) -> list[Type]:  # type: ignore[override]
@@ -157,8 +159,13 @@ class Function:
         self.overloads = [o for o in self.overloads if _annotation_key(o.fn) != sig]
         self.overloads.append(Overload(fn, len(self.overloads)))
 
-    def __call__(self, *args: Any) -> Any:
-        # In Python scope a function runs as plain Python (its first overload of that arity).
+    def __call__(self, *args: Any, **kwargs: Any) -> Any:
+        # In Python scope a standard-library function is a builtin (kernel semantics, as
+        # in Warp); a user's runs as plain Python (its first overload of that arity).
+        if self.overloads and self.overloads[0].fn.__module__.startswith("kdsl."):
+            from kdsl.types import python_scope
+
+            return python_scope(self, args, kwargs)
         for ov in self.overloads:
             if len(inspect.signature(ov.fn).parameters) == len(args):
                 return ov.fn(*args)
@@ -173,6 +180,19 @@ def _annotation_key(fn: Callable[..., Any]) -> tuple:
 
 
 _FUNCTIONS: dict[tuple[str, str], Function] = {}
+#: The live kernels of each Python module, by id, in definition order (Warp's modules).
+_KERNELS: dict[str, weakref.WeakValueDictionary] = {}
+
+
+def kernels_of_module(name: str) -> list[Kernel]:
+    """The live kernels defined in the Python module ``name``, in definition order."""
+    entries = _KERNELS.get(name)
+    return list(entries.values()) if entries is not None else []
+
+
+def modules_with_kernels() -> list[str]:
+    """The names of the Python modules that define live kernels."""
+    return [n for n, e in _KERNELS.items() if len(e)]
 
 
 def func(fn: Callable[..., Any]) -> Function:

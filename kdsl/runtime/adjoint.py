@@ -82,7 +82,9 @@ class DerivedKernel:
 
 def adjoint_kernel(kernel: Any) -> DerivedKernel:
     """The (cached) adjoint of ``kernel``; raises when the kernel disabled its backward pass."""
-    if not (getattr(kernel, "options", None) or {}).get("enable_backward", True):
+    from kdsl.runtime.modules import backward_enabled
+
+    if not backward_enabled(kernel):
         raise KdslError(
             f"kernel '{kernel.name}' was compiled with enable_backward=False, so it has no "
             "backward pass; remove the option to differentiate it"

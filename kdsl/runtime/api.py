@@ -19,11 +19,15 @@ from kdsl.runtime.context import init
 from kdsl.runtime.device import (
     Device,
     ScopedDevice,
+    get_cuda_device,
     get_cuda_device_count,
     get_cuda_devices,
     get_device,
+    get_devices,
     get_preferred_device,
+    is_cpu_available,
     is_cuda_available,
+    is_device_available,
     set_device,
 )
 from kdsl.runtime.indexed import (
@@ -34,6 +38,36 @@ from kdsl.runtime.indexed import (
     indexedarray4d,
 )
 from kdsl.runtime.launch import Launch, default_backend_for, launch
+from kdsl.runtime.logger import (
+    LOG_DEBUG,
+    LOG_ERROR,
+    LOG_INFO,
+    LOG_WARNING,
+    Logger,
+    ScopedLogger,
+    ScopedLogLevel,
+    get_logger,
+    set_logger,
+)
+from kdsl.runtime.mempool import (
+    ScopedMempool,
+    get_mempool_release_threshold,
+    get_mempool_used_mem_current,
+    get_mempool_used_mem_high,
+    is_mempool_enabled,
+    is_mempool_supported,
+    set_mempool_enabled,
+    set_mempool_release_threshold,
+)
+from kdsl.runtime.modules import (
+    Module,
+    clear_kernel_cache,
+    force_load,
+    get_module,
+    get_module_options,
+    load_module,
+    set_module_options,
+)
 from kdsl.runtime.stream import (
     Event,
     ScopedStream,
@@ -51,6 +85,19 @@ from kdsl.runtime.stream import (
 )
 from kdsl.runtime.structs import Struct, struct
 from kdsl.runtime.tape import Tape
+from kdsl.runtime.timing import (
+    TIMING_ALL,
+    TIMING_GRAPH,
+    TIMING_KERNEL,
+    TIMING_KERNEL_BUILTIN,
+    TIMING_MEMCPY,
+    TIMING_MEMSET,
+    ScopedTimer,
+    TimingResult,
+    timing_begin,
+    timing_end,
+    timing_print,
+)
 
 __all__ = [
     "Device", "Event", "Launch", "ScopedDevice", "ScopedStream", "Stream", "Struct", "Tape",
@@ -62,4 +109,14 @@ __all__ = [
     "indexedarray4d", "init", "is_cuda_available", "launch", "ones", "ones_like", "record_event",
     "set_device", "set_stream", "struct", "synchronize", "synchronize_device", "synchronize_event",
     "synchronize_stream", "wait_event", "wait_stream", "zeros", "zeros_like",
+    # modules, timing, logging, devices and memory pools (issue 14, item 6)
+    "LOG_DEBUG", "LOG_ERROR", "LOG_INFO", "LOG_WARNING", "Logger", "Module", "ScopedLogLevel",
+    "ScopedLogger", "ScopedMempool", "ScopedTimer", "TIMING_ALL", "TIMING_GRAPH", "TIMING_KERNEL",
+    "TIMING_KERNEL_BUILTIN", "TIMING_MEMCPY", "TIMING_MEMSET", "TimingResult",
+    "clear_kernel_cache", "force_load", "get_cuda_device", "get_devices", "get_logger",
+    "get_mempool_release_threshold", "get_mempool_used_mem_current", "get_mempool_used_mem_high",
+    "get_module", "get_module_options", "is_cpu_available", "is_device_available",
+    "is_mempool_enabled", "is_mempool_supported", "load_module", "set_logger",
+    "set_mempool_enabled", "set_mempool_release_threshold", "set_module_options",
+    "timing_begin", "timing_end", "timing_print",
 ]  # fmt: skip

@@ -15,6 +15,7 @@ import numpy as np
 
 from kdsl.errors import KdslError
 from kdsl.runtime.device import Device, cupy
+from kdsl.runtime.mempool import note_allocation
 from kdsl.runtime.stream import Stream, get_stream
 
 
@@ -88,7 +89,9 @@ def empty(shape: tuple[int, ...], dtype: np.dtype, device: Device) -> Any:
         return np.empty(shape, dtype)
     nbytes = int(np.prod(shape, dtype=np.int64)) * np.dtype(dtype).itemsize
     with scope(device, nbytes=nbytes):
-        return cupy().empty(shape, dtype)
+        buf = cupy().empty(shape, dtype)
+        note_allocation(device.ordinal)
+        return buf
 
 
 def zeros_like(buf: Any, device: Device) -> Any:

@@ -188,6 +188,35 @@ def get_cuda_devices() -> list[Device]:
     return [get_device(f"cuda:{i}") for i in range(cuda_device_count())]
 
 
+def get_cuda_device(ordinal: int | None = None) -> Device:
+    """The CUDA device ``ordinal``, or the current CUDA device when None (Warp's name)."""
+    if ordinal is None:
+        return get_device("cuda")
+    if not isinstance(ordinal, int) or isinstance(ordinal, bool):
+        raise KdslError(f"get_cuda_device takes an int ordinal, not {ordinal!r}")
+    return get_device(f"cuda:{ordinal}")
+
+
+def is_cpu_available() -> bool:
+    """True: kdsl always runs kernels on the CPU (the ``cpu`` or ``interp`` backend)."""
+    return True
+
+
+def get_devices() -> list[Device]:
+    """Every device: the CPU, then each CUDA device (Warp's order)."""
+    return [_CPU, *get_cuda_devices()]
+
+
+def is_device_available(device: Any) -> bool:
+    """True when ``device`` (a ``Device`` or an alias) is one of ``get_devices()``."""
+    if isinstance(device, str):
+        try:
+            device = get_device(device)
+        except KdslError:
+            return False
+    return device in get_devices()
+
+
 def set_device(name: Any) -> None:
     """Make ``name`` the default device; a CUDA device also becomes the current one."""
     global _default, _current_cuda

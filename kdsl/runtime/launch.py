@@ -8,8 +8,10 @@ backend (and backend version and options).
 
 from __future__ import annotations
 
+import inspect
 import sys
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -20,7 +22,10 @@ from kdsl.backends.registry import get_backend, is_registered
 from kdsl.compiler import compile_kernel
 from kdsl.errors import KdslError, KdslLaunchError
 from kdsl.ir import types as T
+from kdsl.ir.core import Loc
+from kdsl.runtime import modules as _modules
 from kdsl.runtime import tape as _tape
+from kdsl.runtime import timing as _timing
 from kdsl.runtime.args import ArgError, convert, launch_error
 from kdsl.runtime.array import array
 from kdsl.runtime.device import Device, get_device
@@ -115,14 +120,16 @@ def resolve_stream(device: Device, stream: Any) -> Any:
 class _Plan:
     """What a kernel's launches on one device and backend share (see ``launch_plan``)."""
 
-    __slots__ = ("backend", "compiled", "converters", "device", "options", "settings")
+    __slots__ = ("backend", "compiled", "converters", "device", "options", "own", "settings")
 
     def __init__(self, kernel: Any, device: Device, backend: Backend, settings: tuple) -> None:
         self.device = device
         self.backend = backend
         self.settings = settings
-        self.options = dict(getattr(kernel, "options", None) or {})
-        # Process-wide debug settings (kdsl.config) resolve into the options: they key the cache.
+        self.own = dict(getattr(kernel, "options", None) or {})
+        # The module's options (set_module_options) fill in what the kernel leaves unset;
+        # process-wide debug settings (kdsl.config) resolve into them: they key the cache.
+        self.options = _modules.kernel_options(kernel)
         self.compiled = _compiled(kernel, backend, config.compile_options(self.options))
         self.converters = [
             _converter(kernel, i, n, t, device)
@@ -140,7 +147,7 @@ def launch_plan(kernel: Any, device: Any, backend: Any) -> _Plan:
     and dropped when the kernel's options change, so a hit costs a dict lookup.
     """
     dev = get_device(device)
-    settings = (config.mode, config.verify_fp)
+    settings = (config.mode, config.verify_fp, _modules.version)
     key = (dev.alias, backend if isinstance(backend, str | None) else id(backend))
     plans = getattr(kernel, _PLAN_ATTR, None)
     if plans is None:
@@ -150,10 +157,66 @@ def launch_plan(kernel: Any, device: Any, backend: Any) -> _Plan:
     if (
         plan is None
         or plan.settings != settings
-        or plan.options != (getattr(kernel, "options", None) or {})
+        or plan.own != (getattr(kernel, "options", None) or {})
     ):
         plan = plans[key] = _Plan(kernel, dev, _resolve_backend(backend, dev), settings)
     return plan
+
+
+def forget(kernel: Any) -> None:
+    """Drop the compiled code and launch plans cached on ``kernel``."""
+    for attr in (_CACHE_ATTR, _PLAN_ATTR):
+        if hasattr(kernel, attr):
+            delattr(kernel, attr)
+
+
+_KDSL_DIR = str(Path(__file__).resolve().parents[1])
+
+
+def _user_frame() -> Any:
+    """The innermost frame outside the kdsl package (the user's ``launch`` call)."""
+    f = sys._getframe(1)
+    while f is not None and str(Path(f.f_code.co_filename).resolve()).startswith(_KDSL_DIR):
+        f = f.f_back
+    return f
+
+
+def kernel_definition(kernel: Any) -> Loc | None:
+    """Where ``kernel``'s ``def`` line is (None when its source cannot be read)."""
+    fn = getattr(kernel, "fn", None)
+    if fn is None:
+        return None
+    try:
+        lines, start = inspect.getsourcelines(fn)
+    except (OSError, TypeError):
+        return None
+    for k, text in enumerate(lines):
+        stripped = text.lstrip()
+        if stripped.startswith(("def ", "async def ")):
+            col = len(text) - len(stripped) + 1
+            return Loc(inspect.getsourcefile(fn) or fn.__code__.co_filename, start + k, col)
+    return None
+
+
+def locate_launch_error(err: KdslLaunchError, kernel: Any) -> KdslLaunchError:
+    """``err`` pointing at the user's ``launch`` call and at the kernel's definition."""
+    if err.loc is None:
+        frame = _user_frame()
+        if frame is not None:
+            col, end_line, end_col = 1, None, None
+            try:
+                pos = inspect.getframeinfo(frame, context=0).positions
+                if pos is not None and pos.col_offset is not None:
+                    col, end_line = pos.col_offset + 1, pos.end_lineno
+                    end_col = pos.end_col_offset + 1 if pos.end_col_offset is not None else None
+            except (AttributeError, ValueError):  # no column table (Python < 3.11)
+                pass
+            err.loc = Loc(frame.f_code.co_filename, frame.f_lineno, col, end_line, end_col)
+            err.func = frame.f_code.co_name
+    if getattr(err, "kernel_loc", None) is None:
+        err.kernel_loc = kernel_definition(kernel)
+        err.kernel_name = _kernel_name(kernel)
+    return err
 
 
 def _converter(kernel: Any, index: int, name: str, t: Any, device: Device) -> Any:
@@ -244,9 +307,12 @@ class Launch:
                 f"kernel '{_kernel_name(self.kernel)}' has {len(types)} parameters; "
                 f"there is no index {index}"
             )
-        self.params[index] = _convert_one(
-            self.kernel, index, names[index], types[index], value, self.device
-        )
+        try:
+            self.params[index] = _convert_one(
+                self.kernel, index, names[index], types[index], value, self.device
+            )
+        except KdslLaunchError as e:
+            raise locate_launch_error(e, self.kernel) from None
         self._run = None
 
     def set_param_by_name(self, name: str, value: Any) -> None:
@@ -322,27 +388,37 @@ def launch(
             record_cmd,
         )  # fmt: skip
         return None
-    if type(dim) is int and dim >= 0:
-        dims: tuple[int, ...] = (dim,)
-    else:
-        dims = normalize_dim(dim, _kernel_name(kernel))
-    args = [*inputs, *outputs] if outputs else inputs
-    plan = launch_plan(kernel, device, backend)
-    convs = plan.converters
-    if len(args) != len(convs):
-        names = list(kernel.arg_names)
-        raise KdslLaunchError(
-            f"kernel '{_kernel_name(kernel)}' takes {len(convs)} arguments ({', '.join(names)}) "
-            f"but {len(args)} were given ({len(inputs)} inputs, {len(outputs)} outputs)"
-        )
-    converted = [conv(v) for conv, v in zip(convs, args)]
-    if len(dims) > 1 or (getattr(kernel, "tid_ndim", 0) or 0) > 1:
-        check_tid(kernel, dims)
+    try:
+        if type(dim) is int and dim >= 0:
+            dims: tuple[int, ...] = (dim,)
+        else:
+            dims = normalize_dim(dim, _kernel_name(kernel))
+        args = [*inputs, *outputs] if outputs else inputs
+        plan = launch_plan(kernel, device, backend)
+        convs = plan.converters
+        if len(args) != len(convs):
+            names = list(kernel.arg_names)
+            raise KdslLaunchError(
+                f"kernel '{_kernel_name(kernel)}' takes {len(convs)} arguments "
+                f"({', '.join(names)}) but {len(args)} were given ({len(inputs)} inputs, "
+                f"{len(outputs)} outputs)"
+            )
+        converted = [conv(v) for conv, v in zip(convs, args)]
+        if len(dims) > 1 or (getattr(kernel, "tid_ndim", 0) or 0) > 1:
+            check_tid(kernel, dims)
+    except KdslLaunchError as e:
+        raise locate_launch_error(e, kernel) from None
     dev = plan.device
     stream = resolve_stream(dev, stream)
     if record_cmd:
         return Launch(kernel, plan.backend, plan.compiled, dims, converted, dev, stream)
-    plan.backend.launch(plan.compiled, dims, converted, stream)
+    if _timing.RECORDING is None:
+        plan.backend.launch(plan.compiled, dims, converted, stream)
+    else:
+        _timing.timed_launch(
+            plan.backend, plan.compiled, dims, converted, stream, dev,
+            f"forward kernel {_kernel_name(kernel)}",
+        )  # fmt: skip
     if _tape.ACTIVE and record_tape:
         caller = sys._getframe(1)
         _tape.ACTIVE[-1].record_launch(

@@ -272,6 +272,14 @@ def synchronize() -> None:
         if ordinal < cuda_device_count():
             with cp.cuda.Device(ordinal) as d:
                 d.synchronize()
+    _release_pools()
+
+
+def _release_pools() -> None:
+    from kdsl.runtime import mempool
+
+    if mempool.THRESHOLDS:
+        mempool.trim_all()
 
 
 def synchronize_device(device: Any = None) -> None:
@@ -280,6 +288,7 @@ def synchronize_device(device: Any = None) -> None:
     if dev.is_cuda:
         with cupy().cuda.Device(dev.ordinal) as d:
             d.synchronize()
+        _release_pools()
 
 
 def synchronize_stream(stream_or_device: Any = None) -> None:

@@ -182,8 +182,9 @@ class Tape:
         adj = [self.get_adjoint(a) for a in args]
         if all(g is None for g in adj):
             return  # no argument carries a gradient: the adjoint would change nothing
-        options = getattr(rec.kernel, "options", None) or {}
-        if options.get("enable_backward", True) is False:
+        from kdsl.runtime.modules import backward_enabled
+
+        if not backward_enabled(rec.kernel):
             raise KdslError(
                 f"tape.backward(): kernel '{_kernel_name(rec.kernel)}' was declared with "
                 f"enable_backward=False, so its recorded launch{_site(rec)} cannot be "
