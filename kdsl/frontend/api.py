@@ -1,13 +1,15 @@
 """Public names of the frontend (decorators, kernel-language builtins).
 
 ``import kdsl as wp`` gets ``wp.kernel``, ``wp.func``, ``wp.tid``, ``wp.static``,
-``wp.constant``, ``wp.func_grad``/``wp.func_replay``/``wp.adjoint`` (custom
+``wp.constant``, the constants (``wp.pi``, ``wp.tau``...), ``wp.func_grad``/``wp.func_replay``/``wp.adjoint`` (custom
 gradients) and every builtin of ``kdsl.frontend.builtins.BUILTINS``
 (``wp.sin``, ``wp.dot``, ``wp.atomic_add``, ...).
 """
 
 from kdsl.frontend.builtins import BUILTINS
 from kdsl.frontend.builtins_base import Builtin
+from kdsl.frontend.constants import *  # noqa: F403
+from kdsl.frontend.constants import __all__ as _constant_names
 from kdsl.frontend.custom_grad import adjoint, func_grad, func_replay
 from kdsl.frontend.inout import inout
 from kdsl.frontend.kernel import Function, Kernel, func, kernel
@@ -18,5 +20,6 @@ globals().update(BUILTINS)
 __all__ = [
     "Builtin", "Function", "Kernel", "adjoint", "constant", "func", "func_grad", "func_replay",
     "inout", "kernel", "static",
+    *_constant_names,
     *sorted(BUILTINS),
 ]  # fmt: skip

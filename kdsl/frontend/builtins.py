@@ -7,6 +7,7 @@ an op of its own). The builtins are defined in groups, each module with a
 - ``builtins_core``: the ops' own builtins (math, vector, logic, memory, ``tid``);
 - ``builtins_math``: scalar math composed from ops (``clamp``, ``lerp``...);
 - ``builtins_linalg``: vector and matrix math (``trace``, ``inverse``, ``vector()``...);
+- ``builtins_ops``: the operator-named builtins (``add``, ``bit_and``...), ``reversed``;
 - ``geometry``: quaternion and transform constructors;
 - ``printing``: ``print`` and ``printf``.
 
@@ -21,7 +22,14 @@ from __future__ import annotations
 import builtins as py
 from typing import Any
 
-from kdsl.frontend import builtins_core, builtins_linalg, builtins_math, geometry, printing
+from kdsl.frontend import (
+    builtins_core,
+    builtins_linalg,
+    builtins_math,
+    builtins_ops,
+    geometry,
+    printing,
+)
 from kdsl.frontend.builtins_base import Builtin, BuiltinTable
 from kdsl.ir.types import BOOL, F32, ScalarType
 
@@ -30,6 +38,7 @@ TABLES: tuple[BuiltinTable, ...] = (
     builtins_core.TABLE,
     builtins_math.TABLE,
     builtins_linalg.TABLE,
+    builtins_ops.TABLE,
     geometry.TABLE,
     printing.TABLE,
 )

@@ -23,7 +23,8 @@ import re
 from typing import Any
 
 from kdsl.errors import KdslSyntaxError, KdslTypeError
-from kdsl.frontend.builtins_base import Builtin, BuiltinTable, cast
+from kdsl.frontend.builtins_base import Builtin, BuiltinTable, cast, unified
+from kdsl.frontend.builtins_math import components
 from kdsl.frontend.values import describe, is_weak
 from kdsl.ir import Value
 from kdsl.ir.ops_print import Conversion, FormatError, parse_format
@@ -39,6 +40,7 @@ from kdsl.ir.types import (
     TransformType,
     Type,
     VectorType,
+    elem_type,
 )
 
 
@@ -322,3 +324,86 @@ TABLE.add(AstBuiltin(
     "checked against the argument types.",
     (1, 64), "utility",
 ))  # fmt: skip
+
+
+# -- expect_eq / expect_neq / expect_near ------------------------------------------
+
+
+def _expected_pair(em, args: list[Any], name: str, node) -> tuple[Value, Value]:
+    a, b = unified(em, args[:2], node)
+    if a.type != b.type:
+        raise em.error(KdslTypeError, f"{name}() needs two values of one type, got {a.type} and "
+                       f"{b.type}", node)  # fmt: skip
+    return a, b
+
+
+def _report(em, cond: Value, head: str, rows: list[tuple[str, Value]], node,
+            head_value: Value | None = None) -> None:  # fmt: skip
+    """``if cond:`` print ``head`` (then ``head_value``) and one ``label value`` line per
+    row: the layout of Warp's messages."""
+
+    def then() -> None:
+        f = _Format()
+        f.text(head)
+        if head_value is not None:
+            _append_value(em, f, head_value, node)
+        f.text("\n")
+        for label, v in rows:
+            f.text(label)
+            _append_value(em, f, v, node)
+            f.text("\n")
+        _emit_print(em, "".join(f.parts), f.operands, node)
+
+    em.emit_if(cond, then, None, node)
+
+
+def _expect(name: str, pred: str):
+    def lower(em, args, node):
+        a, b = _expected_pair(em, args, name, node)
+        if not isinstance(a.type, ScalarType | VectorType | MatrixType | QuatType | TransformType):
+            raise em.error(KdslTypeError, f"{name}() cannot compare a {a.type}", node)
+        failed = em.emit("arith.cmp", a, b, node=node, pred=pred)
+        _report(em, failed, f"Error, {name}() failed:", [("\t Expected: ", b), ("\t Actual: ", a)],
+                node)  # fmt: skip
+        return None
+
+    return lower
+
+
+TABLE.define("expect_eq", (2, 2), "``expect_eq(actual, expected)``: print an error (the expected "
+             "and actual values) when they differ; the kernel goes on.", "utility")(
+    _expect("expect_eq", "ne"))  # fmt: skip
+TABLE.define("expect_neq", (2, 2), "``expect_neq(actual, expected)``: print an error when they "
+             "are equal; the kernel goes on.", "utility")(_expect("expect_neq", "eq"))  # fmt: skip
+
+
+@TABLE.define("expect_near", (2, 3), "``expect_near(actual, expected, tolerance=1e-6)``: print an "
+              "error when a float (or a component of a vector, matrix or quaternion) differs by "
+              "more than ``tolerance``; the kernel goes on.", "utility")  # fmt: skip
+def _expect_near(em, args, node):
+    a, b = _expected_pair(em, args, "expect_near", node)
+    t = a.type
+    if not (
+        isinstance(t, ScalarType | VectorType | MatrixType | QuatType) and elem_type(t).is_float
+    ):
+        raise em.error(KdslTypeError, f"expect_near() needs floats, vectors, matrices or "
+                       f"quaternions of floats, not {t}", node)  # fmt: skip
+    et = elem_type(t)
+    tol = em.value(args[2] if len(args) > 2 else 1.0e-6, node, want=et)
+    if tol.type != et:
+        raise em.error(KdslTypeError, f"expect_near(): the tolerance must be a {et}, not "
+                       f"{tol.type}", node)  # fmt: skip
+    diffs = components(em, em.emit("math.abs", em.emit("arith.sub", a, b, node=node), node=node),
+                       node)  # fmt: skip
+    diff = diffs[0]
+    for d in diffs[1:]:
+        diff = em.emit("arith.max", diff, d, node=node)
+    failed = em.emit("arith.cmp", diff, tol, node=node, pred="gt")
+    label = (
+        "    Absolute difference: "
+        if isinstance(t, ScalarType)
+        else "    Max absolute difference: "
+    )
+    rows = [("    Expected: ", b), ("    Actual: ", a), (label, diff)]
+    _report(em, failed, "Error, expect_near() failed with tolerance ", rows, node, tol)
+    return None

@@ -8,7 +8,7 @@ from typing import Any
 from kdsl.errors import KdslNameError, KdslSyntaxError, KdslTypeError
 from kdsl.frontend import geometry, structs
 from kdsl.frontend.analysis import BREAK, CONTINUE, RETURN, always_exits, exits
-from kdsl.frontend.builtins import BUILTINS
+from kdsl.frontend.builtins import BUILTINS, PYTHON_ALIASES
 from kdsl.frontend.control import BRK, CONT, MAX_UNROLL, RET, ControlFlowLowering
 from kdsl.frontend.expressions import BINOPS, COMPONENTS
 from kdsl.frontend.static import static
@@ -236,6 +236,9 @@ class StatementLowering(ControlFlowLowering):
                 raise self.error(KdslTypeError, "static() in a for loop must give a range", it)
             self.unroll(node, list(values))
             return
+        backwards = _is_reversed_range(self, it)
+        if backwards:  # for i in reversed(range(...))
+            it = it.args[0]
         if not (isinstance(it, ast.Call) and self.visit(it.func) is range):
             raise self.error(KdslSyntaxError, "a for loop must iterate over range(...)", it)
         if it.keywords or not 1 <= len(it.args) <= 3:
@@ -245,11 +248,14 @@ class StatementLowering(ControlFlowLowering):
         if unroll:
             if not all(isinstance(a, int) and not isinstance(a, bool) for a in args):
                 raise self.error(KdslTypeError, "static range bounds must be integers", it)
-            self.unroll(node, list(range(*args)))
+            values = list(range(*args))
+            self.unroll(node, values[::-1] if backwards else values)
             return
         self.loop_depth += 1
         try:
             bounds = self.range_bounds(args, it)
+            if backwards:
+                bounds = self.reversed_bounds(bounds, it)
             self.lower_range_for(node.target.id, bounds, node.body, node)
         finally:
             self.loop_depth -= 1
@@ -268,6 +274,25 @@ class StatementLowering(ControlFlowLowering):
         if isinstance(step, int) and step == 0:
             raise self.error(KdslTypeError, "range() step must not be zero", node)
         return out
+
+    def reversed_bounds(self, bounds: list[Value], node: ast.AST) -> list[Value]:
+        """``reversed(range(lb, ub, step))`` as a range: ``(last, lb - step, -step)``, or
+        an empty range when the range is empty (Warp's ``iter_reverse``)."""
+        lb, ub, step = bounds
+        t = lb.type
+        zero, one = self.const(0, t, node), self.const(1, t, node)
+        up = self.emit("arith.cmp", step, zero, node=node, pred="gt")
+        sign = self.emit("arith.select", up, one, self.const(-1, t, node), node=node)
+        nonempty = self.emit("arith.select", up, self.emit("arith.cmp", lb, ub, node=node, pred="lt"),
+                             self.emit("arith.cmp", lb, ub, node=node, pred="gt"), node=node)  # fmt: skip
+        # Non-empty: (ub - lb - sign) and step have one sign, so truncation is floor.
+        span = self.emit("arith.sub", self.emit("arith.sub", ub, lb, node=node), sign, node=node)
+        last = self.emit("arith.add", lb, self.emit("arith.mul", self.emit("arith.div", span, step,
+                         node=node), step, node=node), node=node)  # fmt: skip
+        start = self.emit("arith.select", nonempty, last, lb, node=node)
+        end = self.emit("arith.select", nonempty, self.emit("arith.sub", lb, step, node=node), lb,
+                        node=node)  # fmt: skip
+        return [start, end, self.emit("arith.neg", step, node=node)]
 
     def unroll(self, node: ast.For, values: list[int]) -> None:
         if len(values) > MAX_UNROLL:
@@ -376,3 +401,23 @@ class StatementLowering(ControlFlowLowering):
 
     def undefined(self, name: str, node: ast.AST) -> None:
         raise self.error(KdslNameError, f"name '{name}' is not defined", node)
+
+
+def _is_reversed_range(em, it: ast.expr) -> bool:
+    """Whether ``it`` is ``reversed(range(...))`` (Python's or kdsl's ``reversed``)."""
+    if not (isinstance(it, ast.Call) and isinstance(it.func, ast.Name | ast.Attribute)):
+        return False
+    fn = em.visit(it.func)
+    if not (_hashable(fn) and PYTHON_ALIASES.get(fn, fn) is BUILTINS["reversed"]):
+        return False
+    if it.keywords or len(it.args) != 1 or not isinstance(it.args[0], ast.Call):
+        raise em.error(KdslSyntaxError, "reversed() in a for loop must wrap range(...)", it)
+    return True
+
+
+def _hashable(x: Any) -> bool:
+    try:
+        hash(x)
+    except TypeError:
+        return False
+    return True

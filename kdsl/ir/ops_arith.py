@@ -328,6 +328,32 @@ CAST = CATALOG.define(
 )
 
 
+def _bitcast_verify(op) -> None:
+    src = op.operands[0].type
+    dst = op.results[0].type
+    ok = all(isinstance(t, ScalarType) and not t.is_bool for t in (src, dst))
+    if not ok or src.bits != dst.bits:
+        raise TypeError(f"cannot reinterpret the bits of a {src} as a {dst}: both must be "
+                        "numeric scalars of one width")  # fmt: skip
+
+
+def _bitcast_interp(ctx, op, a):
+    src, dst = op.operands[0].type, op.results[0].type
+    return np.asarray(a, dtype=src.np_dtype).view(dst.np_dtype)[()]
+
+
+BITCAST = CATALOG.define(
+    "arith.bitcast",
+    "The bits of a numeric scalar reinterpreted as another numeric scalar type of the "
+    "same width (``float32`` 1.0 as ``int32`` is ``0x3f800000``).",
+    traits=_PURE,
+    verifier=_bitcast_verify,
+    interp=_bitcast_interp,
+    example="%1 = arith.bitcast %0 : i32",
+    group="arithmetic",
+)
+
+
 def _select_rule(ts: Sequence[Type], attrs: dict[str, Any]) -> list[Type]:
     c, a, b = ts
     if c != BOOL:

@@ -1,5 +1,6 @@
 """Public names of the standard library, star-imported into ``kdsl``."""
 
+from kdsl.stdlib.algorithms import *  # noqa: F403
 from kdsl.stdlib.linalg import *  # noqa: F403
 from kdsl.stdlib.noise import *  # noqa: F403
 from kdsl.stdlib.quat import *  # noqa: F403

@@ -268,4 +268,7 @@ CPU.register("arith.not", _not)
 CPU.register("arith.bitnot", _not)
 CPU.register("arith.cmp", _cmp)
 CPU.register("arith.cast", _cast)
+CPU.register(
+    "arith.bitcast", lambda em, op: em.b.bitcast(em.args(op)[0], LT.llvm_type(op.results[0].type))
+)
 CPU.register("arith.select", _select)

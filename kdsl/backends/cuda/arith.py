@@ -325,6 +325,31 @@ def cast_scalar(src: Source, a: str, s: T.ScalarType, d: T.ScalarType) -> str:
     return f"({dc}){a}"  # int to float rounds to nearest; int to int wraps
 
 
+#: CUDA's bit-reinterpreting intrinsics: (float bits, to integer or from it).
+_FLOAT_BITS = {32: ("__float_as_int", "__int_as_float"), 64: ("__double_as_longlong",
+               "__longlong_as_double")}  # fmt: skip
+
+
+def bitcast_scalar(src: Source, a: str, s: T.ScalarType, d: T.ScalarType) -> str:
+    """C reinterpreting the bits of scalar ``a`` (type ``s``) as a ``d`` of the same width."""
+    if s == d:
+        return a
+    dc = CT.scalar_c(d)
+    if is_f16(s):  # kd_f16 holds the half's bits
+        bits = f"{a}.bits"
+    elif s.is_float:
+        bits = f"{_FLOAT_BITS[s.bits][0]}({a})"
+    else:
+        bits = a
+    if is_f16(d):
+        H.need_f16(src)
+        return f"kd_f16{{(unsigned short)({bits})}}"
+    if d.is_float:
+        wide = "int" if d.bits == 32 else "long long"
+        return f"{_FLOAT_BITS[d.bits][1]}(({wide})({bits}))"
+    return f"({dc})({bits})"  # integers of one width: two's complement, bits unchanged
+
+
 def _clamp(src: Source) -> None:
     src.need(
         "kd_clamp",
@@ -361,4 +386,8 @@ CUDA.register("arith.not", _not)
 CUDA.register("arith.bitnot", _bitnot)
 CUDA.register("arith.cmp", _cmp)
 CUDA.register("arith.cast", _cast)
+CUDA.register(
+    "arith.bitcast",
+    lambda em, op: bitcast_scalar(em.src, em.args(op)[0], op.operands[0].type, op.results[0].type),
+)
 CUDA.register("arith.select", _select)

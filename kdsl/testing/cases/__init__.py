@@ -9,7 +9,7 @@ from kdsl.testing.case import Case
 #: Case modules, one per area, in the order the suite runs them.
 GROUPS = ("arith", "logic", "math", "vector", "control", "funcs", "memory", "programs",
           "scalar_math", "linalg", "geometry", "random_noise", "atomics_print",
-          "gradients", "structs")
+          "gradients", "structs", "warp_ops")
 
 
 def all_cases() -> list[Case]:
