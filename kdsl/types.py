@@ -5,7 +5,12 @@ Each class carries ``__kdsl_type__``, its IR type (from ``kdsl.ir.types``, the o
 dtype table). ``type_of(annotation)`` turns any annotation into an IR type.
 
 In Python scope, ``kdsl.float32(1.5)`` gives a NumPy ``float32`` and
-``kdsl.vec3(1, 2, 3)`` gives a ``vec3`` (a NumPy array subclass of shape (3,)).
+``kdsl.vec3(1, 2, 3)`` gives a ``vec3`` (a NumPy array subclass of shape (3,)). Its
+operators follow the kernel language, as Warp's do: ``+ - * / @`` and unary ``-`` are
+evaluated with the kernel's own semantics (``m * v`` is a matrix product, ``q1 * q2`` the
+quaternion product, ``t1 * t2`` composes transforms) through the hook the compiler
+registers (``register_python_scope``); ``==`` is one bool; indexing and iteration give
+scalars and rows as kdsl values; ``v.x``/``t.p``/``t.q`` name parts as in kernels.
 """
 
 from __future__ import annotations
@@ -29,7 +34,7 @@ __all__ = [
     "quath", "transform", "transformf", "transformd", "transformh", "spatial_vector",
     "spatial_vectorf", "spatial_vectord", "spatial_vectorh", "spatial_matrix", "spatial_matrixf",
     "spatial_matrixd", "spatial_matrixh", "type_of", "class_of",
-    "dtype_to_numpy", "dtype_from_numpy",
+    "dtype_to_numpy", "dtype_from_numpy", "register_python_scope", "python_scope",
 ]  # fmt: skip
 
 
@@ -66,8 +71,59 @@ float64 = SCALAR_CLASSES[T.F64]
 half = float16
 
 
+_EVALUATOR: list[Any] = []
+
+
+def register_python_scope(evaluator: Any) -> None:
+    """Install the Python-scope evaluator (``kdsl.compiler.python_scope.call``).
+
+    The compiler sits above this module; it hands its evaluator down once, when it is
+    imported (``import kdsl`` does that).
+    """
+    _EVALUATOR[:] = [evaluator]
+
+
+def python_scope(what: Any, args: tuple, kwargs: dict[str, Any] | None = None) -> Any:
+    """``what(*args, **kwargs)`` evaluated in Python scope with kernel semantics.
+
+    ``what`` is a kernel builtin, a standard-library ``@kdsl.func`` or an operator name
+    (``"add"``, ``"sub"``, ``"mul"``, ``"truediv"``, ``"floordiv"``, ``"mod"``,
+    ``"matmul"``, ``"neg"``, ``"pos"``).
+    """
+    if not _EVALUATOR:
+        from kdsl.errors import KdslError
+
+        raise KdslError("the Python-scope evaluator is not registered: import kdsl first")
+    return _EVALUATOR[0](what, args, kwargs or {})
+
+
+def _operand(x: Any) -> bool:
+    """True for what a composite's operator evaluates with kernel semantics."""
+    return isinstance(x, Composite | builtins.int | builtins.float) or (
+        isinstance(x, np.generic) and x.dtype.kind in "biuf"
+    )
+
+
+def _binary(name: str, reflected: builtins.bool = False) -> Any:
+    numpy_op = getattr(np.ndarray, f"__{'r' if reflected else ''}{name}__")
+
+    def op(self: Composite, other: Any) -> Any:
+        if not _operand(other):
+            # Plain arrays, lists...: NumPy's elementwise rule, on a plain array.
+            return numpy_op(self.view(np.ndarray), other)
+        return python_scope(name, (other, self) if reflected else (self, other))
+
+    op.__name__ = f"__{'r' if reflected else ''}{name}__"
+    op.__doc__ = f"The kernel's ``{name}`` of two kdsl values (see ``python_scope``)."
+    return op
+
+
 class Composite(np.ndarray):
-    """Base of vector, matrix, quaternion and transform classes (Python scope values)."""
+    """Base of vector, matrix, quaternion and transform classes (Python scope values).
+
+    A NumPy array of the type's shape (``np.asarray(v)`` is free), with the kernel
+    language's operators (Warp's Python-scope semantics); see the module docstring.
+    """
 
     __kdsl_type__: T.Type
 
@@ -83,8 +139,120 @@ class Composite(np.ndarray):
         else:
             flat = np.concatenate([np.ravel(np.asarray(a, dtype)) for a in args])
             if flat.size != size:
-                raise ValueError(f"{cls.__name__} takes {size} components, got {flat.size}")
+                from kdsl.errors import KdslTypeError
+
+                raise KdslTypeError(f"{cls.__name__} takes {size} components, got {flat.size}")
         return flat.reshape(shape).view(cls)
+
+    __add__, __radd__ = _binary("add"), _binary("add", True)
+    __sub__, __rsub__ = _binary("sub"), _binary("sub", True)
+    __mul__, __rmul__ = _binary("mul"), _binary("mul", True)
+    __truediv__, __rtruediv__ = _binary("truediv"), _binary("truediv", True)
+    __floordiv__, __rfloordiv__ = _binary("floordiv"), _binary("floordiv", True)
+    __mod__, __rmod__ = _binary("mod"), _binary("mod", True)
+    __matmul__, __rmatmul__ = _binary("matmul"), _binary("matmul", True)
+
+    def __neg__(self) -> Any:
+        return python_scope("neg", (self,))
+
+    def __pos__(self) -> Any:
+        return python_scope("pos", (self,))
+
+    def __eq__(self, other: Any) -> builtins.bool:  # type: ignore[override]
+        """One bool, as in Warp: the same shape and every component equal."""
+        try:
+            b = np.asarray(other)
+        except Exception:
+            return False
+        a = self.view(np.ndarray)
+        return a.shape == b.shape and builtins.bool(np.all(a == b))
+
+    def __ne__(self, other: Any) -> builtins.bool:  # type: ignore[override]
+        return not self.__eq__(other)
+
+    __hash__ = None  # type: ignore[assignment]  # mutable, as NumPy arrays are
+
+    def __getitem__(self, index: Any) -> Any:
+        """A component (a NumPy scalar), a matrix row or a slice (kdsl vectors)."""
+        return _as_value(self.view(np.ndarray)[index])
+
+    def __iter__(self) -> Any:
+        for k in range(len(self)):
+            yield self[k]
+
+    def __array_wrap__(self, arr: Any, context: Any = None, return_scalar: Any = False) -> Any:
+        # NumPy functions on a composite: keep the class only where the shape and kind
+        # still fit it (np.sin(v) is a vec3, np.isnan(v) a plain bool array).
+        out = np.ndarray.__array_wrap__(self, arr, context, return_scalar)
+        if isinstance(out, np.ndarray) and not (
+            out.shape == self.shape and out.dtype == self.dtype
+        ):
+            return _as_value(out.view(np.ndarray))
+        return out
+
+    def __reduce__(self) -> Any:
+        return (_rebuild, (type(self).__kdsl_type__, self.view(np.ndarray).tolist()))
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({self.view(np.ndarray).tolist()})"
+
+    __str__ = __repr__
+
+    def __getattr__(self, name: str) -> Any:
+        index = _PART_INDEX.get(name)
+        t = type(self).__kdsl_type__
+        if _has_part(t, index):
+            return self[index]
+        if isinstance(t, T.TransformType) and name in ("p", "q"):
+            return self[0:3] if name == "p" else _as_value(self.view(np.ndarray)[3:7], T.QuatType)
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        index = _PART_INDEX.get(name)
+        t = type(self).__kdsl_type__
+        if _has_part(t, index):
+            self.view(np.ndarray)[index] = value
+            return
+        if isinstance(t, T.TransformType) and name in ("p", "q"):
+            part = slice(0, 3) if name == "p" else slice(3, 7)
+            self.view(np.ndarray)[part] = np.ravel(np.asarray(value))
+            return
+        object.__setattr__(self, name, value)
+
+
+_PART_INDEX = {"x": 0, "y": 1, "z": 2, "w": 3}
+
+
+def _has_part(t: T.Type, index: int | None) -> builtins.bool:
+    """True when component ``index`` (of ``.x``...``.w``) exists on a vector or quaternion."""
+    return (
+        index is not None
+        and isinstance(t, T.VectorType | T.QuatType)
+        and index < T.value_shape(t)[0]
+    )
+
+
+def _rebuild(t: T.Type, values: list) -> Composite:
+    return class_of(t)(np.asarray(values))
+
+
+def _as_value(x: Any, kind: type | None = None) -> Any:
+    """A piece of a composite as a Python-scope value: a scalar or a vector/matrix class."""
+    if not isinstance(x, np.ndarray):
+        return x
+    if x.ndim == 0:
+        return x[()]
+    try:
+        et = T.scalar_from_numpy(x.dtype)
+    except (KeyError, TypeError):
+        return x
+    if kind is T.QuatType and x.shape == (4,):
+        return x.copy().view(class_of(T.QuatType(et)))
+    if x.ndim == 1 and x.shape[0] > 0:
+        return x.view(class_of(T.VectorType(x.shape[0], et)))
+    if x.ndim == 2 and x.shape[0] > 0 and x.shape[1] > 0:
+        return x.view(class_of(T.MatrixType(x.shape[0], x.shape[1], et)))
+    return x
 
 
 _COMPOSITE_CACHE: dict[T.Type, type] = {}

@@ -3,8 +3,14 @@ a backend's stages (see ``driver``). It sits above the frontend and the backends
 below the runtime, which asks it for compiled kernels.
 """
 
+from kdsl.compiler import python_scope
 from kdsl.compiler.adjoint import adjoint_module
 from kdsl.compiler.driver import compile_kernel, lower, prepare_module
 from kdsl.compiler.pipelines import check_pipeline
+from kdsl.types import register_python_scope
+
+# Builtins, standard-library functions and composite operators called from Python
+# evaluate through the interp backend (see ``python_scope``).
+register_python_scope(python_scope.call)
 
 __all__ = ["adjoint_module", "check_pipeline", "compile_kernel", "lower", "prepare_module"]

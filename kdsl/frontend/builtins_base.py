@@ -17,10 +17,11 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from kdsl.errors import KdslError, KdslTypeError
+from kdsl.errors import KdslTypeError
 from kdsl.frontend.values import is_weak
 from kdsl.ir import Value
 from kdsl.ir.types import F32, ScalarType
+from kdsl.types import python_scope
 
 #: ``lower(emitter, args, node)``: emits a builtin's ops for one call.
 Lower = Callable[[Any, list[Any], ast.Call], Any]
@@ -49,10 +50,9 @@ class Builtin:
         self.__doc__ = self.doc
 
     def __call__(self, *args: Any, **kwargs: Any) -> Any:
-        raise KdslError(
-            f"kdsl.{self.name}() is a kernel builtin: call it inside a @kdsl.kernel or "
-            "@kdsl.func, not from Python"
-        )
+        """In Python scope: the builtin evaluated with its kernel semantics
+        (``kdsl.compiler.python_scope``); ``kdsl.sin(0.5)`` is ``np.float32(0.47942555)``."""
+        return python_scope(self, args, kwargs)
 
     def __repr__(self) -> str:
         return f"<kdsl builtin {self.name}>"
@@ -105,7 +105,7 @@ def unified(em, args: list[Any], node: ast.AST) -> list[Value]:
     typed = next((a for a in args if isinstance(a, Value)), None)
     if typed is None:
         floats = any(isinstance(a, float) for a in args)
-        return [em.value(float(a) if floats and not isinstance(a, bool) else a, node)
+        return [em.value(float(a) if floats and not isinstance(a, bool | float) else a, node)
                 for a in args]  # fmt: skip
     return [em.coerce_pair(a, typed, node)[0] if is_weak(a) else em.value(a, node) for a in args]
 
@@ -113,7 +113,8 @@ def unified(em, args: list[Any], node: ast.AST) -> list[Value]:
 def float_default(em, x: Any, node: ast.AST) -> Value:
     """``x`` as a value, where a lone int literal is a float (``sqrt(2)``), as in Python."""
     if is_weak(x) and not isinstance(x, bool):
-        return em.const(float(x), F32, node)
+        # A float stays the object it is (Python scope compiles with placeholder literals).
+        return em.const(x if isinstance(x, float) else float(x), F32, node)
     return em.value(x, node)
 
 

@@ -167,8 +167,8 @@ class Function:
 
             return python_scope(self, args, kwargs)
         for ov in self.overloads:
-            if len(inspect.signature(ov.fn).parameters) == len(args):
-                return ov.fn(*args)
+            if len(inspect.signature(ov.fn).parameters) == len(args) + len(kwargs):
+                return ov.fn(*args, **kwargs)
         raise TypeError(f"{self.name}() has no overload taking {len(args)} arguments")
 
     def __repr__(self) -> str:
