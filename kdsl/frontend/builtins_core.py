@@ -77,7 +77,8 @@ TABLE.define("pow", (2, 2), "``x`` raised to ``y`` (floats).", "math")(_binary("
 
 def _minmax(op: str) -> Lower:
     def lower(em, args, node):
-        if len(args) == 1:  # min(v): the smallest component of a vector (NaN skipped)
+        reduce = len(args) == 1
+        if reduce:  # min(v): the smallest component of a vector (NaN skipped)
             v = em.value(args[0], node)
             if not isinstance(v.type, VectorType):
                 raise em.error(KdslTypeError, f"{op[6:]}() of one argument needs a vector, "
@@ -85,8 +86,8 @@ def _minmax(op: str) -> Lower:
             args = components(em, v, node)
         vals = unified(em, args, node)
         out = vals[0]
-        for v in vals[1:]:
-            out = em.emit(op, out, v, node=node)
+        for v in vals[1:]:  # op(new, so far): ties keep the earlier value and its gradient
+            out = em.emit(op, v, out, node=node) if reduce else em.emit(op, out, v, node=node)
         return out
 
     return lower

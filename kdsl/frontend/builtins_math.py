@@ -87,7 +87,9 @@ def nan_passing(em, x: Value, r: Value, node) -> Value:
 def _clamp(em, args, node):
     x, lo, hi = unified(em, args, node)
     require_numeric(em, x, "clamp", node)
-    r = em.emit("arith.min", em.emit("arith.max", x, lo, node=node), hi, node=node)
+    # Warp's operand order, min(max(lo, x), hi): the gradient rules send ties to the
+    # second operand, so x gets it at lo and hi gets it at hi (docs/autodiff.md).
+    r = em.emit("arith.min", em.emit("arith.max", lo, x, node=node), hi, node=node)
     return nan_passing(em, x, r, node)
 
 

@@ -80,28 +80,35 @@ def _div(ctx: VjpContext, op: Operation, adj: Adj) -> list[Value | None]:
     return [adj_a, adj_b]
 
 
-def _pick_first(ctx: VjpContext, op: Operation, adj: Adj) -> list[Value | None]:
-    """Adjoints of ``min``/``max``: each component's adjoint goes to the operand returned."""
+def _pick_returned(ctx: VjpContext, op: Operation, adj: Adj) -> list[Value | None]:
+    """Adjoints of ``min``/``max``, per component, as Warp's ``adj_min``/``adj_max``.
+
+    ``a`` gets the adjoint where the result is ``a`` and not also ``b`` (so ``a`` won
+    strictly, or ``b`` is NaN); ``b`` gets it everywhere else: at ties (``-0`` and
+    ``+0`` included) and where ``a`` is NaN.
+    """
     (g,) = adj
-    a, _b = ctx.operands(op)
+    a, b = ctx.operands(op)
     r = ctx.primal(op.results[0])
 
-    def a_won(ra: Value, aa: Value) -> Value:
-        return ctx.cmp("eq", ra, aa)
+    def a_won(ra: Value, aa: Value, bb: Value) -> Value:
+        return ctx.emit("arith.and", ctx.cmp("eq", ra, aa), ctx.cmp("ne", ra, bb))
 
-    return [where(ctx, a_won, [r, a], g, None), where(ctx, a_won, [r, a], None, g)]
+    return [where(ctx, a_won, [r, a, b], g, None), where(ctx, a_won, [r, a, b], None, g)]
 
 
 @rule("arith.min")
 def _min(ctx: VjpContext, op: Operation, adj: Adj) -> list[Value | None]:
-    """The smaller operand gets the adjoint. Ties: the first operand; NaN: the operand returned."""
-    return _pick_first(ctx, op, adj)
+    """The smaller operand gets the adjoint. Ties: the second operand (Warp's choice); NaN:
+    the operand returned."""
+    return _pick_returned(ctx, op, adj)
 
 
 @rule("arith.max")
 def _max(ctx: VjpContext, op: Operation, adj: Adj) -> list[Value | None]:
-    """The larger operand gets the adjoint. Ties: the first operand; NaN: the operand returned."""
-    return _pick_first(ctx, op, adj)
+    """The larger operand gets the adjoint. Ties: the second operand (Warp's choice); NaN:
+    the operand returned."""
+    return _pick_returned(ctx, op, adj)
 
 
 @rule("arith.mod")
@@ -158,3 +165,10 @@ def _cast(ctx: VjpContext, op: Operation, adj: Adj) -> list[Value | None]:
     if not is_differentiable(src):
         return [None]
     return [ctx.emit_typed("arith.cast", [g], src)]
+
+
+@rule("arith.bitcast")
+def _bitcast(ctx: VjpContext, op: Operation, adj: Adj) -> list[Value | None]:
+    """Reinterpreted bits are not a differentiable function of the value: none (as Warp's
+    ``cast``, which has no adjoint)."""
+    return [None]

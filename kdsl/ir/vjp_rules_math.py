@@ -120,11 +120,13 @@ def _piecewise_constant(ctx: VjpContext, op: Operation, adj: Adj) -> list[Value 
 
 @rule("math.copysign")
 def _copysign(ctx: VjpContext, op: Operation, adj: Adj) -> list[Value | None]:
-    """copysign(a, b) = |a| sgn(b): sign(a) sgn(b) for a, 0 for b. At a == 0: +sgn(b)."""
+    """copysign(a, b) = |a| sgn(b): sgn(a) sgn(b) for a, 0 for b. sgn reads the sign bit,
+    as Warp does: at a == +0 that is +sgn(b), at a == -0 -sgn(b)."""
     (g,) = adj
     a, b = ctx.operands(op)
+    sgn_a = ctx.emit("math.copysign", ctx.const(1, a.type), a)
     sgn_b = ctx.emit("math.copysign", ctx.const(1, b.type), b)
-    return [ctx.mul(g, ctx.mul(ctx.emit("math.sign", a), sgn_b)), None]
+    return [ctx.mul(g, ctx.mul(sgn_a, sgn_b)), None]
 
 
 @rule("math.atan2")
