@@ -25,7 +25,7 @@ LAYERS: list[set[str]] = [
     {"stdlib"},
     {"compiler"},
     {"runtime"},
-    {"interop", "autograd", "utils"},
+    {"interop", "autograd", "utils", "optim"},
     {"jax_experimental"},
 ]
 FACADES = {"__init__", "__main__", "cli", "testing", "tools"}
