@@ -38,7 +38,6 @@ from typing import Any
 
 import numpy as np
 
-from kdsl.backends.interp.program import Program, ThreadContext
 from kdsl.backends.registry import get_backend
 from kdsl.compiler.driver import compile_kernel
 from kdsl.errors import KdslError, KdslTypeError
@@ -97,8 +96,13 @@ def evaluate(what: Any, args: tuple, kwargs: dict[str, Any] | None = None) -> An
 class _Compiled:
     """One compiled call: its program and how to feed and read it."""
 
-    def __init__(self, program: Program, symbol: str, typed: list[int],
+    def __init__(self, program: Any, symbol: str, typed: list[int],
                  weak: list[tuple[int, ScalarType]], res_types: list[Type]) -> None:  # fmt: skip
+        # The interp backend loads only when Python scope is first used (``import kdsl``
+        # imports no backend).
+        from kdsl.backends.interp.program import ThreadContext
+
+        self.context = ThreadContext
         self.program = program
         self.symbol = symbol
         self.fn = program.function(symbol)
@@ -109,7 +113,7 @@ class _Compiled:
     def run(self, values: list[Any]) -> Any:
         args = [values[k] for k in self.typed]
         args += [np_value(normalize_constant(values[k], t), t) for k, t in self.weak]
-        ctx = ThreadContext(self.program, self.fn, "python scope")
+        ctx = self.context(self.program, self.fn, "python scope")
         try:
             with np.errstate(all="ignore"):
                 out = ctx.call(self.symbol, args)
