@@ -181,7 +181,7 @@ def _cast(em, args, node):
     return em.emit_typed("arith.bitcast", [v], t, node)
 
 
-@TABLE.define("block_dim", (0, 0), "Number of threads in the running block: the launch's block "
-              "size on cuda, 1 on cpu and interp (as Warp on the CPU).", "utility")  # fmt: skip
+@TABLE.define("block_dim", (0, 0), "Number of threads in the running block: 256 on cuda (the "
+              "block size kdsl launches with), 1 on cpu and interp (as Warp on the CPU).", "utility")  # fmt: skip
 def _block_dim(em, args, node):
     return em.emit("kd.block_dim", node=node)

@@ -45,8 +45,8 @@ TID = CATALOG.define(
 
 BLOCK_DIM = CATALOG.define(
     "kd.block_dim",
-    "Number of threads of the running thread's block: the launch's block size on cuda, "
-    "1 on the cpu backend and the interpreter (as Warp on the CPU).",
+    "Number of threads of the running thread's block: the block size of the launch on "
+    "cuda, 1 on the cpu backend and the interpreter (as Warp on the CPU).",
     traits=frozenset({PURE, SPECULATABLE}), type_rule=lambda ts, attrs: [I32],
     interp=lambda ctx, op: np.int32(1), example="%0 = kd.block_dim : i32", group="memory",
 )  # fmt: skip

@@ -18,6 +18,11 @@ CUDA = pytest.param(
 )
 ALL = (*BACKENDS, CUDA)
 
+
+def _device(backend: str) -> str:
+    return "cuda" if backend == "cuda" else "cpu"
+
+
 NAMES = ("pi", "tau", "e", "inf", "nan", "half_pi", "ln2", "ln10", "log2e", "log10e", "phi")
 VALUES = (math.pi, math.tau, math.e, math.inf, math.nan, math.pi / 2, math.log(2), math.log(10),
           1 / math.log(2), 1 / math.log(10), (1 + 5**0.5) / 2)  # fmt: skip
@@ -52,12 +57,13 @@ def constants_in_kernel(f: wp.array(dtype=float), d: wp.array(dtype=wp.float64),
 
 @pytest.mark.parametrize("backend", ALL)
 def test_constants_in_kernels_typed_as_warp(backend):
+    dev = _device(backend)
     f, d, flags = (
-        wp.zeros(2, dtype=float),
-        wp.array(np.array([0.0, 0.0, 2.0])),
-        wp.zeros(1, dtype=int),
+        wp.zeros(2, dtype=float, device=dev),
+        wp.array(np.array([0.0, 0.0, 2.0]), device=dev),
+        wp.zeros(1, dtype=int, device=dev),
     )
-    wp.launch(constants_in_kernel, 1, [f, d, flags], backend=backend)
+    wp.launch(constants_in_kernel, 1, [f, d, flags], device=dev, backend=backend)
     assert f.numpy().tolist() == [np.float32(math.pi), np.float32(math.tau)]
     assert d.numpy()[:2].tolist() == [math.pi, 2.0 * math.e]
     assert flags.numpy()[0] == 3
@@ -116,7 +122,9 @@ went on
 
 @pytest.mark.parametrize("backend", ALL)
 def test_expect_prints_warps_message_and_the_kernel_goes_on(backend, capfd):
-    wp.launch(expectations, 1, [wp.array(np.ones(1, np.float32)), 3], backend=backend)
+    dev = _device(backend)
+    a = wp.array(np.ones(1, np.float32), device=dev)
+    wp.launch(expectations, 1, [a, 3], device=dev, backend=backend)
     wp.synchronize()
     assert capfd.readouterr().out == EXPECTED
 
@@ -134,10 +142,10 @@ def test_block_dim_is_one_off_the_gpu(backend):
 
 
 @pytest.mark.skipif(not wp.is_cuda_available(), reason="needs a CUDA GPU")
-def test_block_dim_on_cuda_is_the_launch_block_size():
+def test_block_dim_on_cuda_is_the_block_size_kdsl_launches_with():
     out = wp.zeros(300, dtype=int, device="cuda")
-    wp.launch(block_size, 300, [out], device="cuda", block_dim=128)
-    assert set(out.numpy().tolist()) == {128}
+    wp.launch(block_size, 300, [out], device="cuda")
+    assert set(out.numpy().tolist()) == {256}
 
 
 @wp.kernel
