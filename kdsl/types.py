@@ -34,7 +34,7 @@ __all__ = [
     "quath", "transform", "transformf", "transformd", "transformh", "spatial_vector",
     "spatial_vectorf", "spatial_vectord", "spatial_vectorh", "spatial_matrix", "spatial_matrixf",
     "spatial_matrixd", "spatial_matrixh", "type_of", "class_of",
-    "dtype_to_numpy", "dtype_from_numpy", "register_python_scope", "python_scope",
+    "dtype_to_numpy", "dtype_from_numpy",
 ]  # fmt: skip
 
 

@@ -341,6 +341,12 @@ def test_compiled_once_per_types():
     assert len(python_scope._cache) == before  # same types: no new compile
     wp.length(wp.vec3d(3, 4, 12))
     assert len(python_scope._cache) == before + 1
+    # A literal is a parameter: new values reuse the compiled function.
+    wp.cos(0.25)
+    before = len(python_scope._cache)
+    for x in (0.5, 0.7, -3.25):
+        assert wp.cos(x) == np.cos(np.float32(x))
+    assert len(python_scope._cache) == before
 
 
 def test_literals_read_at_compile_time_are_cached_per_value():
