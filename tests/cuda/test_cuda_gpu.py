@@ -161,6 +161,9 @@ def test_launches_on_a_user_stream_are_ordered():
     with wp.ScopedStream(s):
         for _ in range(10):
             wp.launch(add_value, a.shape[0], [a, 1.0], device=DEVICE)
+    # The read runs on the device's own stream again, which does not wait for ``s`` (as in
+    # Warp, ScopedStream's sync_exit is off by default): wait for ``s`` first.
+    wp.synchronize_stream(s)
     np.testing.assert_array_equal(a.numpy(), np.full(a.shape[0], 10.0, dtype=np.float32))
 
 
