@@ -16,7 +16,7 @@ from kdsl.frontend.builtins_base import Builtin, cast
 from kdsl.frontend.emitter import Emitter, component_count
 from kdsl.frontend.static import static
 from kdsl.frontend.structs import is_indexed
-from kdsl.frontend.values import ShapeOf, describe, is_weak
+from kdsl.frontend.values import ShapeOf, describe, is_hashable, is_weak
 from kdsl.ir import Value
 from kdsl.ir.catalog import fold_literal
 from kdsl.ir.types import (
@@ -261,7 +261,7 @@ class ExpressionLowering(Emitter):
         if any(isinstance(a, ast.Starred) for a in node.args):
             raise self.error(KdslSyntaxError, "starred arguments (*args) are not supported", node)
         # Keyword arguments go only to builtins that name them (``identity(n=3, dtype=float)``).
-        target = PYTHON_ALIASES.get(fn, fn) if _hashable(fn) else fn
+        target = PYTHON_ALIASES.get(fn, fn) if is_hashable(fn) else fn
         allowed = (
             target.keywords
             if isinstance(target, Builtin)
@@ -281,7 +281,7 @@ class ExpressionLowering(Emitter):
         return self.call(fn, args, node, kwargs)
 
     def call(self, fn: Any, args: list[Any], node: ast.Call, kwargs: dict | None = None) -> Any:
-        fn = PYTHON_ALIASES.get(fn, fn) if _hashable(fn) else fn
+        fn = PYTHON_ALIASES.get(fn, fn) if is_hashable(fn) else fn
         if isinstance(fn, Builtin):
             lo, hi = fn.arity
             if not lo <= len(args) <= hi:
@@ -292,7 +292,7 @@ class ExpressionLowering(Emitter):
                     node,
                 )
             return fn.lower(self, args, node, **kwargs) if kwargs else fn.lower(self, args, node)
-        if _hashable(fn) and fn in PYTHON_CASTS:
+        if is_hashable(fn) and fn in PYTHON_CASTS:
             self.check_cast_args(fn.__name__, args, node)
             return cast(self, PYTHON_CASTS[fn], args, node)
         t = getattr(fn, "__kdsl_type__", None) if isinstance(fn, type) else None
@@ -382,14 +382,6 @@ class ExpressionLowering(Emitter):
 def _is_matmul(a: Type, b: Type) -> bool:
     return (isinstance(a, MatrixType) and isinstance(b, MatrixType | VectorType)) or (
         isinstance(a, VectorType) and isinstance(b, MatrixType))  # fmt: skip
-
-
-def _hashable(x: Any) -> bool:
-    try:
-        hash(x)
-    except TypeError:
-        return False
-    return True
 
 
 def _callee_name(fn: Any) -> str:

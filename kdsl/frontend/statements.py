@@ -13,7 +13,7 @@ from kdsl.frontend.control import BRK, CONT, MAX_UNROLL, RET, ControlFlowLowerin
 from kdsl.frontend.expressions import BINOPS, COMPONENTS
 from kdsl.frontend.static import static
 from kdsl.frontend.structs import is_indexed
-from kdsl.frontend.values import ShapeOf, describe, is_weak
+from kdsl.frontend.values import ShapeOf, describe, is_hashable, is_weak
 from kdsl.ir import Value
 from kdsl.ir.types import BOOL, I32, ArrayType, MatrixType, StructType, VectorType
 
@@ -408,16 +408,8 @@ def _is_reversed_range(em, it: ast.expr) -> bool:
     if not (isinstance(it, ast.Call) and isinstance(it.func, ast.Name | ast.Attribute)):
         return False
     fn = em.visit(it.func)
-    if not (_hashable(fn) and PYTHON_ALIASES.get(fn, fn) is BUILTINS["reversed"]):
+    if not (is_hashable(fn) and PYTHON_ALIASES.get(fn, fn) is BUILTINS["reversed"]):
         return False
     if it.keywords or len(it.args) != 1 or not isinstance(it.args[0], ast.Call):
         raise em.error(KdslSyntaxError, "reversed() in a for loop must wrap range(...)", it)
-    return True
-
-
-def _hashable(x: Any) -> bool:
-    try:
-        hash(x)
-    except TypeError:
-        return False
     return True

@@ -74,3 +74,12 @@ class ShapeOf:
 
     def __init__(self, array: Value) -> None:
         self.array = array
+
+
+def is_hashable(x: Any) -> bool:
+    """True if ``x`` can be a dict key (a Python object a kernel names may be a list)."""
+    try:
+        hash(x)
+    except TypeError:
+        return False
+    return True

@@ -11,12 +11,13 @@ from kdsl.optim.common import (
     check_number,
     check_params,
     compute_type,
+    fitted,
     flat,
     list_of,
     value_type,
+    zero_all,
 )
 from kdsl.optim.kernels import adam_kernel
-from kdsl.runtime.alloc import zeros
 from kdsl.runtime.array import array
 from kdsl.runtime.launch import launch
 from kdsl.types import class_of
@@ -69,25 +70,16 @@ class Adam:
         self.params = check_params("Adam", params)
         if not self.params:
             return
-        n = len(self.params)
-        if len(self.m) != n:
-            self.m = [None] * n
-        if len(self.v) != n:
-            self.v = [None] * n
-        for i, p in enumerate(self.params):
-            dtype = class_of(compute_type(value_type(p.dtype)))
-            for moments in (self.m, self.v):
-                buf = moments[i]
-                if buf is None or buf.shape != p.shape or buf.dtype != dtype:
-                    moments[i] = zeros(p.shape, dtype=dtype, device=p.device)
-                elif buf.device != p.device:
-                    moments[i] = buf.to(p.device)
+
+        def moment_type(p: array) -> type:
+            return class_of(compute_type(value_type(p.dtype)))
+
+        self.m = fitted(self.m, self.params, moment_type)
+        self.v = fitted(self.v, self.params, moment_type)
 
     def reset_internal_state(self) -> None:
         """Zero the moment buffers and the step count."""
-        for buf in (*self.m, *self.v):
-            if buf is not None:
-                buf.zero_()
+        zero_all([*self.m, *self.v])
         self.t = 0
 
     def step(self, grad: list[array]) -> None:

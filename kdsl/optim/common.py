@@ -15,6 +15,7 @@ from typing import Any
 
 from kdsl.errors import KdslError
 from kdsl.ir import types as T
+from kdsl.runtime.alloc import zeros
 from kdsl.runtime.array import array
 from kdsl.types import class_of, type_of
 
@@ -133,3 +134,24 @@ def list_of(who: str, name: str, values: Any, count: int) -> list[Any]:
     if len(values) != count:
         raise OptimError(f"{who} got {len(values)} {name} arrays for {count} parameter arrays")
     return list(values)
+
+
+def fitted(buffers: list[array | None], params: list[array], dtype_of: Any) -> list[array]:
+    """``buffers`` made to fit ``params`` as Warp's optimizers keep them: one per
+    parameter, zeros of ``dtype_of(p)`` and ``p``'s shape where missing or no longer of
+    that shape and dtype, moved to ``p``'s device where it moved."""
+    out = list(buffers) if len(buffers) == len(params) else [None] * len(params)
+    for i, p in enumerate(params):
+        buf, dtype = out[i], dtype_of(p)
+        if buf is None or buf.shape != p.shape or buf.dtype != dtype:
+            out[i] = zeros(p.shape, dtype=dtype, device=p.device)
+        elif buf.device != p.device:
+            out[i] = buf.to(p.device)
+    return out
+
+
+def zero_all(buffers: list[array | None]) -> None:
+    """Zero every buffer of ``buffers`` (``reset_internal_state``)."""
+    for buf in buffers:
+        if buf is not None:
+            buf.zero_()

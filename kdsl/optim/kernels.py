@@ -11,7 +11,7 @@ classes of the factory's closure and are evaluated where the kernel is defined.)
 
 from functools import cache
 
-from kdsl.frontend.api import cw_div, cw_mul, kernel, sqrt, tid
+from kdsl.frontend.api import cw_div, cw_mul, kernel, sqrt, static, tid
 from kdsl.frontend.api import pow as kpow
 from kdsl.ir import types as T
 from kdsl.optim.common import compute_type, scalar_class
@@ -24,37 +24,29 @@ def adam_kernel(t: T.Type):
     """Adam's step for arrays of ``t``: moments ``m``, ``v`` of the compute type."""
     P, C, S = class_of(t), class_of(compute_type(t)), scalar_class(t)
 
-    if isinstance(t, T.ScalarType):
-
-        @kernel
-        def adam_step(
-            g: array(dtype=P), m: array(dtype=C), v: array(dtype=C), lr: S, beta1: S,
-            beta2: S, t: S, eps: S, params: array(dtype=P),
-        ):  # fmt: skip
-            i = tid()
-            gi = C(g[i])
-            m[i] = beta1 * m[i] + (1.0 - beta1) * gi
-            v[i] = beta2 * v[i] + (1.0 - beta2) * gi * gi
-            mhat = m[i] / (1.0 - kpow(beta1, t + 1.0))
-            vhat = v[i] / (1.0 - kpow(beta2, t + 1.0))
-            params[i] = params[i] - P(lr * mhat / (sqrt(vhat) + eps))
-
-        return adam_step
+    # Vector and matrix elements square and divide component-wise.
+    composite = not isinstance(t, T.ScalarType)
 
     @kernel
-    def adam_step_composite(
+    def adam_step(
         g: array(dtype=P), m: array(dtype=C), v: array(dtype=C), lr: S, beta1: S,
         beta2: S, t: S, eps: S, params: array(dtype=P),
     ):  # fmt: skip
         i = tid()
         gi = C(g[i])
         m[i] = beta1 * m[i] + (1.0 - beta1) * gi
-        v[i] = beta2 * v[i] + (1.0 - beta2) * cw_mul(gi, gi)
+        if static(composite):
+            v[i] = beta2 * v[i] + (1.0 - beta2) * cw_mul(gi, gi)
+        else:
+            v[i] = beta2 * v[i] + (1.0 - beta2) * gi * gi
         mhat = m[i] / (1.0 - kpow(beta1, t + 1.0))
         vhat = v[i] / (1.0 - kpow(beta2, t + 1.0))
-        params[i] = params[i] - P(lr * cw_div(mhat, sqrt(vhat) + C(eps)))
+        if static(composite):
+            params[i] = params[i] - P(lr * cw_div(mhat, sqrt(vhat) + C(eps)))
+        else:
+            params[i] = params[i] - P(lr * mhat / (sqrt(vhat) + eps))
 
-    return adam_step_composite
+    return adam_step
 
 
 @cache

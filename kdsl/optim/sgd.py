@@ -9,12 +9,13 @@ from kdsl.optim.common import (
     check_like,
     check_number,
     check_params,
+    fitted,
     flat,
     list_of,
     value_type,
+    zero_all,
 )
 from kdsl.optim.kernels import sgd_kernel
-from kdsl.runtime.alloc import zeros_like
 from kdsl.runtime.array import array
 from kdsl.runtime.launch import launch
 
@@ -65,20 +66,11 @@ class SGD:
         self.params = check_params("SGD", params)
         if not self.params:
             return
-        if len(self.b) != len(self.params):
-            self.b = [None] * len(self.params)
-        for i, p in enumerate(self.params):
-            buf = self.b[i]
-            if buf is None or buf.shape != p.shape or buf.dtype != p.dtype:
-                self.b[i] = zeros_like(p, requires_grad=False)
-            elif buf.device != p.device:
-                self.b[i] = buf.to(p.device)
+        self.b = fitted(self.b, self.params, lambda p: p.dtype)
 
     def reset_internal_state(self) -> None:
         """Zero the momentum buffers and the step count."""
-        for buf in self.b:
-            if buf is not None:
-                buf.zero_()
+        zero_all(self.b)
         self.t = 0
 
     def step(self, grad: list[array]) -> None:

@@ -11,6 +11,7 @@ from __future__ import annotations
 import inspect
 import sys
 from collections.abc import Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -272,32 +273,23 @@ def _converter(kernel: Any, index: int, name: str, t: Any, device: Device) -> An
     return slow
 
 
+@dataclass(eq=False)
 class Launch:
     """A recorded launch (``record_cmd=True``) that relaunches with little Python work.
 
     The arguments are converted and packed once, when recorded and when a parameter
     or the grid changes; ``launch()`` then goes straight to the backend's prepared
-    call (``Backend.prepare``).
+    call (``Backend.prepare``). ``params`` are the converted arguments.
     """
 
-    def __init__(
-        self,
-        kernel: Any,
-        backend: Backend,
-        compiled: CompiledKernel,
-        dims: tuple[int, ...],
-        args: list,
-        device: Device,
-        stream: Any,
-    ) -> None:
-        self.kernel = kernel
-        self.backend = backend
-        self.compiled = compiled
-        self.dims = dims
-        self.params = args
-        self.device = device
-        self.stream = stream
-        self._run: Any = None
+    kernel: Any
+    backend: Backend
+    compiled: CompiledKernel
+    dims: tuple[int, ...]
+    params: list
+    device: Device
+    stream: Any
+    _run: Any = field(default=None, init=False, repr=False)
 
     def set_param_at_index(self, index: int, value: Any) -> None:
         """Replace argument ``index`` (checked like ``launch`` checks it)."""

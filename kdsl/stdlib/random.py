@@ -18,6 +18,7 @@ import kdsl as wp
 from kdsl.frontend.inout import inout
 from kdsl.frontend.kernel import func
 from kdsl.ir.types import F32, ArrayType
+from kdsl.stdlib.algorithms import lower_bound
 from kdsl.types import float32, int32, uint32, vec2, vec3, vec4
 
 __kdsl_group__ = "random"
@@ -108,16 +109,7 @@ def randn(state: inout(uint32)) -> float32:
 @func
 def sample_cdf(state: inout(uint32), cdf: ArrayType(F32, 1)) -> int32:
     """``sample_cdf(state, cdf)``: the first index ``i`` with ``cdf[i] >= randf(state)``."""
-    u = randf(state)
-    lower = 0
-    upper = cdf.shape[0] - 1
-    while lower < upper:
-        mid = lower + (upper - lower) // 2
-        if cdf[mid] < u:
-            lower = mid + 1
-        else:
-            upper = mid
-    return lower
+    return lower_bound(cdf, randf(state))
 
 
 @func

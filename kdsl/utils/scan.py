@@ -4,15 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from kdsl.utils.buffers import (
-    UtilsError,
-    check_array,
-    chunks,
-    flat_view,
-    on_device,
-    run_parallel,
-    same_device,
-)
+from kdsl.utils import buffers
+from kdsl.utils.buffers import UtilsError, check_array, flat_view, on_device, same_device
 
 #: Scalar types a scan accepts (as Warp's).
 SCAN_TYPES = (np.int32, np.int64, np.float32, np.float64)
@@ -57,12 +50,12 @@ def array_scan(in_array, out_array, inclusive: bool = True) -> None:
 
 def _host_cumsum(x: np.ndarray, out: np.ndarray) -> None:
     """``np.cumsum(x, out=out)`` over the host threads: each chunk, then the carries."""
-    ranges = chunks(len(x))
+    ranges = buffers.chunks(len(x))
 
     def part(start: int, end: int) -> None:
         np.cumsum(x[start:end], axis=0, dtype=x.dtype, out=out[start:end])
 
-    run_parallel(part, ranges)
+    buffers.run_parallel(part, ranges)
     if len(ranges) > 1:
         carries = np.cumsum([out[end - 1] for _, end in ranges[:-1]], axis=0, dtype=x.dtype)
 
@@ -70,4 +63,4 @@ def _host_cumsum(x: np.ndarray, out: np.ndarray) -> None:
             start, end = ranges[i + 1]
             out[start:end] += carries[i]
 
-        run_parallel(carry, [(i, i) for i in range(len(ranges) - 1)])
+        buffers.run_parallel(carry, [(i, i) for i in range(len(ranges) - 1)])

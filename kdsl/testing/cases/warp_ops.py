@@ -232,14 +232,10 @@ def _lb_inputs(rng):
 
 
 def _warp_lower_bound(arr, begin, end, v):
-    lower, upper = begin, end - 1  # Warp searches [begin, end - 1]
-    while lower < upper:
-        mid = lower + (upper - lower) // 2
-        if arr[mid] < v:
-            lower = mid + 1
-        else:
-            upper = mid
-    return lower
+    # Warp searches [begin, end - 1]: with no element >= v the answer is end - 1.
+    if end <= begin:
+        return begin
+    return min(begin + int(np.searchsorted(arr[begin:end], v, side="left")), end - 1)
 
 
 def _lb_ref(ins):
