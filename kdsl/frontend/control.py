@@ -31,9 +31,11 @@ from kdsl.frontend.analysis import (
 )
 from kdsl.frontend.expressions import ExpressionLowering
 from kdsl.frontend.inout import inout_positions, static_callee
+from kdsl.frontend.structs import has_zero, zero_value
 from kdsl.frontend.values import default_type
 from kdsl.ir import Block, Region, Value
-from kdsl.ir.types import BOOL, F32, I32, Type
+from kdsl.ir.rewrite import constant_of
+from kdsl.ir.types import BOOL, F32, I32, StructType, Type
 
 BRK, CONT, RET = "$brk", "$cont", "$ret"
 MAX_UNROLL = 4096
@@ -213,6 +215,24 @@ class ControlFlowLowering(ExpressionLowering):
             else:
                 self.vars[k] = v
 
+    def assigned_by_every_run(self, bounds, carried, body_vars, body_maybe, target) -> list[str]:
+        """Names first assigned in the body of a loop that surely runs (constant bounds, at
+        least one iteration; the caller has no early exit) and that every iteration
+        assigns: as in Python (and Warp), they hold the last iteration's value after it.
+
+        They become loop-carried values that start as zeros nobody reads: each iteration
+        assigns them before the loop yields.
+        """
+        consts = [constant_of(v) for v in bounds]
+        if not all(ok for ok, _ in consts):
+            return []
+        lb, ub, step = (c for _, c in consts)
+        if step == 0 or len(range(lb, ub, step)) == 0:
+            return []
+        return [n for n in sorted(body_vars)
+                if n not in self.vars and n not in carried and n not in body_maybe
+                and n != target and not n.startswith("$") and body_vars[n].type.is_value]  # fmt: skip
+
     def late_carried(self, carried: list[str], body_vars: dict[str, Value], node) -> list[str]:
         """``$rv`` values first set inside the body: carried too, starting as zeros."""
         return [n for n in sorted(body_vars) if n.startswith("$rv") and n not in self.vars
@@ -227,6 +247,13 @@ class ControlFlowLowering(ExpressionLowering):
         init = [self.vars[n] for n in carried]
         block = Block([I32] + [v.type for v in init], [target] + [None] * len(init))
         body_vars, body_maybe = self.loop_body(block, carried, body, target, block.args[0], node)
+        for n in self.assigned_by_every_run(bounds, carried, body_vars, body_maybe, target):
+            t = body_vars[n].type
+            if isinstance(t, StructType) and not has_zero(t):
+                continue  # a struct holding arrays has no zero to start from
+            block.add_arg(t)
+            init.append(zero_value(self, t, node, n))
+            carried = [*carried, n]
         self.check_carried(carried, body_vars, node)
         self.in_block(block, lambda: self.b.create("scf.yield", [body_vars[n] for n in carried]))
         op = self.b.create("scf.for", [lb, ub, step, *init], [v.type for v in init],

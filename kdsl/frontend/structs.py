@@ -68,6 +68,13 @@ def construct(em: Any, t: StructType, args: list[Any], kwargs: dict[str, Any], n
     return em.emit_typed("struct.construct", parts, t, node)
 
 
+def has_zero(t: Type) -> bool:
+    """Whether ``t`` has a zero value in a kernel (no array anywhere inside)."""
+    if isinstance(t, ArrayType):
+        return False
+    return not isinstance(t, StructType) or all(has_zero(ft) for _, ft in t.fields)
+
+
 def zero_value(em: Any, t: Type, node: ast.AST, what: str):
     """A zero value of ``t`` (structs field by field); arrays have none."""
     if isinstance(t, StructType):
