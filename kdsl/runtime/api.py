@@ -14,7 +14,7 @@ from kdsl.runtime.alloc import (
     zeros,
     zeros_like,
 )
-from kdsl.runtime.array import array, array1d, array2d, array3d, array4d
+from kdsl.runtime.array import array, array1d, array2d, array3d, array4d, from_ptr
 from kdsl.runtime.context import init
 from kdsl.runtime.device import (
     Device,
@@ -103,7 +103,7 @@ __all__ = [
     "Device", "Event", "Launch", "ScopedDevice", "ScopedStream", "Stream", "Struct", "Tape",
     "array", "array1d",
     "array2d", "array3d", "array4d", "clone", "context", "copy", "default_backend_for", "empty",
-    "empty_like", "from_numpy", "full", "full_like", "get_cuda_device_count",
+    "empty_like", "from_numpy", "from_ptr", "full", "full_like", "get_cuda_device_count",
     "get_cuda_devices", "get_device", "get_event_elapsed_time", "get_preferred_device",
     "get_stream", "indexedarray", "indexedarray1d", "indexedarray2d", "indexedarray3d",
     "indexedarray4d", "init", "is_cuda_available", "launch", "ones", "ones_like", "record_event",

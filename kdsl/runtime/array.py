@@ -65,8 +65,32 @@ class array:
         pinned: bool = False,
         owner: bool = False,
         deleter: Any = None,
+        *,
+        strides: Any = None,
+        ptr: int | None = None,
+        capacity: int | None = None,
+        grad: array | None = None,
+        retain_grad: bool = False,
     ) -> None:
         t = None if _is_any(dtype) else resolve_dtype(dtype)
+        if ptr is not None or strides is not None:
+            if ptr is None or data is not None:
+                raise KdslError("array(): strides= goes with ptr= (and no data)")
+            if t is None or shape is None:
+                raise KdslError("array(ptr=...) needs a dtype and a shape")
+            dev = get_device(device)
+            buf = _from_ptr(builtins.int(ptr), t, normalize_shape(shape), strides, capacity, dev)
+            self._init(buf, t, dev, requires_grad)
+        else:
+            self._init_data(data, t, shape, device, requires_grad, copy, ndim, length)
+        if grad is not None:
+            self.grad = grad
+        self.retain_grad = builtins.bool(retain_grad)
+
+    def _init_data(
+        self, data: Any, t: T.Type | None, shape: Any, device: Any, requires_grad: bool,
+        copy: bool, ndim: int | None, length: int | None,
+    ) -> None:  # fmt: skip
         if isinstance(data, array):
             t = data._t if t is None else t
             data, src_dev = data._buf, data._device
@@ -104,6 +128,8 @@ class array:
         #: Keep ``.grad`` when a backward pass goes through a store into this array
         #: (by default the store consumes it, as in Warp; see docs/autodiff.md).
         self.retain_grad = False
+        #: Whether this is a transposed view (Warp's flag; the strides say the same).
+        self.is_transposed = False
         self.requires_grad = requires_grad
 
     @classmethod
@@ -119,6 +145,13 @@ class array:
         if self._t is None:
             raise TypeError("array(dtype=Any) is generic: kernels need a concrete dtype")
         return T.ArrayType(self._t, self._ndim)
+
+    @property
+    def __kdsl_generic__(self) -> tuple | None:
+        """``array(dtype=Any)`` annotates a generic parameter (see ``frontend.generic``)."""
+        if self._t is not None:
+            return None
+        return (lambda dtype: T.ArrayType(dtype, self._ndim)), self._ndim
 
     @property
     def dtype(self) -> Any:
@@ -174,7 +207,22 @@ class array:
 
     @grad.setter
     def grad(self, value: array | None) -> None:
-        self._grad = value
+        """Set the gradient array: None drops it (``requires_grad`` becomes False); an
+        array must match this one's dtype, shape, strides and device (Warp's rule)."""
+        if value is None:
+            self._grad, self._requires_grad = None, False
+            return
+        if not isinstance(value, array):
+            raise KdslError(f"array.grad must be a kdsl array or None, not {type(value).__name__}")
+        for what, want, got in (
+            ("dtype", self._t, value._t),
+            ("shape", self.shape, value.shape),
+            ("strides", self.strides, value.strides),
+            ("device", self._device, value._device),
+        ):
+            if want != got:
+                raise KdslError(f"the gradient array has {what} {got}, this array has {want}")
+        self._grad, self._requires_grad = value, True
 
     # --- data ----------------------------------------------------------------
     def numpy(self) -> np.ndarray:
@@ -239,7 +287,7 @@ class array:
         if isinstance(self._t, T.StructType):
             return [self.dtype.from_numpy(x) for x in flat]
         if not self._inner:
-            return list(flat)
+            return flat.tolist()  # Python numbers, as Warp's
         cls = self.dtype
         return [cls(x) for x in flat]
 
@@ -300,13 +348,23 @@ class array:
             record_copy(self, src, 0, 0, self.size)
         return self
 
-    def to(self, device: Any) -> array:
-        """This array on ``device`` (itself when it already lives there)."""
+    def to(self, device: Any, requires_grad: bool | None = None) -> array:
+        """This array on ``device``: itself when it already lives there, else a contiguous
+        copy (``kdsl.clone``, so differentiable on an active Tape)."""
         dev = get_device(device)
         if dev == self._device:
             return self
-        buf = mem.transfer(self._buf, self._device, dev)
-        return array._wrap(buf, self._t, dev, self._requires_grad)
+        from kdsl.runtime.alloc import clone
+
+        return clone(self, device=dev, requires_grad=requires_grad)
+
+    def contiguous(self) -> array:
+        """This array when it is contiguous, else a contiguous copy (``kdsl.clone``)."""
+        if self.is_contiguous:
+            return self
+        from kdsl.runtime.alloc import clone
+
+        return clone(self)
 
     def copy(self) -> array:
         """A new contiguous array on the same device with a copy of the data."""
@@ -314,18 +372,116 @@ class array:
             buf = mem.xp(self._device).array(self._buf, copy=True, order="C")
         return array._wrap(buf, self._t, self._device, self._requires_grad)
 
+    def _view(self, buf: Any, t: T.Type, grad: array | None) -> array:
+        # A view over ``buf`` whose gradient is ``grad`` (the same view of self.grad).
+        out = array._wrap(buf, t, self._device)
+        if grad is not None:
+            out._grad, out._requires_grad = grad, True
+        out.retain_grad = self.retain_grad
+        return out
+
     def reshape(self, shape: Any) -> array:
-        """A view (or copy, when strides forbid a view) with a new shape."""
-        dims = normalize_shape(shape)
-        if -1 not in dims and int(np.prod(dims)) != self.size:
-            raise KdslError(f"cannot reshape an array of shape {self.shape} to {dims}")
+        """A view with a new shape (one dim may be -1); the array must be contiguous.
+
+        As in Warp, a strided array (a transpose, a slice with steps) is refused:
+        ``a.contiguous().reshape(...)`` copies first.
+        """
+        if not self.is_contiguous:
+            raise KdslError(
+                f"cannot reshape a non-contiguous array (shape {self.shape}, strides "
+                f"{self.strides}) as a view; call .contiguous() first"
+            )
+        dims_t = _reshape_dims(shape, self.shape, self.size)
         with mem.scope(self._device):
-            buf = self._buf.reshape(dims + self._inner)
-        return array._wrap(buf, self._t, self._device)
+            buf = self._buf.reshape(dims_t + self._inner)
+        grad = None if self._grad is None else self._grad.reshape(dims_t)
+        return self._view(buf, self._t, grad)
 
     def flatten(self) -> array:
-        """A 1-d view (or copy) of the elements."""
+        """A 1-d view of the elements (the array must be contiguous, as in Warp)."""
+        if self._ndim == 1:
+            return self
+        if not self.is_contiguous:
+            raise KdslError("cannot flatten a non-contiguous array as a view; call "
+                            ".contiguous() first")  # fmt: skip
         return self.reshape((self.size,))
+
+    def transpose(self, axes: Any = None) -> array:
+        """A view with the dims permuted by ``axes`` (reversed when None); no copy.
+
+        The result is strided (``is_contiguous`` False for a real permutation) and
+        launches as it is on every backend.
+        """
+        if self._ndim == 1 and axes is None:
+            return self
+        order = tuple(range(self._ndim))[::-1] if axes is None else tuple(axes)
+        if sorted(order) != list(range(self._ndim)) or not all(
+            isinstance(a, builtins.int | np.integer) and not isinstance(a, builtins.bool)
+            for a in order
+        ):
+            raise KdslError(
+                f"transpose(): axes must be a permutation of 0..{self._ndim - 1}, got {axes!r}"
+            )
+        order = tuple(builtins.int(a) for a in order)
+        full = order + tuple(range(self._ndim, self._buf.ndim))
+        buf = self._buf.transpose(full)
+        grad = None if self._grad is None else self._grad.transpose(order)
+        out = self._view(buf, self._t, grad)
+        out.is_transposed = self.is_transposed != (order != tuple(range(self._ndim)))
+        return out
+
+    def view(self, dtype: Any) -> array:
+        """The same memory seen as ``dtype`` (no copy), with Warp's size rules.
+
+        A dtype of the same byte size keeps the shape and strides (``int32`` as
+        ``uint32``, ``vec4`` as ``quat``, ``vec4ub`` as ``uint32``); a vector or
+        matrix seen as its scalar type gains its component dims (``vec3`` (n,) to
+        float (n, 3)); scalars seen as a vector or matrix lose their trailing dims,
+        which must match its shape and be contiguous.
+        """
+        t = resolve_dtype(dtype)
+        if self._t is None:
+            raise KdslError("view(): a generic array (dtype=Any) has no memory to view")
+        src_size, dst_size = _type_bytes(self._t), _type_bytes(t)
+        outer, outer_strides = self.shape, self.strides
+        if src_size == dst_size:
+            shape, strides = outer + inner_shape(t), outer_strides + _inner_strides(t)
+        elif isinstance(t, T.ScalarType) and isinstance(self._t, T.VectorType | T.MatrixType):
+            if _type_bytes(T.elem_type(self._t)) != dst_size:
+                raise KdslError(
+                    f"view(): cannot view {self._t} as {t}: its components have "
+                    f"{_type_bytes(T.elem_type(self._t))} bytes, {t} has {dst_size}"
+                )
+            if self._ndim + len(self._inner) > 4:
+                raise KdslError(f"view(): {self._t} as {t} would give more than 4 dimensions")
+            shape, strides = self._buf.shape, self._buf.strides
+        elif isinstance(self._t, T.ScalarType) and isinstance(t, T.VectorType | T.MatrixType):
+            inner = inner_shape(t)
+            if _type_bytes(T.elem_type(t)) != src_size:
+                raise KdslError(
+                    f"view(): cannot view {self._t} as {t}: its components have "
+                    f"{_type_bytes(T.elem_type(t))} bytes, {self._t} has {src_size}"
+                )
+            k = len(inner)
+            if self._ndim < k or outer[self._ndim - k :] != inner:
+                raise KdslError(
+                    f"view(): an array of shape {outer} cannot be viewed as {t}: its last "
+                    f"dims must be {inner}"
+                )
+            if outer_strides[self._ndim - k :] != _inner_strides(t):
+                raise KdslError(
+                    f"view(): the last dims of an array with strides {outer_strides} are not "
+                    f"contiguous, as {t} needs"
+                )
+            shape = (outer[: self._ndim - k] or (1,)) + inner
+            strides = (outer_strides[: self._ndim - k] or (dst_size,)) + _inner_strides(t)
+        else:
+            raise KdslError(
+                f"view(): cannot view {self._t} ({src_size} bytes) as {t} ({dst_size} bytes)"
+            )
+        buf = _restride(self._buf, self._device, np_dtype(t), shape, strides)
+        grad = None if self._grad is None else self._grad.view(t)
+        return self._view(buf, t, grad)
 
     # --- indexing ------------------------------------------------------------
     def _key(self, key: Any) -> tuple:
@@ -357,7 +513,8 @@ class array:
             if not self._inner:
                 return view[()]
             return self.dtype(view)
-        return array._wrap(view, self._t, self._device)
+        grad = None if self._grad is None else self._grad[key]
+        return self._view(view, self._t, grad)
 
     def _update_records(self, key: Any, value: Any) -> array:
         # CuPy copies structured buffers but cannot assign into them: update on the host.
@@ -391,8 +548,10 @@ def _subclass(ndim: int) -> type:
         kwargs["ndim"] = ndim
         array.__init__(self, *args, **kwargs)
 
-    doc = (f"A {ndim}-d ``array``: ``array{ndim}d[float]`` (or ``array{ndim}d(dtype=float)``) "
-           "annotates a kernel parameter.")
+    doc = (
+        f"A {ndim}-d ``array``: ``array{ndim}d[float]`` (or ``array{ndim}d(dtype=float)``) "
+        "annotates a kernel parameter."
+    )
     return type(f"array{ndim}d", (array,),
                 {"__init__": __init__, "__doc__": doc, "_fixed_ndim": ndim})  # fmt: skip
 
@@ -451,3 +610,103 @@ def _from_data(
     if not 1 <= outer <= 4:
         raise KdslError(f"arrays have 1 to 4 dimensions; the data gives {outer}")
     return buf, t
+
+
+def _from_ptr(
+    ptr: int, t: T.Type, dims: tuple[int, ...], strides: Any, capacity: Any, dev: Device
+) -> Any:
+    """A buffer over the memory at address ``ptr`` (not owned: the caller keeps it alive)."""
+    dtype, inner = np_dtype(t), inner_shape(t)
+    size = _type_bytes(t)
+    if strides is None:
+        outer = tuple(int(size * np.prod(dims[k + 1 :], dtype=np.int64)) for k in range(len(dims)))
+    else:
+        outer = tuple(builtins.int(x) for x in strides)
+        if len(outer) != len(dims):
+            raise KdslError(f"array(ptr=...): {len(outer)} strides for {len(dims)} dimensions")
+    full_shape, full_strides = dims + inner, outer + _inner_strides(t)
+    extent = 0 if 0 in dims else size + sum((d - 1) * abs(s) for d, s in zip(dims, outer))
+    if capacity is not None and extent > builtins.int(capacity):
+        raise KdslError(
+            f"array(ptr=...): shape {dims} needs {extent} bytes, capacity is {capacity}"
+        )
+    if ptr == 0 and extent:
+        raise KdslError("array(ptr=0) is a null pointer: only an empty shape may use it")
+    if dev.is_cuda:
+        cp = mem.cupy()
+        memory = cp.cuda.UnownedMemory(ptr, extent, None, dev.ordinal)
+        return cp.ndarray(full_shape, dtype, cp.cuda.MemoryPointer(memory, 0), full_strides)
+    face = {"data": (ptr, False), "shape": full_shape, "strides": full_strides,
+            "typestr": dtype.str, "descr": dtype.descr, "version": 3}  # fmt: skip
+    return np.asarray(_Interface(face, None))
+
+
+def from_ptr(
+    ptr: int, length: int, dtype: Any = None, shape: Any = None, device: Any = None
+) -> array:
+    """Warp's deprecated ``from_ptr``: ``ptr`` is the address of a pointer to the data.
+
+    As in Warp, the data address is read from ``ptr`` (a ``size_t`` there), and the
+    array of ``length`` elements (``shape`` when given) does not own the memory.
+    New code writes ``kdsl.array(ptr=address, dtype=..., shape=..., device=...)``.
+    """
+    import ctypes
+
+    if dtype is None:
+        raise KdslError("from_ptr() needs a dtype")
+    addr = 0 if ptr == 0 else ctypes.cast(ptr, ctypes.POINTER(ctypes.c_size_t)).contents.value
+    dims = shape if shape is not None else length
+    t = resolve_dtype(dtype)
+    return array(ptr=addr, dtype=dtype, shape=dims, device=device,
+                 capacity=builtins.int(length) * _type_bytes(t))  # fmt: skip
+
+
+def _reshape_dims(shape: Any, old: tuple[int, ...], size: int) -> tuple[int, ...]:
+    """``shape`` for ``reshape()``, its one -1 (if any) worked out from ``size``."""
+    if isinstance(shape, builtins.int | np.integer) and not isinstance(shape, builtins.bool):
+        shape = (shape,)
+    try:
+        dims = list(shape)
+    except TypeError:
+        raise KdslError(
+            f"reshape(): shape must be an int or a tuple of ints, got {shape!r}"
+        ) from None
+    if dims.count(-1) > 1:
+        raise KdslError(f"reshape(): only one dimension may be -1, got {tuple(dims)}")
+    if -1 in dims:
+        at = dims.index(-1)
+        dims[at] = 0
+        known = int(np.prod([d for k, d in enumerate(dims) if k != at], dtype=np.int64))
+        if known == 0 or size % known:
+            raise KdslError(f"cannot reshape an array of shape {old} to {tuple(shape)}")
+        dims[at] = size // known
+    out = normalize_shape(dims)
+    if int(np.prod(out, dtype=np.int64)) != size:
+        raise KdslError(f"cannot reshape an array of shape {old} (size {size}) to {out}")
+    return out
+
+
+def _type_bytes(t: T.Type) -> int:
+    return int(np_dtype(t).itemsize * np.prod(inner_shape(t), dtype=np.int64))
+
+
+def _inner_strides(t: T.Type) -> tuple[int, ...]:
+    """Byte strides of a contiguous element's component dims (() for scalars and structs)."""
+    inner, item = inner_shape(t), np_dtype(t).itemsize
+    return tuple(int(item * np.prod(inner[k + 1 :], dtype=np.int64)) for k in range(len(inner)))
+
+
+class _Interface:
+    # An __array_interface__ over another buffer's memory, keeping that buffer alive.
+    def __init__(self, face: dict, owner: Any) -> None:
+        self.__array_interface__ = face
+        self.owner = owner
+
+
+def _restride(buf: Any, dev: Device, dtype: np.dtype, shape: tuple, strides: tuple) -> Any:
+    """``buf``'s memory, from its first element, as ``shape``/``strides`` of ``dtype``."""
+    if dev.is_cuda:
+        return mem.cupy().ndarray(shape, dtype, memptr=buf.data, strides=strides)
+    face = dict(buf.__array_interface__)
+    face.update(shape=tuple(shape), strides=tuple(strides), typestr=dtype.str, descr=dtype.descr)
+    return np.asarray(_Interface(face, buf))

@@ -16,6 +16,8 @@ import numpy as np
 from kdsl.errors import KdslError
 from kdsl.frontend.structs import indexed_type
 from kdsl.ir import types as T
+from kdsl.runtime import cuda_memory as mem
+from kdsl.runtime.alloc import zeros
 from kdsl.runtime.annotation import ArrayAnnotation, subscript
 from kdsl.runtime.array import array
 from kdsl.runtime.dtypes import resolve_dtype
@@ -90,13 +92,78 @@ class indexedarray:
             return self.shape[int(name[5:])]
         raise AttributeError(name)
 
+    #: An indexed array is never contiguous (Warp's attribute).
+    is_contiguous = False
+
+    def _require_data(self, what: str) -> array:
+        if self.data is None:
+            raise KdslError(f"indexedarray.{what}(): this indexedarray is an annotation (no data)")
+        return self.data
+
+    def _key(self) -> tuple:
+        # Per-dim index vectors on the data's device, combined as an outer product.
+        data = self._require_data("index")
+        xp = mem.xp(data.device)
+        with mem.scope(data.device):
+            vecs = [xp.arange(n, dtype=np.int64) if ix is None else ix._buf.astype(np.int64)
+                    for n, ix in zip(data.shape, self.indices)]  # fmt: skip
+            return xp.ix_(*vecs)
+
+    def contiguous(self) -> array:
+        """The viewed elements gathered into a new contiguous array on the data's device."""
+        data = self._require_data("contiguous")
+        if 0 in self.shape:
+            return zeros(self.shape, dtype=data.dtype, device=data.device)
+        with mem.scope(data.device):
+            buf = data._buf[self._key()]
+        return array._wrap(buf, data._t, data.device)
+
     def numpy(self) -> np.ndarray:
         """The viewed elements gathered into a new NumPy array."""
-        out = self.data.numpy()
-        for k, ix in enumerate(self.indices):
-            if ix is not None:
-                out = np.take(out, ix.numpy(), axis=k)
-        return out
+        return self.contiguous().numpy()
+
+    def list(self) -> list:
+        """The viewed elements as a flat Python list (as ``array.list``)."""
+        return self.contiguous().list()
+
+    def to(self, device: Any) -> array:
+        """The viewed elements as a contiguous array on ``device`` (Warp's ``to``)."""
+        return self.contiguous().to(device)
+
+    def assign(self, src: Any) -> indexedarray:
+        """Write ``src`` (an array, NumPy array or list of this shape) into the viewed elements."""
+        data = self._require_data("assign")
+        if isinstance(src, indexedarray):
+            src = src.contiguous()
+        value = src if isinstance(src, array) else array(src, dtype=data.dtype)
+        value = value.to(data.device)
+        if value.shape != self.shape:
+            raise KdslError(
+                f"indexedarray.assign(): a {value.shape} array does not fit shape {self.shape}"
+            )
+        with mem.scope(data.device):
+            data._buf[self._key()] = value._buf
+        return self
+
+    def fill_(self, value: Any) -> indexedarray:
+        """Set every viewed element to ``value`` (a scalar, or a vector for vector dtypes)."""
+        data = self._require_data("fill_")
+        if 0 in self.shape:
+            return self
+        part = self.contiguous().fill_(value)
+        with mem.scope(data.device):
+            data._buf[self._key()] = part._buf
+        return self
+
+    def zero_(self) -> indexedarray:
+        """Set every viewed element to zero."""
+        return self.fill_(0)
+
+    def __len__(self) -> int:
+        return self.shape[0]
+
+    def __str__(self) -> str:
+        return str(self.numpy()) if self.data is not None else repr(self)
 
     def __repr__(self) -> str:
         return f"indexedarray(shape={self.shape}, dtype={self._t.fields[0][1].dtype})"
