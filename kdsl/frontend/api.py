@@ -12,14 +12,14 @@ from kdsl.frontend.constants import *  # noqa: F403
 from kdsl.frontend.constants import __all__ as _constant_names
 from kdsl.frontend.custom_grad import adjoint, func_grad, func_replay
 from kdsl.frontend.inout import inout
-from kdsl.frontend.kernel import Function, Kernel, func, kernel
+from kdsl.frontend.kernel import Function, Kernel, func, kernel, overload
 from kdsl.frontend.static import constant, static
 
 globals().update(BUILTINS)
 
 __all__ = [
     "Builtin", "Function", "Kernel", "adjoint", "constant", "func", "func_grad", "func_replay",
-    "inout", "kernel", "static",
+    "inout", "kernel", "overload", "static",
     *_constant_names,
     *sorted(BUILTINS),
 ]  # fmt: skip

@@ -10,11 +10,12 @@ from typing import TYPE_CHECKING, Any
 from kdsl.errors import KdslError, KdslSyntaxError, KdslTypeError
 from kdsl.frontend.analysis import always_returns, has_nontail_return
 from kdsl.frontend.control import RET
+from kdsl.frontend.generic import ANY, Generic, generic_of
 from kdsl.frontend.inout import InOut
 from kdsl.frontend.statements import StatementLowering
 from kdsl.frontend.values import describe, is_weak
 from kdsl.ir import Module, Operation, Value, new_func
-from kdsl.ir.types import BOOL, ScalarType, Type
+from kdsl.ir.types import BOOL, F32, I32, ScalarType, Type
 
 if TYPE_CHECKING:
     from kdsl.frontend.kernel import Function, Overload
@@ -64,9 +65,11 @@ class FunctionCompiler(StatementLowering):
         func.attrs["res_types"] = list(res) + [v.type for v in inout]
         return func
 
-    def call_user(self, fn: Function, args: list[Any], node: ast.Call) -> Any:
+    def call_user(
+        self, fn: Function, args: list[Any], node: ast.Call, kwargs: dict | None = None
+    ) -> Any:
         """A call of a ``@kdsl.func``: pick the overload, compile it once, ``func.call``."""
-        overload, values = self.pick_overload(fn, args, node)
+        overload, values = self.pick_overload(fn, args, node, kwargs or {})
         callee = self.unit.compile_func(overload, self, node)
         res = callee.attrs["res_types"]
         op = self.b.create("func.call", values, list(res), {"callee": callee.attrs["sym_name"]},
@@ -91,50 +94,124 @@ class FunctionCompiler(StatementLowering):
             if isinstance(arg, ast.Name) and self.vars.get(arg.id) is args[k]:
                 self.bind_raw(arg.id, new)
 
-    def pick_overload(self, fn: Function, args: list[Any], node: ast.Call):
-        for a in args:
+    def pick_overload(self, fn: Function, args: list[Any], node: ast.Call, kwargs: dict):
+        """The overload a call runs and its argument values (Warp's rules).
+
+        Keywords and default values fill in each overload's parameter list first.
+        Overloads whose parameter types are all concrete win over generic ones (``Any``,
+        ``array(dtype=Any)``); among each, an exact match wins over one that converts
+        a literal. A generic overload is instantiated for the arguments' types.
+        """
+        for a in [*args, *kwargs.values()]:
             if not (isinstance(a, Value) or is_weak(a)):
                 raise self.error(KdslTypeError, f"cannot pass {describe(a)} to {fn.name}()", node)
-        candidates = []
+        candidates, reasons = [], []
         for ov in fn.overloads:
-            types = ov.arg_types()
-            if len(types) != len(args):
+            bound = _bind(ov, args, kwargs)
+            if isinstance(bound, str):
+                reasons.append(bound)
                 continue
-            score = _match(args, types)
+            bound = [self.default_value(ov, a, node) if _is_default(a) else a for a in bound]
+            types = ov.arg_types()
+            score = _match(bound, types)
             if score is not None:
-                candidates.append((score, ov))
+                candidates.append((score, len(candidates), ov, bound))
         if not candidates:
-            if len(fn.overloads) == 1:
-                want = fn.overloads[0].arg_types()
-                if len(want) != len(args):
-                    raise self.error(KdslTypeError, f"{fn.name}() takes {len(want)} arguments, "
-                                     f"got {len(args)}", node)  # fmt: skip
+            if len(fn.overloads) == 1 and reasons:
+                raise self.error(KdslTypeError, f"{fn.name}(): {reasons[0]}", node)
             got = ", ".join(str(a.type) if isinstance(a, Value) else repr(a) for a in args)
+            got += "".join(f", {k}=" + (str(v.type) if isinstance(v, Value) else repr(v))
+                           for k, v in kwargs.items())  # fmt: skip
             sigs = "; ".join("(" + ", ".join(map(str, ov.arg_types())) + ")"
                              for ov in fn.overloads)  # fmt: skip
             raise self.error(
                 KdslTypeError, f"no overload of {fn.name}() takes ({got}); it takes: {sigs}", node
             )
-        candidates.sort(key=lambda c: c[0])
-        ov = candidates[0][1]
-        values = [self.value(a, node, want=t) for a, t in zip(args, ov.arg_types())]
+        candidates.sort(key=lambda c: c[:2])
+        _, _, ov, bound = candidates[0]
+        types = ov.arg_types()
+        if any(isinstance(t, Generic) for t in types):
+            concrete = [_arg_type(a) if isinstance(t, Generic) else t for a, t in zip(bound, types)]
+            ov = ov.instance(concrete)
+            types = concrete
+        values = [self.value(a, node, want=t) for a, t in zip(bound, types)]
         return ov, values
 
+    def default_value(self, ov: Any, d: _Default, node: ast.AST) -> Any:
+        v = self.python_value(d.value, node)
+        if not (isinstance(v, Value) or is_weak(v)):
+            raise self.error(KdslTypeError, f"{ov.name}(): the default value of '{d.name}' "
+                             f"is {describe(d.value)}, not a number or vector", node)  # fmt: skip
+        return v
 
-def _match(args: list[Any], types: list[Type]) -> int | None:
-    """How well ``args`` fit ``types``: 0 exact, more for weak literals; None if not."""
-    score = 0
+
+class _Default:
+    """A parameter's default value, used where a call leaves it out."""
+
+    __slots__ = ("name", "value")
+
+    def __init__(self, name: str, value: Any) -> None:
+        self.name = name
+        self.value = value
+
+
+def _is_default(a: Any) -> bool:
+    return isinstance(a, _Default)
+
+
+def _bind(ov: Any, args: list[Any], kwargs: dict) -> list[Any] | str:
+    """``args`` and ``kwargs`` in ``ov``'s parameter order, defaults filled in; or why not."""
+    params = [a.arg for a in ov.src.tree.args.args]
+    defaults = ov.fn.__defaults__ or ()
+    if len(args) > len(params):
+        return f"takes {len(params)} arguments, got {len(args)}"
+    out: list[Any] = list(args)
+    for k, name in enumerate(params[len(args) :], len(args)):
+        if name in kwargs:
+            out.append(kwargs[name])
+            continue
+        d = k - (len(params) - len(defaults))
+        if d < 0:
+            return f"missing argument '{name}' (it takes {', '.join(params)})"
+        out.append(_Default(name, defaults[d]))
+    for name in kwargs:
+        if name not in params:
+            return f"has no parameter '{name}' (it takes {', '.join(params)})"
+        if params.index(name) < len(args):
+            return f"got two values for '{name}'"
+    return out
+
+
+def _arg_type(a: Any) -> Type:
+    """The type a generic parameter takes for argument ``a`` (a literal: Warp's defaults)."""
+    if isinstance(a, Value):
+        return a.type
+    return BOOL if isinstance(a, bool) else I32 if isinstance(a, int) else F32
+
+
+def _match(args: list[Any], types: list[Any]) -> tuple[int, int] | None:
+    """How well ``args`` fit ``types``, best first; None if they do not.
+
+    (literals converted from their own type, generic parameters): as in Warp, an
+    exact match wins, then a generic instance; kdsl also converts a literal (``7``
+    to a float parameter) where nothing else fits.
+    """
+    generic = score = 0
     for a, t in zip(args, types):
-        if isinstance(a, Value):
+        if isinstance(t, Generic):
+            generic += 1
+            if not (t is ANY or (isinstance(a, Value) and t.matches(a.type))):
+                return None
+        elif isinstance(a, Value):
             if a.type != t:
                 return None
         elif isinstance(t, ScalarType):
             if isinstance(a, bool) != t.is_bool or (isinstance(a, float) and not t.is_float):
                 return None
-            score += 1
+            score += _arg_type(a) != t
         else:
             return None
-    return score
+    return score, generic
 
 
 def _returns_value(fdef: ast.FunctionDef) -> bool:
@@ -143,10 +220,13 @@ def _returns_value(fdef: ast.FunctionDef) -> bool:
 
 def _check_signature(em: FunctionCompiler, fdef: ast.FunctionDef) -> None:
     a = fdef.args
-    extra = a.vararg or a.kwarg or a.kwonlyargs or a.posonlyargs or a.defaults
+    extra = a.vararg or a.kwarg or a.kwonlyargs or a.posonlyargs
     if extra:
         raise em.error(KdslSyntaxError, "kernel and function parameters must be plain "
-                       "annotated names (no *args, **kwargs, defaults)", fdef)  # fmt: skip
+                       "annotated names (no *args, **kwargs)", fdef)  # fmt: skip
+    if a.defaults and em.kind == "kernel":
+        raise em.error(KdslSyntaxError, "kernel parameters cannot have default values (launch "
+                       "passes every argument); a @kdsl.func's can", a.defaults[0])  # fmt: skip
     for node in ast.walk(fdef):
         if node is not fdef and isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef |
                                            ast.ClassDef | ast.Lambda):  # fmt: skip
@@ -199,6 +279,9 @@ def resolve_annotation(target: Any, name: str, ann: Any, node: ast.AST | None) -
     ann = evaluate_annotation(target, name, ann, node)
     if isinstance(ann, InOut):
         ann = ann.type
+    generic = generic_of(ann)
+    if generic is not None:
+        return generic  # type: ignore[return-value]  # filled in per call or launch
     try:
         return type_of(ann)
     except (TypeError, KdslError):

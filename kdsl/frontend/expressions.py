@@ -268,6 +268,8 @@ class ExpressionLowering(Emitter):
             else getattr(target, "__kdsl_keywords__", ())
         )  # struct fields
         for kw in node.keywords:
+            if kw.arg is not None and hasattr(target, "__kdsl_overloads__"):
+                continue  # a @kdsl.func binds keywords to its parameters (pick_overload)
             if kw.arg is None or kw.arg not in allowed:
                 what = f"'{kw.arg}'" if kw.arg else "**kwargs"
                 takes = f"only {', '.join(allowed)} as" if allowed else "no"
@@ -304,7 +306,7 @@ class ExpressionLowering(Emitter):
         if isinstance(t, StructType):
             return structs.construct(self, t, args, kwargs or {}, node)
         if hasattr(fn, "__kdsl_overloads__"):
-            return self.call_user(fn, args, node)
+            return self.call_user(fn, args, node, kwargs)
         if fn is range:
             raise self.error(
                 KdslSyntaxError, "range() can only be the iterable of a for loop", node
@@ -367,13 +369,15 @@ class ExpressionLowering(Emitter):
             isinstance(v, int) and not isinstance(v, bool) for v in result
         ):
             return result  # only usable as the iterable of a for loop (unrolled)
+        if hasattr(result, "__kdsl_overloads__") or isinstance(result, Builtin):
+            return result  # a function picked at compile time, to be called
         ok = is_weak(result) or hasattr(result, "__kdsl_type__")
         ok = ok or (isinstance(result, np.generic) and result.dtype.kind in "biuf")
         if not ok:
             raise self.error(
                 KdslTypeError,
-                "static() must give a compile-time constant (a number, vector, type or "
-                f"range), got {describe(result)}",
+                "static() must give a compile-time constant (a number, vector, type, range "
+                f"or a @kdsl.func), got {describe(result)}",
                 node,
             )
         return self.python_value(result, node)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 import hashlib
 import inspect
 import weakref
@@ -9,7 +10,8 @@ from collections.abc import Callable
 from functools import cached_property
 from typing import Any
 
-from kdsl.errors import KdslError, full_tracebacks
+from kdsl.errors import KdslError, KdslTypeError, full_tracebacks
+from kdsl.frontend.generic import Generic, is_generic
 from kdsl.frontend.source import ParsedSource
 from kdsl.frontend.structs import register_structs
 from kdsl.ir import Module, verify_module
@@ -45,6 +47,52 @@ class CompileTarget:
             anns = self.fn.__annotations__
             self._arg_types = [resolve_annotation(self, a.arg, anns.get(a.arg), a) for a in args]
         return self._arg_types
+
+    @property
+    def is_generic(self) -> bool:
+        """True when a parameter is ``Any`` or an array of ``dtype=Any`` (see ``generic.py``)."""
+        g = self.__dict__.get("_generic")
+        if g is None:
+            g = self.__dict__["_generic"] = is_generic(
+                _trimmed(lambda: CompileTarget.arg_types(self))
+            )
+        return g
+
+    def instance(self, types: list[Type]) -> Any:
+        """This generic target with concrete parameter ``types``, made once per tuple.
+
+        Raises a located KdslTypeError when ``types`` do not fit the parameters.
+        """
+        types = list(types)
+        key = tuple(types)
+        cache = self.__dict__.setdefault("_instances", {})
+        inst = cache.get(key)
+        if inst is not None:
+            return inst
+        params = CompileTarget.arg_types(self)
+        names = [a.arg for a in self.src.tree.args.args]
+        if len(types) != len(params):
+            raise KdslTypeError(f"{self.name} takes {len(params)} parameters, got {len(types)} "
+                                "types", self.src.loc(self.src.tree), self.src.name)  # fmt: skip
+        for name, want, got in zip(names, params, types):
+            ok = want.matches(got) if isinstance(want, Generic) else want == got
+            if not ok:
+                raise KdslTypeError(
+                    f"{self.name}: parameter '{name}' is {want}, which a {got} does not fit",
+                    self.src.loc(self.src.tree), self.src.name,
+                )  # fmt: skip
+        inst = copy.copy(self)
+        for attr in ("_instances", "_kdsl_compiled", "_kdsl_plans", "_generic"):
+            inst.__dict__.pop(attr, None)
+        inst._arg_types = types
+        inst.key = f"{self.key}_{hashlib.sha1(repr(key).encode()).hexdigest()[:8]}"
+        inst.generic = self
+        cache[key] = inst
+        return inst
+
+    def instances(self) -> list[Any]:
+        """The instances made so far (declared with ``kdsl.overload`` or at calls/launches)."""
+        return list(self.__dict__.get("_instances", {}).values())
 
     def inout_params(self) -> tuple[int, ...]:
         """Indices of the parameters annotated ``inout(T)`` (see ``inout.py``)."""
@@ -103,6 +151,12 @@ class Kernel(CompileTarget):
     def _build(self) -> Module:
         from kdsl.frontend.compiler import FunctionCompiler, ModuleCompiler
 
+        if self.is_generic:
+            raise KdslTypeError(
+                f"kernel '{self.name}' is generic (it has Any parameters): launch it, which "
+                "compiles it for the arguments' types, or declare an instance with "
+                "kdsl.overload(kernel, [types...])", self.src.loc(self.src.tree), self.src.name,
+            )  # fmt: skip
         unit = ModuleCompiler(self.key)
         fc = FunctionCompiler(unit, self, "kernel")
         try:
@@ -213,6 +267,82 @@ def kernel(fn: Callable[..., Any] | None = None, **options: Any) -> Any:
     return Kernel(fn, **options)
 
 
+def overload(kernel: Any, arg_types: list[Any] | dict[str, Any] | None = None) -> Kernel:
+    """Declare the instance of a generic kernel for concrete types (Warp's ``wp.overload``).
+
+    ``kdsl.overload(k, [t0, t1, ...])`` gives every parameter's type;
+    ``kdsl.overload(k, {"name": t})`` the generic ones by name (the others keep their
+    declared types). As a decorator, ``@kdsl.overload`` on a stub ``def`` with the
+    kernel's name and concrete annotations declares that instance. Returns the
+    instance, a kernel that ``kdsl.launch`` runs like any other.
+    """
+    from kdsl.types import type_of
+
+    if not isinstance(kernel, Kernel):
+        if not inspect.isfunction(kernel):
+            raise KdslTypeError(f"kdsl.overload() takes a generic kernel, not {kernel!r}")
+        stub = kernel
+        found = [k for k in kernels_of_module(stub.__module__)
+                 if k.fn.__qualname__ == stub.__qualname__]  # fmt: skip
+        if not found:
+            raise KdslTypeError(f"@kdsl.overload: no kernel named '{stub.__name__}' in module "
+                                f"{stub.__module__} (define the generic kernel first)")  # fmt: skip
+        kernel, arg_types = found[-1], _stub_types(found[-1], stub)
+    if not kernel.is_generic:
+        raise KdslTypeError(f"kdsl.overload(): kernel '{kernel.name}' is not generic (it has no "
+                            "Any parameter); launch it as it is")  # fmt: skip
+    declared = CompileTarget.arg_types(kernel)
+    if isinstance(arg_types, dict):
+        types: list[Any] = list(declared)
+        for name, t in arg_types.items():
+            if name not in kernel.arg_names:
+                raise KdslTypeError(f"kdsl.overload(): kernel '{kernel.name}' has no parameter "
+                                    f"'{name}' (it has {', '.join(kernel.arg_names)})")  # fmt: skip
+            types[kernel.arg_names.index(name)] = t
+    elif isinstance(arg_types, list | tuple):
+        types = list(arg_types)
+    else:
+        raise KdslTypeError("kdsl.overload(kernel, arg_types): arg_types must be a list of "
+                            f"types or a dict of name: type, not {arg_types!r}")  # fmt: skip
+    concrete = []
+    for k, t in enumerate(types):
+        if isinstance(t, Generic | Type):
+            concrete.append(t)
+            continue
+        try:
+            concrete.append(type_of(t))
+        except (TypeError, KdslError):
+            name = kernel.arg_names[k] if k < len(kernel.arg_names) else str(k)
+            raise KdslTypeError(f"kdsl.overload(): the type of '{name}' for kernel "
+                                f"'{kernel.name}' is not a concrete kdsl type: {t!r}") from None  # fmt: skip
+    for name, t in zip(kernel.arg_names, concrete):
+        if isinstance(t, Generic):
+            raise KdslTypeError(f"kdsl.overload(): parameter '{name}' of kernel '{kernel.name}' "
+                                f"needs a concrete type (it is {t})")  # fmt: skip
+    return _trimmed(lambda: kernel.instance(concrete))
+
+
+def _stub_types(kernel: Kernel, stub: Callable[..., Any]) -> list[Any]:
+    names = list(inspect.signature(stub).parameters)
+    if names != kernel.arg_names:
+        raise KdslTypeError(f"@kdsl.overload of '{kernel.name}': the stub's parameters "
+                            f"({', '.join(names)}) differ from the kernel's "
+                            f"({', '.join(kernel.arg_names)})")  # fmt: skip
+    anns = dict(stub.__annotations__)
+    for n, a in anns.items():
+        if isinstance(a, str):  # from __future__ import annotations
+            try:
+                anns[n] = eval(a, stub.__globals__)
+            except Exception:
+                raise KdslTypeError(f"@kdsl.overload of '{kernel.name}': cannot resolve the "
+                                    f"annotation {a!r} of '{n}'") from None  # fmt: skip
+    missing = [n for n in names if n not in anns]
+    if missing:
+        raise KdslTypeError(f"@kdsl.overload of '{kernel.name}': annotate every parameter "
+                            f"(missing: {', '.join(missing)})")  # fmt: skip
+    return [anns[n] for n in names]
+
+
 def _trimmed(fn: Callable[[], Any]) -> Any:
     """Run ``fn``; a KdslError leaves without the compiler's internal frames."""
     if full_tracebacks():
@@ -224,4 +354,4 @@ def _trimmed(fn: Callable[[], Any]) -> Any:
     raise err.with_traceback(None) from None
 
 
-__all__ = ["Function", "Kernel", "Overload", "func", "kernel"]
+__all__ = ["Function", "Kernel", "Overload", "func", "kernel", "overload"]

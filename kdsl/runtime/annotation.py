@@ -37,6 +37,14 @@ class ArrayAnnotation:
             raise TypeError(f"{self!r} is generic: kernels need a concrete dtype")
         return self.family.annotation_type(self.dtype, self.ndim)
 
+    @property
+    def __kdsl_generic__(self) -> tuple | None:
+        """For ``dtype=Any``: how to make the type per element type (``frontend.generic``)."""
+        if self.dtype is not Any:
+            return None
+        family, ndim = self.family, self.ndim
+        return (lambda dtype: family.annotation_type(dtype, ndim)), ndim
+
     def __call__(self, *args: Any, **kwargs: Any) -> Any:
         """An array of this type: ``array[vec3](data)`` is ``array(data, dtype=vec3, ndim=1)``."""
         kwargs.setdefault("ndim", self.ndim)

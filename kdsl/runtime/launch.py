@@ -346,6 +346,51 @@ def _convert_one(kernel: Any, index: int, name: str, t: Any, value: Any, device:
         raise launch_error(_kernel_name(kernel), index, name, str(e)) from None
 
 
+def _value_type(v: Any) -> T.Type | None:
+    """The kernel type of a launch argument, inferred as Warp does; None if unknown."""
+    if type(v) in _PY_TYPES:
+        return _PY_TYPES[type(v)]
+    if isinstance(v, np.generic):
+        return T.scalar_from_numpy(v.dtype)
+    try:
+        t = getattr(v, "__kdsl_type__", None)  # arrays, indexed arrays, vectors, structs
+    except TypeError:  # an array of dtype=Any
+        return None
+    if isinstance(t, T.Type):
+        return t
+    if isinstance(v, np.ndarray) and v.dtype.kind in "biuf":
+        return T.ArrayType(T.scalar_from_numpy(v.dtype), v.ndim)
+    return None
+
+
+_PY_TYPES = {bool: T.BOOL, int: T.I32, float: T.F32}
+
+
+def instance_for(kernel: Any, args: Sequence[Any], n_in: int = -1, n_out: int = 0) -> Any:
+    """The instance of a generic kernel for the types of ``args`` (made and cached once)."""
+    names, params = list(kernel.arg_names), list(kernel.arg_types)
+    if len(args) != len(params):
+        given = f" ({n_in} inputs, {n_out} outputs)" if n_in >= 0 else ""
+        raise KdslLaunchError(
+            f"kernel '{_kernel_name(kernel)}' takes {len(params)} arguments "
+            f"({', '.join(names)}) but {len(args)} were given{given}"
+        )
+    types = []
+    for i, (name, t, v) in enumerate(zip(names, params, args)):
+        if isinstance(t, T.Type):
+            types.append(t)
+            continue
+        got = _value_type(v)
+        if got is None or not t.matches(got):
+            what = f"a {got}" if got is not None else type(v).__name__
+            raise launch_error(
+                _kernel_name(kernel), i, name,
+                f"the generic parameter is {t}; cannot instantiate it for {what}",
+            )  # fmt: skip
+        types.append(got)
+    return kernel.instance(types)
+
+
 def launch(
     kernel: Any,
     dim: Any,
@@ -386,6 +431,8 @@ def launch(
         else:
             dims = normalize_dim(dim, _kernel_name(kernel))
         args = [*inputs, *outputs] if outputs else inputs
+        if getattr(kernel, "is_generic", False):
+            kernel = instance_for(kernel, args, len(inputs), len(outputs))
         plan = launch_plan(kernel, device, backend)
         convs = plan.converters
         if len(args) != len(convs):
@@ -452,6 +499,11 @@ def _launch_adjoint(
         raise KdslLaunchError(
             f"kernel '{name}': record_cmd=True is not supported with adjoint=True"
         )
+    if getattr(kernel, "is_generic", False):
+        try:
+            kernel = instance_for(kernel, [*inputs, *outputs], len(inputs), len(outputs))
+        except KdslLaunchError as e:
+            raise locate_launch_error(e, kernel) from None
     adj = _adjoint_list(adj_inputs, inputs, "inputs", name)
     adj += _adjoint_list(adj_outputs, outputs, "outputs", name)
     from kdsl.runtime.adjoint import launch_adjoint
