@@ -123,23 +123,24 @@ class Module:
     def load(self, device: Any = None, block_dim: int | None = None) -> Module:
         """Compile every kernel of this module for ``device`` (the default device when None).
 
-        Generic kernels (``Any`` parameters) compile per argument types at launch and
-        are skipped. ``block_dim`` is accepted for Warp's signature; kdsl picks the
+        A generic kernel (``Any`` parameters) compiles the instances declared with
+        ``kdsl.overload`` (or made by earlier launches); the rest compile per argument
+        types at launch. ``block_dim`` is accepted for Warp's signature; kdsl picks the
         CUDA block size per launch.
         """
         from kdsl.runtime.launch import launch_plan
 
         dev = get_device(device)
         for k in self.kernels:
-            if getattr(k, "is_generic", False):
-                continue
-            launch_plan(k, dev, None)
+            for inst in k.instances() if k.is_generic else [k]:
+                launch_plan(inst, dev, None)
         return self
 
     def unload(self) -> None:
         """Drop every compiled kernel of this module held in this process."""
         for k in self.kernels:
-            forget_compiled(k)
+            for inst in [k, *k.instances()]:
+                forget_compiled(inst)
 
     def __repr__(self) -> str:
         return f"<kdsl.Module {self.name!r} ({len(self.kernels)} kernels)>"
@@ -299,7 +300,8 @@ def clear_kernel_cache() -> None:
     MEMORY.clear()
     for name in modules_with_kernels():
         for k in kernels_of_module(name):
-            forget_compiled(k)
+            for inst in [k, *k.instances()]:
+                forget_compiled(inst)
     config_touch()
 
 

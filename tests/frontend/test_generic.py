@@ -312,3 +312,16 @@ def test_generic_kernel_gradients_on_a_tape(backend):
         wp.launch(square, 2, [x, y], backend=backend)
     tape.backward(grads={y: wp.array(np.ones(2, np.float32))})
     np.testing.assert_allclose(x.grad.numpy(), [2.0, 6.0])
+
+
+def test_module_load_compiles_declared_instances():
+    @wp.kernel
+    def negate_all(x: wp.array(dtype=Any)):
+        i = wp.tid()
+        x[i] = -x[i]
+
+    inst = wp.overload(negate_all, [wp.array(dtype=wp.float64)])
+    wp.get_module(__name__).load("cpu")
+    assert getattr(inst, "_kdsl_plans", None)  # compiled ahead of the first launch
+    wp.get_module(__name__).unload()
+    assert not hasattr(inst, "_kdsl_plans")
