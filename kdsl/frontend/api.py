@@ -11,6 +11,7 @@ from kdsl.frontend.builtins_base import Builtin
 from kdsl.frontend.constants import *  # noqa: F403
 from kdsl.frontend.constants import __all__ as _constant_names
 from kdsl.frontend.custom_grad import adjoint, func_grad, func_replay
+from kdsl.frontend.generic import Float, Int
 from kdsl.frontend.inout import inout
 from kdsl.frontend.kernel import Function, Kernel, func, kernel, overload
 from kdsl.frontend.static import constant, static
@@ -18,7 +19,7 @@ from kdsl.frontend.static import constant, static
 globals().update(BUILTINS)
 
 __all__ = [
-    "Builtin", "Function", "Kernel", "adjoint", "constant", "func", "func_grad", "func_replay",
+    "Builtin", "Float", "Function", "Int", "Kernel", "adjoint", "constant", "func", "func_grad", "func_replay",
     "inout", "kernel", "overload", "static",
     *_constant_names,
     *sorted(BUILTINS),

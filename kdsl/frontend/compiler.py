@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING, Any
 from kdsl.errors import KdslError, KdslSyntaxError, KdslTypeError
 from kdsl.frontend.analysis import always_returns, has_nontail_return
 from kdsl.frontend.control import RET
-from kdsl.frontend.generic import ANY, Generic, generic_of
+from kdsl.frontend.generic import Generic, generic_of
 from kdsl.frontend.inout import InOut
 from kdsl.frontend.statements import StatementLowering
 from kdsl.frontend.values import describe, is_weak
@@ -200,7 +200,7 @@ def _match(args: list[Any], types: list[Any]) -> tuple[int, int] | None:
     for a, t in zip(args, types):
         if isinstance(t, Generic):
             generic += 1
-            if not (t is ANY or (isinstance(a, Value) and t.matches(a.type))):
+            if not t.matches(_arg_type(a)):
                 return None
         elif isinstance(a, Value):
             if a.type != t:

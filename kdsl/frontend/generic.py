@@ -16,25 +16,32 @@ from __future__ import annotations
 
 import typing
 from collections.abc import Callable
-from typing import Any
+from typing import Any, TypeVar
 
 from kdsl.frontend.structs import is_indexed
-from kdsl.ir.types import F32, ArrayType, Type
+from kdsl.ir.types import F32, ArrayType, ScalarType, Type
+from kdsl.types import Scalar
 
 
 class Generic:
     """A parameter type filled in per call or launch: any value, or an array of any dtype."""
 
-    def __init__(self, label: str, make: Callable[[Type], Type] | None = None) -> None:
+    def __init__(
+        self,
+        label: str,
+        make: Callable[[Type], Type] | None = None,
+        accept: Callable[[Type], bool] | None = None,
+    ) -> None:
         self.label = label
         self.make = make
+        self.accept = accept
 
     def matches(self, t: Type) -> bool:
         """Whether an argument of type ``t`` fits this parameter."""
-        if self.make is None:
-            return True
-        elem = element_type(t)
-        return elem is not None and self.make(elem) == t
+        if self.make is not None:
+            elem = element_type(t)
+            return elem is not None and self.make(elem) == t
+        return self.accept is None or self.accept(t)
 
     def __str__(self) -> str:
         return self.label
@@ -44,6 +51,22 @@ class Generic:
 
 #: ``typing.Any`` as a parameter type: any value type.
 ANY = Generic("Any")
+
+#: Warp's generic scalar annotations: ``wp.Float`` (any float type), ``wp.Int`` (any
+#: integer type) and ``wp.Scalar`` (any number type), as in ``def f(x: wp.Float)``.
+Float = TypeVar("Float")
+Int = TypeVar("Int")
+
+
+def _is_number(t: Type, kinds: str) -> bool:
+    return isinstance(t, ScalarType) and t.kind in kinds.split()
+
+
+_SCALAR_GENERICS = {
+    Float: Generic("Float", accept=lambda t: _is_number(t, "float")),
+    Int: Generic("Int", accept=lambda t: _is_number(t, "int uint")),
+    Scalar: Generic("Scalar", accept=lambda t: _is_number(t, "float int uint")),
+}
 
 
 def element_type(t: Type) -> Type | None:
@@ -59,6 +82,8 @@ def generic_of(ann: Any) -> Generic | None:
     """The ``Generic`` an annotation names, or None for a concrete (or invalid) one."""
     if ann is typing.Any:
         return ANY
+    if ann in _SCALAR_GENERICS:
+        return _SCALAR_GENERICS[ann]
     spec = getattr(ann, "__kdsl_generic__", None)
     if spec is None:
         return None

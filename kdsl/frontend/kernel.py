@@ -94,6 +94,10 @@ class CompileTarget:
         """The instances made so far (declared with ``kdsl.overload`` or at calls/launches)."""
         return list(self.__dict__.get("_instances", {}).values())
 
+    def declared_instances(self) -> list[Any]:
+        """The instances declared with ``kdsl.overload``."""
+        return [i for i in self.instances() if i.__dict__.get("declared")]
+
     def inout_params(self) -> tuple[int, ...]:
         """Indices of the parameters annotated ``inout(T)`` (see ``inout.py``)."""
         if not hasattr(self, "_inout"):
@@ -319,7 +323,9 @@ def overload(kernel: Any, arg_types: list[Any] | dict[str, Any] | None = None) -
         if isinstance(t, Generic):
             raise KdslTypeError(f"kdsl.overload(): parameter '{name}' of kernel '{kernel.name}' "
                                 f"needs a concrete type (it is {t})")  # fmt: skip
-    return _trimmed(lambda: kernel.instance(concrete))
+    inst = _trimmed(lambda: kernel.instance(concrete))
+    inst.declared = True
+    return inst
 
 
 def _stub_types(kernel: Kernel, stub: Callable[..., Any]) -> list[Any]:

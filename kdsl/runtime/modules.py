@@ -124,15 +124,14 @@ class Module:
         """Compile every kernel of this module for ``device`` (the default device when None).
 
         A generic kernel (``Any`` parameters) compiles the instances declared with
-        ``kdsl.overload`` (or made by earlier launches); the rest compile per argument
-        types at launch. ``block_dim`` is accepted for Warp's signature; kdsl picks the
+        ``kdsl.overload``; the others compile per argument types at launch. ``block_dim`` is accepted for Warp's signature; kdsl picks the
         CUDA block size per launch.
         """
         from kdsl.runtime.launch import launch_plan
 
         dev = get_device(device)
         for k in self.kernels:
-            for inst in k.instances() if k.is_generic else [k]:
+            for inst in k.declared_instances() if k.is_generic else [k]:
                 launch_plan(inst, dev, None)
         return self
 

@@ -315,13 +315,51 @@ def test_generic_kernel_gradients_on_a_tape(backend):
 
 
 def test_module_load_compiles_declared_instances():
-    @wp.kernel
     def negate_all(x: wp.array(dtype=Any)):
         i = wp.tid()
         x[i] = -x[i]
 
-    inst = wp.overload(negate_all, [wp.array(dtype=wp.float64)])
-    wp.get_module(__name__).load("cpu")
+    # A module of its own: this file's other kernels include deliberately broken ones.
+    negate_all.__module__ = "kdsl_test_generic_load"
+    generic = wp.kernel(negate_all)
+    inst = wp.overload(generic, [wp.array(dtype=wp.float64)])
+    module = wp.get_module("kdsl_test_generic_load")
+    module.load("cpu")
     assert getattr(inst, "_kdsl_plans", None)  # compiled ahead of the first launch
-    wp.get_module(__name__).unload()
+    module.unload()
     assert not hasattr(inst, "_kdsl_plans")
+
+
+@wp.func
+def twice_float(x: wp.Float):
+    return x + x
+
+
+@wp.func
+def bump(x: wp.Int):
+    return x + 1
+
+
+@wp.func
+def sq(x: wp.types.Scalar):
+    return x * x
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_warp_generic_scalar_annotations(backend):
+    @wp.kernel
+    def use(f: wp.array(dtype=float), n: wp.array(dtype=wp.int64), out: wp.array(dtype=float)):
+        n[0] = bump(n[0])
+        n[1] = sq(n[1])
+        out[0] = sq(f[0]) + float(bump(2)) + twice_float(f[0])
+
+    f = wp.array(np.array([3.0], np.float32))
+    n = wp.array(np.array([4, 5], np.int64), dtype=wp.int64)
+    out = wp.zeros(1, dtype=float)
+    wp.launch(use, 1, [f, n, out], backend=backend)
+    assert n.numpy().tolist() == [5, 25] and out.numpy().tolist() == [18.0]
+
+    def float_to_int(a: wp.array(dtype=float)):
+        a[0] = float(bump(a[0]))
+
+    assert "(Int)" in _build_error(float_to_int)
