@@ -118,7 +118,7 @@ class FunctionCompiler(StatementLowering):
                 candidates.append((score, len(candidates), ov, bound))
         if not candidates:
             if len(fn.overloads) == 1 and reasons:
-                raise self.error(KdslTypeError, f"{fn.name}(): {reasons[0]}", node)
+                raise self.error(KdslTypeError, f"{fn.name}() {reasons[0]}", node)
             got = ", ".join(str(a.type) if isinstance(a, Value) else repr(a) for a in args)
             got += "".join(f", {k}=" + (str(v.type) if isinstance(v, Value) else repr(v))
                            for k, v in kwargs.items())  # fmt: skip

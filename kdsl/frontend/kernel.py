@@ -225,8 +225,11 @@ class Function:
 
             return python_scope(self, args, kwargs)
         for ov in self.overloads:
-            if len(inspect.signature(ov.fn).parameters) == len(args) + len(kwargs):
-                return ov.fn(*args, **kwargs)
+            try:
+                inspect.signature(ov.fn).bind(*args, **kwargs)  # defaults and keywords too
+            except TypeError:
+                continue
+            return ov.fn(*args, **kwargs)
         raise TypeError(f"{self.name}() has no overload taking {len(args)} arguments")
 
     def __repr__(self) -> str:

@@ -363,3 +363,9 @@ def test_warp_generic_scalar_annotations(backend):
         a[0] = float(bump(a[0]))
 
     assert "(Int)" in _build_error(float_to_int)
+
+
+def test_user_funcs_with_defaults_run_as_python():
+    assert scale(2.0) == 4.0 and scale(2.0, bias=1.0) == 5.0 and scale(x=1.0, s=3.0) == 3.0
+    with pytest.raises(TypeError, match="no overload taking 0 arguments"):
+        scale()
