@@ -244,7 +244,8 @@ class ExpressionLowering(Emitter):
                     f"too many indices for a {t.ndim}-d array: got {len(idx)}, expected {t.ndim}",
                     node,
                 )
-            return self.emit("kd.load", base, *self.indices(base, idx, node), node=node)
+            op = "kd.load" if len(idx) == t.ndim else "kd.array_view"  # a[i]: a row, as Warp's
+            return self.emit(op, base, *self.indices(base, idx, node), node=node)
         if isinstance(t, VectorType | MatrixType):
             return self.emit("vec.extract", base, *self.indices(base, idx, node), node=node)
         if is_indexed(t):

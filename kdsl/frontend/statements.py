@@ -95,8 +95,7 @@ class StatementLowering(ControlFlowLowering):
         target = node.target
         # Only a named array (or a struct's array field): evaluating the base twice
         # (here, then in the read-modify-write path) must have no effect.
-        if not (isinstance(target, ast.Subscript) and isinstance(target.value, ast.Name
-                                                                | ast.Attribute)):  # fmt: skip
+        if not (isinstance(target, ast.Subscript) and _plain_base(target.value)):
             return False
         base = self.visit(target.value)
         if not (isinstance(base, Value) and isinstance(base.type, ArrayType)):
@@ -144,6 +143,9 @@ class StatementLowering(ControlFlowLowering):
         if old is not None and isinstance(old.type, ArrayType):
             raise self.error(KdslSyntaxError, f"cannot assign to the array '{name}'", node)
         v = self.value(value, node, want=old.type if old is not None else None)
+        if old is None and isinstance(v.type, ArrayType):  # r = a[i]: a name for a view
+            self.bind_raw(name, v)
+            return
         if not v.type.is_value:
             raise self.error(KdslTypeError, f"cannot store a {v.type} in a variable", node)
         if old is not None and old.type != v.type:
@@ -413,3 +415,15 @@ def _is_reversed_range(em, it: ast.expr) -> bool:
     if it.keywords or len(it.args) != 1 or not isinstance(it.args[0], ast.Call):
         raise em.error(KdslSyntaxError, "reversed() in a for loop must wrap range(...)", it)
     return True
+
+
+def _plain_base(node: ast.expr) -> bool:
+    """A name, an attribute, or a row of one with plain indices (``a``, ``s.a``, ``a[i]``):
+    evaluating it twice has no effect."""
+    if isinstance(node, ast.Name | ast.Attribute):
+        return True
+    if isinstance(node, ast.Subscript):
+        idx = node.slice.elts if isinstance(node.slice, ast.Tuple) else [node.slice]
+        plain = all(isinstance(i, ast.Name | ast.Constant) for i in idx)
+        return plain and isinstance(node.value, ast.Name | ast.Attribute)
+    return False

@@ -29,7 +29,7 @@ from kdsl.ir.types import ScalarType, Type, elem_type
 
 
 def _bounds_rule(ts: Sequence[Type], attrs: dict[str, Any]) -> list[Type]:
-    check_access(ts[0], ts[1:], "kd.check_bounds checks an array")
+    check_access(ts[0], ts[1:], "kd.check_bounds checks an array", partial=True)
     return []
 
 
@@ -55,7 +55,8 @@ def _bounds_interp(ctx, op, a, *idx):
 
 CHECK_BOUNDS = _define_check(
     "kd.check_bounds",
-    "Debug mode: stop with an error when an index is outside the array's shape. "
+    "Debug mode: stop with an error when an index is outside the array's shape (all "
+    "of its dims, or the leading ones a ``kd.array_view`` takes). "
     "``arg`` names the array (for messages); ``site`` numbers the check in its module.",
     _bounds_rule, _bounds_interp, 'kd.check_bounds %0, %1 {arg = "y", site = 0}',
 )  # fmt: skip
@@ -153,7 +154,8 @@ def insert_checks(
             if planned is None:
                 continue
             operands, anchor = planned
-            arg = op.operands[op.opdef.array_operand].name_hint or "array"
+            at = op.opdef.array_operand  # None for a kd.array_view: its array comes first
+            arg = op.operands[at if at is not None else 0].name_hint or "array"
             new = create_op(check.name, operands, [], {"arg": arg, "site": site}, loc=op.loc)
             anchor.parent.insert_before(anchor, new)
             site += 1

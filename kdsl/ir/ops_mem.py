@@ -71,15 +71,24 @@ ARRAY_SHAPE = CATALOG.define(
 
 
 def check_access(
-    a: Type, idx: Sequence[Type], what: str = "only arrays can be indexed this way"
+    a: Type,
+    idx: Sequence[Type],
+    what: str = "only arrays can be indexed this way",
+    partial: bool = False,
 ) -> ArrayType:
     """``a`` as an array that the index types ``idx`` address one element of.
 
-    Raises ``TypeError`` otherwise; ``what`` begins the message for a non-array.
+    With ``partial``, 1 to ``ndim`` leading indices are accepted (a view's or a
+    bounds check's). Raises ``TypeError`` otherwise; ``what`` begins the message for
+    a non-array.
     """
     if not isinstance(a, ArrayType):
         raise TypeError(f"{what}, not {a}")
-    if len(idx) != a.ndim:
+    if partial and not 1 <= len(idx) <= a.ndim:
+        raise TypeError(
+            f"a {a.ndim}-d array needs {a.ndim} indices (or fewer, for a view), got {len(idx)}"
+        )
+    if not partial and len(idx) != a.ndim:
         raise TypeError(f"a {a.ndim}-d array needs {a.ndim} indices, got {len(idx)}")
     for t in idx:
         if not (isinstance(t, ScalarType) and t.is_int):
@@ -134,6 +143,31 @@ LOAD = CATALOG.define(
     "kd.load", "Read one element of an array.",
     traits=frozenset({READS}), type_rule=_load_rule, interp=_load_interp, array_operand=0,
     example="%2 = kd.load %0, %1 : f32", group="memory",
+)  # fmt: skip
+
+
+def _view_rule(ts: Sequence[Type], attrs: dict[str, Any]) -> list[Type]:
+    a = check_access(ts[0], ts[1:], "only arrays have views", partial=True)
+    if len(ts) - 1 >= a.ndim:
+        raise TypeError(
+            f"a view of a {a.ndim}-d array takes fewer than {a.ndim} indices, got {len(ts) - 1}"
+        )
+    return [ArrayType(a.dtype, a.ndim - (len(ts) - 1))]
+
+
+def _view_interp(ctx, op, a, *idx):
+    ix = element_index(ctx, op, a, 0, idx)
+    return a[ix]  # a NumPy view: stores through it reach the array
+
+
+ARRAY_VIEW = CATALOG.define(
+    "kd.array_view",
+    "The sub-array at leading indices ``i...`` (fewer than the array's dims): an array "
+    "of the remaining dims that shares the memory, as ``a[i]`` on a 2-d array in Warp. "
+    "Its data pointer is the address of ``a[i..., 0...]``; shape and strides are the "
+    "array's last ones. The indices must be in range (checked like an access).",
+    traits=frozenset({PURE}), type_rule=_view_rule, interp=_view_interp,
+    example="%2 = kd.array_view %0, %1 : array<f32, 1>", group="memory",
 )  # fmt: skip
 
 

@@ -1,10 +1,11 @@
 """Debug mode: a ``kd.check_bounds`` before every array access.
 
 Every op that reaches an array element (one whose catalog entry names its
-``array_operand``: ``kd.load``, ``kd.store``, ``kd.atomic_rmw``, ``kd.atomic_cas``)
-gets a ``kd.check_bounds`` of its array and indices right before it, with the access's location, the array's
-name (``arg``) and a fresh ``site`` number (see ``kdsl.ir.ops_debug``). A backend
-stops the failing thread at the check, so the access never touches memory.
+``array_operand``: ``kd.load``, ``kd.store``, ``kd.atomic_rmw``, ``kd.atomic_cas``),
+and every ``kd.array_view`` (its leading indices), gets a ``kd.check_bounds`` of its
+array and indices right before it, with the access's location, the array's name
+(``arg``) and a fresh ``site`` number (see ``kdsl.ir.ops_debug``). A backend stops
+the failing thread at the check, so the access never touches memory.
 
 Run it after optimization: the checks then guard exactly the accesses that
 remain, and nothing after it can remove them (they carry the WRITES trait). An
@@ -31,7 +32,7 @@ def _already_checked(op: Operation, operands: list) -> bool:
 
 
 def _plan(op: Operation) -> CheckPlan | None:
-    at = op.opdef.array_operand
+    at = 0 if op.name == "kd.array_view" else op.opdef.array_operand
     if at is None:
         return None
     operands = list(op.operands[at:])

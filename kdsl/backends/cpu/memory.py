@@ -117,6 +117,20 @@ def _load(em: Emitter, op: Operation) -> ir.Value:
     return load_value(em, ptr, at.dtype)
 
 
+def _array_view(em: Emitter, op: Operation) -> ir.Value:
+    """The descriptor of ``a[i...]``: the element address, and the remaining shape and strides."""
+    at = op.operands[0].type
+    arr = em.get(op.operands[0])
+    k, rest = len(op.operands) - 1, op.results[0].type.ndim
+    B = em.b
+    out = B.insert_value(ir.Constant(LT.descriptor_type(rest), ir.Undefined),
+                         element_ptr(em, arr, at, list(op.operands[1:])), 0)  # fmt: skip
+    for d in range(rest):
+        out = B.insert_value(out, B.extract_value(arr, [1, k + d]), [1, d])
+        out = B.insert_value(out, B.extract_value(arr, [2, k + d]), [2, d])
+    return out
+
+
 def _store(em: Emitter, op: Operation) -> None:
     at = op.operands[1].type
     ptr = element_ptr(em, em.get(op.operands[1]), at, op.operands[2:])
@@ -220,6 +234,7 @@ CPU.register("kd.tid", _tid)
 CPU.register("kd.block_dim", lambda em, op: ir.Constant(LT.I32, 1))  # one thread a block, as Warp
 CPU.register("kd.array_shape", _array_shape)
 CPU.register("kd.load", _load)
+CPU.register("kd.array_view", _array_view)
 CPU.register("kd.store", _store)
 CPU.register("kd.atomic_rmw", _atomic)
 CPU.register("kd.atomic_cas", _atomic_cas)

@@ -55,6 +55,30 @@ def _load(em: FuncEmitter, op: Operation) -> str:
     return f"*(const {em.ctype(t)} *){p}"
 
 
+def _array_view(em: FuncEmitter, op: Operation) -> str:
+    """``a[i...]`` as a descriptor of the remaining dims (``kd_view<N>_<K>``)."""
+    at: T.ArrayType = op.operands[0].type
+    k = len(op.operands) - 1
+    rest = at.ndim - k
+    name = f"kd_view{at.ndim}_{k}"
+    src = em.src
+    arr, out = src.ctype(at), src.ctype(op.results[0].type)
+    at_fn = H.element_ptr(src, at.ndim)
+    params = ", ".join(f"long long i{j}" for j in range(k))
+    zeros = ", 0" * rest
+    shape = ", ".join(f"a.shape[{k + d}]" for d in range(rest))
+    strides = ", ".join(f"a.strides[{k + d}]" for d in range(rest))
+    src.need(
+        name,
+        lambda: (
+            f"{_FI} {out} {name}(const {arr} &a, {params}) {{ return {out}{{"
+            f"{at_fn}(a, {', '.join(f'i{j}' for j in range(k))}{zeros}), {{{shape}}}, "
+            f"{{{strides}}}}}; }}"
+        ),
+    )
+    return f"{name}({em.get(op.operands[0])}, {', '.join(em.get(i) for i in op.operands[1:])})"
+
+
 def _store(em: FuncEmitter, op: Operation) -> None:
     t = op.operands[0].type
     v = em.get(op.operands[0])
@@ -236,6 +260,7 @@ CUDA.register("kd.tid", _tid)
 CUDA.register("kd.block_dim", lambda em, op: "(int)blockDim.x")
 CUDA.register("kd.array_shape", _array_shape)
 CUDA.register("kd.load", _load)
+CUDA.register("kd.array_view", _array_view)
 CUDA.register("kd.store", _store)
 CUDA.register("kd.atomic_rmw", _atomic)
 CUDA.register("kd.atomic_cas", _atomic_cas)

@@ -48,7 +48,7 @@ class Primal:
         if hit is None:
             hit = any(is_differentiable(r.type) for r in op.results) or any(
                 inner.name in ARRAY_ACCESSES
-                and inner.operands[ARRAY_ACCESSES[inner.name]] in self.grad_arrays
+                and base_array(inner.operands[ARRAY_ACCESSES[inner.name]]) in self.grad_arrays
                 for inner in op.walk()
             )
             self._matters[op] = hit
@@ -64,8 +64,12 @@ class Primal:
         hit = self._owned.get(arr)
         if hit is None:
             nd = arr.type.ndim
-            hit = True
-            for op, index in arr.uses:
+            # A view (kd.array_view) reaches elements other threads may own: atomics.
+            hit = arr in self.block.args
+            for op, index in arr.uses if hit else ():
+                if op.name == "kd.array_view":
+                    hit = False
+                    break
                 at = ARRAY_ACCESSES.get(op.name)
                 if at is None:
                     continue
@@ -105,6 +109,15 @@ def check_differentiable(primal: Primal) -> None:
                     "replays the read with the written value and may be wrong\n"
                     + render_loc(op.loc, primal.sym), KdslGradientWarning, stacklevel=2)  # fmt: skip
                 written.discard(arr)  # warn once per array
+
+
+def base_array(arr: Value) -> Value:
+    """The array a ``kd.array_view`` chain starts from (``arr`` itself when not a view)."""
+    op = getattr(arr, "op", None)
+    while op is not None and op.name == "kd.array_view":
+        arr = op.operands[0]
+        op = getattr(arr, "op", None)
+    return arr
 
 
 def is_tid(v: Value, dim: int, ndim: int) -> bool:

@@ -17,7 +17,7 @@ from kdsl.errors import KdslError
 from kdsl.ir import Block, Builder, Operation, Region, Value
 from kdsl.ir.types import I64, StructType, Type
 from kdsl.ir.vjp import VjpContext, get_rule, is_differentiable
-from kdsl.passes.adjoint.analysis import Primal, defined_in
+from kdsl.passes.adjoint.analysis import Primal, base_array, defined_in
 from kdsl.passes.adjoint.replay import Replay
 from kdsl.passes.adjoint.reverse_loops import reverse_for, reverse_while
 from kdsl.passes.adjoint.tapes import TapeWriter
@@ -90,11 +90,24 @@ class ReverseSweep:
             for operand, c in zip(op.operands, contribs):
                 self.accumulate(adj, operand, c)
 
+    def grad_of(self, arr: Value, vmap: dict[Value, Value]) -> Value | None:
+        """The gradient array of ``arr``: a parameter's, or the same view of its base's
+        (``kd.array_view``, emitted here over the replayed indices); None when none."""
+        grad = self.grads.get(arr)
+        view = getattr(arr, "op", None)
+        if grad is None and view is not None and view.name == "kd.array_view":
+            base = self.grad_of(view.operands[0], vmap)
+            if base is not None:
+                grad = self.b.value("kd.array_view", base, *[vmap[i] for i in view.operands[1:]])
+        return grad
+
     def _reverse_load(self, op: Operation, vmap: dict[Value, Value], adj: Adjoints) -> None:
         b = self.b
         g = adj.get(op.results[0])
-        grad = self.grads.get(op.operands[0])
-        if g is None or grad is None:
+        if g is None:
+            return
+        grad = self.grad_of(op.operands[0], vmap)
+        if grad is None:
             return
         if isinstance(g.type, StructType):
             raise KdslError("kdsl cannot yet differentiate reads of struct arrays",
@@ -127,8 +140,10 @@ class ReverseSweep:
 
     def _reverse_write(self, op: Operation, vmap: dict[Value, Value], adj: Adjoints) -> None:
         v, arr = op.operands[0], op.operands[1]
-        grad = self.grads.get(arr)
-        if grad is None or not is_differentiable(v.type):
+        if not is_differentiable(v.type):
+            return
+        grad = self.grad_of(arr, vmap)
+        if grad is None:
             return
         b = self.b
         idx = [vmap[i] for i in op.operands[2:]]
@@ -142,8 +157,8 @@ class ReverseSweep:
             now = b.value("kd.load", vmap[arr], *idx)
             g = b.value("arith.select", b.value("arith.cmp", now, vmap[v], pred="eq"), g,
                         self.zeros(v.type))  # fmt: skip
-        elif kind in ("store", "exch") and arr in params:
-            self._consume(grad, idx, params.index(arr), v.type)
+        elif kind in ("store", "exch") and base_array(arr) in params:
+            self._consume(grad, idx, params.index(base_array(arr)), v.type)
         self.accumulate(adj, v, g)
 
     def _consume(self, grad: Value, idx: list[Value], param: int, t: Type) -> None:

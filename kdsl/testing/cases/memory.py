@@ -41,6 +41,40 @@ def array_shape(a: wp.array2d(dtype=float), out: wp.array(dtype=wp.int32)):
     out[i] = a.shape[0] * 1000 + a.shape[1] + i
 
 
+@wp.func
+def _row_dot(r: wp.array(dtype=float), w: wp.array(dtype=float)) -> float:
+    s = 0.0
+    for j in range(r.shape[0]):
+        s += r[j] * w[j]
+    return s
+
+
+@wp.kernel
+def array_views(
+    a: wp.array2d(dtype=float),
+    c: wp.array3d(dtype=float),
+    w: wp.array(dtype=float),
+    out: wp.array2d(dtype=float),
+):
+    i = wp.tid()
+    row = a[i]  # a 1-d view of row i (Warp's a[i] on a 2-d array)
+    o = out[i]
+    o[0] = _row_dot(row, w)
+    o[1] = c[i][1][2] + c[i, 0][row.shape[0] - 1]
+    out[i][2] = float(c[i].shape[0] * 10 + c[i].shape[1])
+    wp.atomic_add(out[i], 3, row[1])
+
+
+def _array_views_ref(ins):
+    a, c, w = f64(ins["a"]), f64(ins["c"]), f64(ins["w"])
+    out = np.zeros((5, 4))
+    out[:, 0] = a @ w
+    out[:, 1] = c[:, 1, 2] + c[:, 0, a.shape[1] - 1]
+    out[:, 2] = c.shape[1] * 10 + c.shape[2]
+    out[:, 3] = a[:, 1]
+    return {"out": out}
+
+
 @wp.kernel
 def atomic_add_contention(
     a: wp.array(dtype=float),
@@ -198,6 +232,10 @@ CASES = [
     Case("array_shape", array_shape, 6,
          lambda rng: {"a": _zeros((7, 3)), "out": _zeros(6, np.int32)},
          lambda ins: {"out": 7000 + 3 + np.arange(6)}, ("out",)),
+    Case("array_views", array_views, 5,
+         lambda rng: {"a": uniform(rng, (5, 3), -2, 2), "c": uniform(rng, (5, 2, 4), -2, 2),
+                      "w": uniform(rng, 3, -1, 1), "out": _zeros((5, 4))},
+         _array_views_ref, ("out",), requires=("atomics",)),
     Case("atomic_add_contention", atomic_add_contention, 200, _atomic_add_inputs,
          _atomic_add_ref, ("total", "counts"), requires=("atomics",)),
     Case("atomic_min_max_contention", atomic_min_max, 200, _atomic_minmax_inputs,
