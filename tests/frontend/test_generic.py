@@ -19,6 +19,15 @@ BACKENDS = [
 ]
 
 
+@pytest.fixture(autouse=True)
+def _device_of_the_backend(request):
+    """Arrays and launches of a test run on its backend's device (cuda:0 for cuda)."""
+    callspec = getattr(request.node, "callspec", None)
+    backend = callspec.params.get("backend") if callspec is not None else None
+    with wp.ScopedDevice("cuda:0" if backend == "cuda" else "cpu"):
+        yield
+
+
 @wp.func
 def twice(x: Any):
     return x + x
