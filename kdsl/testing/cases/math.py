@@ -147,12 +147,7 @@ def _atan2_inputs(rng):
 
 
 @wp.kernel
-def min_max_nan(
-    a: wp.array(dtype=float),
-    b: wp.array(dtype=float),
-    lo: wp.array(dtype=float),
-    hi: wp.array(dtype=float),
-):
+def min_max_nan(a: wp.array[float], b: wp.array[float], lo: wp.array[float], hi: wp.array[float]):
     i = wp.tid()
     lo[i] = wp.min(a[i], b[i])
     hi[i] = wp.max(a[i], b[i])

@@ -50,12 +50,8 @@ def _row_dot(r: wp.array(dtype=float), w: wp.array(dtype=float)) -> float:
 
 
 @wp.kernel
-def array_views(
-    a: wp.array2d(dtype=float),
-    c: wp.array3d(dtype=float),
-    w: wp.array(dtype=float),
-    out: wp.array2d(dtype=float),
-):
+def array_views(a: wp.array2d[float], c: wp.array3d[float], w: wp.array[float],
+                out: wp.array2d[float]):  # fmt: skip
     i = wp.tid()
     row = a[i]  # a 1-d view of row i (Warp's a[i] on a 2-d array)
     o = out[i]
