@@ -56,7 +56,20 @@ class ReverseSweep:
         if g.type != v.type:
             raise AssertionError(f"adjoint of {v.type} has type {g.type}")
         old = adj.get(v)
-        adj[v] = g if old is None else self.b.value("arith.add", old, g)
+        adj[v] = g if old is None else self.add(old, g)
+
+    def add(self, a: Value, g: Value) -> Value:
+        """``a + g`` for adjoints; structs add field by field (``arith.add`` has no
+        struct form), keeping ``a``'s non-differentiable fields (arrays, integers)."""
+        if not isinstance(a.type, StructType):
+            return self.b.value("arith.add", a, g)
+        fields = []
+        for name, ft in a.type.fields:
+            part = self.b.value("struct.extract", a, field=name)
+            if is_differentiable(ft):
+                part = self.add(part, self.b.value("struct.extract", g, field=name))
+            fields.append(part)
+        return self.b.create("struct.construct", fields, [a.type]).result
 
     def zeros(self, t: Type) -> Value:
         """A zero of type ``t`` (the adjoint of a value nothing depends on)."""
