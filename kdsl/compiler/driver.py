@@ -24,6 +24,7 @@ from typing import Any
 from kdsl import config
 from kdsl.backends.base import Backend, CompiledKernel, Job
 from kdsl.compiler import cache as kernel_cache
+from kdsl.compiler.capabilities import check_capabilities
 from kdsl.compiler.pipelines import check_pipeline
 from kdsl.errors import KdslError
 from kdsl.ir import Module, print_module
@@ -74,6 +75,7 @@ def prepare_module(backend: Backend, module: Module, options: Mapping[str, Any])
     checks = check_pipeline(options)
     if checks:
         run_pipeline(module, checks, verify_each=verify)
+    check_capabilities(backend.name, frozenset(backend.capabilities), module)
     return bool(checks)
 
 

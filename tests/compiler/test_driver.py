@@ -26,6 +26,7 @@ class Recording(Backend):
 
     name = "recording"
     version = "1"
+    capabilities = frozenset({"fp32", "fp64", "int64", "atomics"})
     emit_stages = ("text",)
     target_options = ("arch",)
 

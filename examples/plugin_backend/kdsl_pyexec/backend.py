@@ -73,9 +73,7 @@ class PyExecBackend(Backend):
 
     name = "pyexec"
     version = "1"
-    capabilities = frozenset(
-        {"fp16", "fp32", "fp64", "int8", "int16", "int64", "atomics", "recursion"}
-    )
+    capabilities = frozenset({"fp16", "fp32", "fp64", "int8", "int16", "int64", "atomics"})
     emit_stages = ("python",)
 
     def devices(self) -> list[str]:

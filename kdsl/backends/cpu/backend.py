@@ -58,7 +58,7 @@ class CpuBackend(Backend):
     name = "cpu"
     version = f"1-{jit.version_tag()}"
     capabilities = frozenset(
-        {"fp16", "fp32", "fp64", "int8", "int16", "int64", "atomics", "recursion"}
+        {"fp16", "fp32", "fp64", "int8", "int16", "int64", "atomics"}
     )
 
     emit_stages = ("llvm-ir-unopt", "llvm-ir", "asm")

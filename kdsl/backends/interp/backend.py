@@ -19,7 +19,7 @@ class InterpBackend(Backend):
     name = "interp"
     version = "1"
     capabilities = frozenset(
-        {"fp16", "fp32", "fp64", "int8", "int16", "int64", "atomics", "recursion"}
+        {"fp16", "fp32", "fp64", "int8", "int16", "int64", "atomics"}
     )
 
     #: Nothing to cache: the program is built from the module in Python.
