@@ -26,7 +26,9 @@ LAYERS: list[set[str]] = [
     {"compiler"},
     {"runtime"},
     {"interop", "autograd", "utils", "optim"},
+    {"geometry"},
     {"jax_experimental"},
+    {"scenes"},  # user code on the public API, above everything (docs/scenes.md)
 ]
 FACADES = {"__init__", "__main__", "cli", "testing", "tools"}
 #: Upward imports allowed, with the reason. The standard library is kernel code written

@@ -7,10 +7,19 @@ from kdsl.compiler import python_scope
 from kdsl.compiler.adjoint import adjoint_module
 from kdsl.compiler.driver import compile_kernel, lower, prepare_module
 from kdsl.compiler.pipelines import check_pipeline
+from kdsl.compiler.records import CompileRecord, record_compiles
 from kdsl.types import register_python_scope
 
 # Builtins, standard-library functions and composite operators called from Python
 # evaluate through the interp backend (see ``python_scope``).
 register_python_scope(python_scope.call)
 
-__all__ = ["adjoint_module", "check_pipeline", "compile_kernel", "lower", "prepare_module"]
+__all__ = [
+    "CompileRecord",
+    "adjoint_module",
+    "check_pipeline",
+    "compile_kernel",
+    "lower",
+    "prepare_module",
+    "record_compiles",
+]

@@ -18,12 +18,14 @@ A backend never runs passes, never touches the cache, and never imports the runt
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable, Mapping
 from typing import Any
 
 from kdsl import config
 from kdsl.backends.base import Backend, CompiledKernel, Job
 from kdsl.compiler import cache as kernel_cache
+from kdsl.compiler import records
 from kdsl.compiler.capabilities import check_capabilities
 from kdsl.compiler.pipelines import check_pipeline
 from kdsl.errors import KdslError
@@ -44,6 +46,8 @@ class _Artifacts:
         self.ir_text = ir_text
         self.loaded: dict[str, Any] = {}
         self.job: Job | None = None
+        #: Sizes of the binaries built (not loaded from the cache), for ``records``.
+        self.built: list[int] = []
 
     def key(self, target: str) -> str:
         b = self.backend
@@ -58,10 +62,15 @@ class _Artifacts:
             b, job = self.backend, self.job
             hit = self.loaded[target] = kernel_cache.get_or_build(
                 self.key(target),
-                lambda: b.build(job, target),
+                lambda: self._build(target),
                 lambda data: b.load_artifact(job, target, data),
             )
         return hit
+
+    def _build(self, target: str) -> bytes:
+        data = self.backend.build(self.job, target)  # type: ignore[arg-type]
+        self.built.append(len(data))
+        return data
 
 
 def prepare_module(backend: Backend, module: Module, options: Mapping[str, Any]) -> bool:
@@ -97,7 +106,9 @@ def compile_kernel(
     """Compile the kernel ``target`` (a frontend kernel, or a module plus ``symbol``).
 
     ``options`` are resolved kernel options (``kdsl.config.compile_options``).
+    Inside ``kdsl.compiler.record_compiles()`` each call is recorded.
     """
+    start = time.perf_counter()
     module, symbol = _module_of(target, symbol)
     if not symbol:
         raise KdslError("compile_kernel: name the kernel (symbol=...) to compile from a module")
@@ -106,7 +117,11 @@ def compile_kernel(
     ir_text = print_module(module, debuginfo=True) if backend.cacheable else ""
     binaries = _Artifacts(backend, opts, symbol, ir_text)
     job = binaries.job = Job(module, symbol, opts, checked, binaries.artifact, binaries.key)
-    return backend.load(job)
+    compiled = backend.load(job)
+    if records.recording():
+        seconds = time.perf_counter() - start
+        records.add_record(symbol, backend.name, seconds, module, binaries.built)
+    return compiled
 
 
 def lower(

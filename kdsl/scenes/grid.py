@@ -1,0 +1,77 @@
+"""What the 2D grid scenes (heat, wave) share: the 5-point Laplacian and its modes.
+
+The unknowns are the ``n x n`` interior points of the unit square with spacing
+``h = 1 / (n + 1)``, stored flat (``i * n + j``), zero on the boundary (Dirichlet).
+``sin(k pi x) sin(l pi y)`` is an exact eigenvector of the discrete Laplacian with
+eigenvalue ``-(4 / h^2) (sin^2(k pi h / 2) + sin^2(l pi h / 2))``, so the
+semi-discrete (method of lines) solutions are closed forms: the references the grid
+scenes compare against, isolating the time integrator's error from the grid's.
+"""
+
+# No ``from __future__ import annotations``: kernel annotations name closure variables.
+
+import math
+from functools import cache
+from types import ModuleType, SimpleNamespace
+from typing import Any
+
+import numpy as np
+
+#: The modes (k, l, amplitude) of the initial condition.
+MODES = ((1, 1, 1.0), (2, 3, 0.5))
+
+
+@cache
+def make_grid_kernels(wp: ModuleType, real: Any) -> SimpleNamespace:
+    """``laplacian(u, n, s, out)``: ``out = s * (5-point sum)``; ``fill(value, out)``."""
+
+    @wp.kernel(module="unique")
+    def laplacian(u: wp.array(dtype=real), n: int, s: real, out: wp.array(dtype=real)):
+        i, j = wp.tid()
+        c = u[i * n + j]
+        total = real(-4.0) * c
+        if i > 0:
+            total += u[(i - 1) * n + j]
+        if i < n - 1:
+            total += u[(i + 1) * n + j]
+        if j > 0:
+            total += u[i * n + j - 1]
+        if j < n - 1:
+            total += u[i * n + j + 1]
+        out[i * n + j] = s * total
+
+    @wp.kernel(module="unique")
+    def fill(value: real, out: wp.array(dtype=real)):
+        out[wp.tid()] = value
+
+    return SimpleNamespace(laplacian=laplacian, fill=fill)
+
+
+def grid_points(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The interior points' x and y (flat, ``i * n + j``)."""
+    h = 1.0 / (n + 1)
+    x = np.arange(1, n + 1) * h
+    gx, gy = np.meshgrid(x, x, indexing="ij")
+    return gx.ravel(), gy.ravel()
+
+
+def mode(n: int, k: int, l: int) -> np.ndarray:
+    """``sin(k pi x) sin(l pi y)`` on the interior points."""
+    gx, gy = grid_points(n)
+    return np.sin(k * np.pi * gx) * np.sin(l * np.pi * gy)
+
+
+def discrete_eigenvalue(n: int, k: int, l: int) -> float:
+    """The (negative) eigenvalue of the discrete Laplacian for mode ``(k, l)``."""
+    h = 1.0 / (n + 1)
+    return -(4.0 / h**2) * (math.sin(k * math.pi * h / 2) ** 2 + math.sin(l * math.pi * h / 2) ** 2)
+
+
+def continuum_eigenvalue(k: int, l: int) -> float:
+    """The eigenvalue ``-(k^2 + l^2) pi^2`` of the continuous Laplacian."""
+    return -(k * k + l * l) * math.pi**2
+
+
+def spectral_radius(n: int) -> float:
+    """The largest ``|eigenvalue|`` of the discrete Laplacian (mode ``(n, n)``)."""
+    return -discrete_eigenvalue(n, n, n)
