@@ -32,6 +32,8 @@ from kdsl.errors import KdslError, full_tracebacks
 EXIT_USAGE = 2
 #: Exit status of an internal error (a kdsl bug).
 EXIT_INTERNAL = 1
+#: Exit status of a conformance run with a failed case, or one that tested nothing.
+EXIT_FAILED = 1
 
 #: Stages every backend shares: the frontend's IR and the IR after the pipeline.
 KIR, KIR_OPT = "kir", "kir-opt"
@@ -277,21 +279,40 @@ class _Tally:
 
 
 def cmd_conformance(args: argparse.Namespace) -> int:
-    """``kdsl conformance``: run the packaged suite on one backend; 0 if none failed."""
+    """``kdsl conformance``: run the packaged suite on one backend.
+
+    Exits 0 when at least one case passed and none failed; 1 when a case failed or
+    nothing was tested (the backend has no device here, every case was skipped, or
+    ``-k`` matched none), with the reason on stderr; 2 for an unknown backend.
+    """
     import pytest
 
-    _backend(args.backend)  # an unknown or broken backend is a user error, before pytest
     argv = ["--pyargs", "kdsl.testing", "-p", "kdsl.testing.plugin",
             f"--kdsl-backend={args.backend}", "-q", "-p", "no:cacheprovider"]  # fmt: skip
     if args.k:
         argv += ["-k", args.k]
     if args.exitfirst:
         argv.append("-x")
+    backend = _backend(args.backend)  # an unknown or broken backend is a user error
+    if not backend.devices():
+        return _nothing_ran(f"the {backend.name} backend has no device on this machine")
     tally = _Tally()
     code = pytest.main(argv, plugins=[tally])
     print(tally.summary())
     clean = code in (pytest.ExitCode.OK, pytest.ExitCode.NO_TESTS_COLLECTED)
-    return 0 if clean and tally.failed == 0 else 1
+    if not clean or tally.failed:
+        return EXIT_FAILED
+    if tally.passed == 0:
+        if tally.skipped:
+            return _nothing_ran(f"all {tally.skipped} selected cases were skipped")
+        return _nothing_ran(f"no case matches -k {args.k!r}" if args.k else "no case was collected")
+    return 0
+
+
+def _nothing_ran(reason: str) -> int:
+    """Report a conformance run that tested nothing: a failure, never a green run."""
+    print(f"kdsl conformance: nothing was tested: {reason}", file=sys.stderr)
+    return EXIT_FAILED
 
 
 def cmd_cache(args: argparse.Namespace) -> int:

@@ -53,13 +53,15 @@ def options(arch: str, fast_math: bool = False) -> list[str]:
     return opts
 
 
+#: How to install the cuda backend's dependencies, as the README says.
+INSTALL_HINT = 'pip install -e ".[cuda13]", or ".[cuda12]" for a CUDA 12 driver'
+
+
 def _nvrtc():
     try:
         from cupy_backends.cuda.libs import nvrtc
     except ImportError as e:  # pragma: no cover - depends on the install
-        raise KdslError(
-            f"the cuda backend needs CuPy with NVRTC (pip install cupy-cuda12x): {e}"
-        ) from None
+        raise KdslError(f"the cuda backend needs CuPy with NVRTC ({INSTALL_HINT}): {e}") from None
     return nvrtc
 
 
