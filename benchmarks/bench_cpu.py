@@ -9,7 +9,9 @@ its cell). Frameworks that are not installed (the ``bench`` extra) are reported 
 skipped, and a framework that fails shows ``error: ...`` in its cell while the rest
 goes on. The table gives medians; the last columns give kdsl's ratio to the fastest
 peer (>1: kdsl is faster) and whether the issue's target is met. Everything,
-samples included, goes to benchmarks/results/cpu-<timestamp>.json.
+samples included, goes to benchmarks/results/cpu-<timestamp>.json. The exit status
+is 1 when a kdsl result failed its check (wrong or an error), so a run that checked
+nothing of kdsl never reads as a success.
 
 Workloads: saxpy, particles, nbody, nbody_fast, jacobi, cloth, launch,
 launch_prepared (``suite.workloads``), plus triad (Numba's STREAM triad bandwidth,
@@ -256,7 +258,7 @@ def main() -> int:
     }
     harness.write_json(harness.to_json(cells, meta), path)
     print(f"wrote {path}")
-    return 0
+    return harness.exit_status(cells, "bench_cpu")
 
 
 if __name__ == "__main__":

@@ -22,8 +22,9 @@ again with the same cache (warm); "compile" is first launch to first result,
 
 Frameworks that are not installed are reported and skipped; a failing cell shows
 ``error [k]`` with the message in a note under the table. Without a CUDA device the
-script says so and exits 0 (``--device cpu`` runs its logic on the CPU, CuPy
-skipped: a check of the script, not a benchmark). Everything, samples included,
+script says so and exits 1: nothing was measured (``--device cpu`` runs its logic
+on the CPU, CuPy skipped: a check of the script, not a benchmark). It also exits 1
+when a kdsl result failed its check against the reference. Everything, samples included,
 goes to benchmarks/results/cuda-<timestamp>.json.
 """
 
@@ -315,8 +316,8 @@ def main() -> int:
         p.error(f"unknown workloads {unknown} or frameworks {bad}")
     problem = device_problem(args.device)
     if problem is not None:
-        print(f"bench_cuda: {problem}; nothing measured.")
-        return 0
+        print(f"bench_cuda: {problem}; nothing measured.", file=sys.stderr)
+        return 1
 
     import kdsl
 
@@ -363,7 +364,7 @@ def main() -> int:
     path = args.json or RESULTS / f"cuda-{time.strftime('%Y%m%d-%H%M%S')}.json"
     harness.write_json(harness.to_json(cells, meta), path)
     print(f"wrote {path}")
-    return 0
+    return harness.exit_status(cells, "bench_cuda")
 
 
 if __name__ == "__main__":

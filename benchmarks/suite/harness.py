@@ -222,6 +222,24 @@ def run_script(
     return out
 
 
+def failed_checks(cells: dict[str, dict[str, Cell]], framework: str = "kdsl") -> list[str]:
+    """``workload: status`` of every cell of ``framework`` that failed or was wrong."""
+    return [f"{w}: {row[framework].status}" for w, row in cells.items()
+            if framework in row and row[framework].status.startswith(("error", "wrong"))]  # fmt: skip
+
+
+def exit_status(cells: dict[str, dict[str, Cell]], script: str) -> int:
+    """1 (with the reason on stderr) when a kdsl cell failed its check, else 0.
+
+    A benchmark whose kdsl result is wrong or missing must not read as a success.
+    """
+    failed = failed_checks(cells)
+    if failed:
+        print(f"{script}: kdsl failed its checks: {'; '.join(failed)}", file=sys.stderr)
+        return 1
+    return 0
+
+
 def short_error(exc: BaseException, limit: int = 48) -> str:
     """``error: <Type>: <message>`` cut to ``limit`` characters for a table cell."""
     msg = str(exc).strip().splitlines()
