@@ -8,6 +8,7 @@ Commands::
     kdsl pipeline [BACKEND]
     kdsl conformance --backend NAME [-k EXPR] [-x]
     kdsl cache info|clear
+    kdsl scene list|run|stability|info [NAME] ...
 
 A user mistake (a missing file, a kernel that does not compile, a bad pipeline, an
 unknown stage or backend) prints kdsl's message, with the file, line and a caret,
@@ -386,6 +387,10 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("cache", help="show (info) or empty (clear) the kernel cache")
     p.add_argument("action", choices=["info", "clear"])
     p.set_defaults(run=cmd_cache)
+
+    from kdsl.scenes.cli import add_scene_parser  # docs/scenes.md
+
+    add_scene_parser(sub)
     return parser
 
 

@@ -55,21 +55,23 @@ def grid_points(n: int) -> tuple[np.ndarray, np.ndarray]:
     return gx.ravel(), gy.ravel()
 
 
-def mode(n: int, k: int, l: int) -> np.ndarray:
+def mode(n: int, kx: int, ky: int) -> np.ndarray:
     """``sin(k pi x) sin(l pi y)`` on the interior points."""
     gx, gy = grid_points(n)
-    return np.sin(k * np.pi * gx) * np.sin(l * np.pi * gy)
+    return np.sin(kx * np.pi * gx) * np.sin(ky * np.pi * gy)
 
 
-def discrete_eigenvalue(n: int, k: int, l: int) -> float:
+def discrete_eigenvalue(n: int, kx: int, ky: int) -> float:
     """The (negative) eigenvalue of the discrete Laplacian for mode ``(k, l)``."""
     h = 1.0 / (n + 1)
-    return -(4.0 / h**2) * (math.sin(k * math.pi * h / 2) ** 2 + math.sin(l * math.pi * h / 2) ** 2)
+    return -(4.0 / h**2) * (
+        math.sin(kx * math.pi * h / 2) ** 2 + math.sin(ky * math.pi * h / 2) ** 2
+    )
 
 
-def continuum_eigenvalue(k: int, l: int) -> float:
+def continuum_eigenvalue(kx: int, ky: int) -> float:
     """The eigenvalue ``-(k^2 + l^2) pi^2`` of the continuous Laplacian."""
-    return -(k * k + l * l) * math.pi**2
+    return -(kx * kx + ky * ky) * math.pi**2
 
 
 def spectral_radius(n: int) -> float:

@@ -38,7 +38,7 @@ class Heat(Scene):
         return grid.make_grid_kernels(wp, real)
 
     def initial_state(self) -> tuple[np.ndarray, None]:
-        return sum(a * grid.mode(self.grid_n, k, l) for k, l, a in grid.MODES), None
+        return sum(a * grid.mode(self.grid_n, kx, ky) for kx, ky, a in grid.MODES), None
 
     def _lap(self, u: Any, s: float, out: Any) -> None:
         n = self.grid_n
@@ -56,11 +56,11 @@ class Heat(Scene):
 
     def _solution(self, t: float, eigenvalue: Any) -> np.ndarray:
         d, n = self.params["diffusivity"], self.grid_n
-        return sum(a * np.exp(d * eigenvalue(k, l) * t) * grid.mode(n, k, l)
-                   for k, l, a in grid.MODES)  # fmt: skip
+        return sum(a * np.exp(d * eigenvalue(kx, ky) * t) * grid.mode(n, kx, ky)
+                   for kx, ky, a in grid.MODES)  # fmt: skip
 
     def reference(self, t: float) -> np.ndarray:
-        return self._solution(t, lambda k, l: grid.discrete_eigenvalue(self.grid_n, k, l))
+        return self._solution(t, lambda kx, ky: grid.discrete_eigenvalue(self.grid_n, kx, ky))
 
     def pde_error(self) -> float:
         """The error against the continuous PDE's solution (time and grid together)."""

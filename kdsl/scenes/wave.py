@@ -39,7 +39,7 @@ class Wave(Scene):
         return grid.make_grid_kernels(wp, real)
 
     def initial_state(self) -> tuple[np.ndarray, np.ndarray]:
-        u0 = sum(a * grid.mode(self.grid_n, k, l) for k, l, a in grid.MODES)
+        u0 = sum(a * grid.mode(self.grid_n, kx, ky) for kx, ky, a in grid.MODES)
         return u0, np.zeros_like(u0)
 
     def _lap(self, u: Any, s: float, out: Any) -> None:
@@ -58,11 +58,11 @@ class Wave(Scene):
 
     def _solution(self, t: float, eigenvalue: Any) -> np.ndarray:
         c, n = self.params["speed"], self.grid_n
-        return sum(a * math.cos(c * math.sqrt(-eigenvalue(k, l)) * t) * grid.mode(n, k, l)
-                   for k, l, a in grid.MODES)  # fmt: skip
+        return sum(a * math.cos(c * math.sqrt(-eigenvalue(kx, ky)) * t) * grid.mode(n, kx, ky)
+                   for kx, ky, a in grid.MODES)  # fmt: skip
 
     def reference(self, t: float) -> np.ndarray:
-        return self._solution(t, lambda k, l: grid.discrete_eigenvalue(self.grid_n, k, l))
+        return self._solution(t, lambda kx, ky: grid.discrete_eigenvalue(self.grid_n, kx, ky))
 
     def pde_error(self) -> float:
         """The error against the continuous PDE's solution (time and grid together)."""
