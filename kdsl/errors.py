@@ -12,9 +12,13 @@ span, and says what was expected and what was found::
 
 from __future__ import annotations
 
+import functools
 import linecache
 import os
-from typing import TYPE_CHECKING
+import traceback
+import types
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any, TypeVar
 
 if TYPE_CHECKING:
     from kdsl.ir.core import Loc
@@ -117,5 +121,73 @@ def render_loc(loc: Loc, func: str | None = None) -> str:
 
 
 def full_tracebacks() -> bool:
-    """True when ``KDSL_TRACEBACK=full`` asks for kdsl-internal frames."""
+    """True when ``KDSL_TRACEBACK=full`` asks for kdsl-internal frames.
+
+    Read at each error, so setting ``os.environ["KDSL_TRACEBACK"] = "full"`` in a
+    running program (a notebook) takes effect at the next error.
+    """
     return os.environ.get("KDSL_TRACEBACK", "").lower() == "full"
+
+
+# --- short tracebacks ------------------------------------------------------------
+# A kdsl error raised from a user call (launch, Tape.backward, a module load) carries
+# the frames of every kdsl function it passed through: five to ten frames of launch
+# plans, the compile driver and the frontend before the one message that matters,
+# which already names the user's file and line. As JAX does
+# (jax/_src/traceback_util.py), the public entry points are API boundaries: a
+# KdslError leaving one keeps only the frames outside the kdsl package (the user's),
+# and says so in a note. KDSL_TRACEBACK=full keeps everything.
+
+#: The kdsl package directory: frames of files under it are kdsl-internal.
+_PACKAGE_DIR = os.path.dirname(os.path.abspath(__file__)) + os.sep
+#: The note added to a filtered error (once).
+HIDDEN_FRAMES_NOTE = "(kdsl-internal frames hidden; set KDSL_TRACEBACK=full to show them)"
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+
+def is_internal_frame(filename: str) -> bool:
+    """True for a frame of kdsl's own code (a file under the kdsl package)."""
+    return os.path.abspath(filename).startswith(_PACKAGE_DIR)
+
+
+def filter_traceback(tb: types.TracebackType | None) -> types.TracebackType | None:
+    """``tb`` without kdsl-internal frames (the user's frames, in order)."""
+    out = None
+    for frame, lineno in reversed(list(traceback.walk_tb(tb))):
+        if not is_internal_frame(frame.f_code.co_filename):
+            out = types.TracebackType(out, frame, frame.f_lasti, lineno)
+    return out
+
+
+def hide_internal_frames(err: KdslError) -> KdslError:
+    """Drop kdsl-internal frames from ``err``'s traceback and add a note saying so,
+    unless ``KDSL_TRACEBACK=full``; re-raise it with a bare ``raise`` (which adds no
+    frame). Idempotent: nested boundaries filter again and note once."""
+    if not full_tracebacks():
+        err.with_traceback(filter_traceback(err.__traceback__))
+        if HIDDEN_FRAMES_NOTE not in getattr(err, "__notes__", ()):
+            err.add_note(HIDDEN_FRAMES_NOTE)
+    return err
+
+
+def api_boundary(fn: F) -> F:
+    """Make ``fn`` (a public entry point) drop kdsl-internal frames from the traceback
+    of a ``KdslError`` leaving it, unless ``KDSL_TRACEBACK=full``.
+
+    Boundaries nest: an inner one filters what is below it, the outer one the rest.
+    Only ``KdslError`` is filtered; any other exception (a kdsl bug, or the user's own
+    error inside a callback) keeps its full traceback. It costs a call; on the hottest
+    paths (``launch``) call ``hide_internal_frames`` in an ``except`` instead.
+    """
+
+    @functools.wraps(fn)
+    def boundary(*args: Any, **kwargs: Any) -> Any:
+        __tracebackhide__ = True  # pytest and IPython hide this frame too
+        try:
+            return fn(*args, **kwargs)
+        except KdslError as e:
+            hide_internal_frames(e)
+            raise
+
+    return boundary  # type: ignore[return-value]

@@ -21,7 +21,7 @@ from kdsl import config
 from kdsl.backends.base import Backend, CompiledKernel
 from kdsl.backends.registry import get_backend, is_registered
 from kdsl.compiler import compile_kernel
-from kdsl.errors import KdslError, KdslLaunchError
+from kdsl.errors import KdslError, KdslLaunchError, hide_internal_frames
 from kdsl.ir import types as T
 from kdsl.ir.core import Loc
 from kdsl.runtime import modules as _modules
@@ -419,13 +419,15 @@ def launch(
     array of an array argument (input gradients receive +=, output gradients hold
     the incoming gradient) or None for no gradient.
     """
-    if adjoint:
-        _launch_adjoint(
-            kernel, dim, inputs, outputs, adj_inputs, adj_outputs, device, stream, backend,
-            record_cmd,
-        )  # fmt: skip
-        return None
+    # One try, no wrapper: a kdsl error leaves with the user's frames only (zero cost
+    # until something is raised; launch is on the hot path).
     try:
+        if adjoint:
+            _launch_adjoint(
+                kernel, dim, inputs, outputs, adj_inputs, adj_outputs, device, stream, backend,
+                record_cmd,
+            )  # fmt: skip
+            return None
         if type(dim) is int and dim >= 0:
             dims: tuple[int, ...] = (dim,)
         else:
@@ -445,28 +447,32 @@ def launch(
         converted = [conv(v) for conv, v in zip(convs, args)]
         if len(dims) > 1 or (getattr(kernel, "tid_ndim", 0) or 0) > 1:
             check_tid(kernel, dims)
-    except KdslLaunchError as e:
-        raise locate_launch_error(e, kernel) from None
-    dev = plan.device
-    stream = resolve_stream(dev, stream)
-    if record_cmd:
-        return Launch(kernel, plan.backend, plan.compiled, dims, converted, dev, stream)
-    if _timing.RECORDING is None:
-        plan.backend.launch(plan.compiled, dims, converted, stream)
-    else:
-        _timing.timed_launch(
-            plan.backend, plan.compiled, dims, converted, stream, dev,
-            f"forward kernel {_kernel_name(kernel)}",
-        )  # fmt: skip
-    if _tape.ACTIVE and record_tape:
-        caller = sys._getframe(1)
-        _tape.ACTIVE[-1].record_launch(
-            kernel, dims, inputs, outputs, dev, max_blocks, block_dim,
-            {"caller": {"file": caller.f_code.co_filename, "lineno": caller.f_lineno,
-                        "func": caller.f_code.co_name}},
-            backend, stream,
-        )  # fmt: skip
-    return None
+        dev = plan.device
+        stream = resolve_stream(dev, stream)
+        if record_cmd:
+            return Launch(kernel, plan.backend, plan.compiled, dims, converted, dev, stream)
+        if _timing.RECORDING is None:
+            plan.backend.launch(plan.compiled, dims, converted, stream)
+        else:
+            _timing.timed_launch(
+                plan.backend, plan.compiled, dims, converted, stream, dev,
+                f"forward kernel {_kernel_name(kernel)}",
+            )  # fmt: skip
+        if _tape.ACTIVE and record_tape:
+            caller = sys._getframe(1)
+            _tape.ACTIVE[-1].record_launch(
+                kernel, dims, inputs, outputs, dev, max_blocks, block_dim,
+                {"caller": {"file": caller.f_code.co_filename, "lineno": caller.f_lineno,
+                            "func": caller.f_code.co_name}},
+                backend, stream,
+            )  # fmt: skip
+        return None
+    except KdslError as e:
+        if isinstance(e, KdslLaunchError):
+            locate_launch_error(e, kernel)
+            e.__suppress_context__ = True
+        hide_internal_frames(e)
+        raise
 
 
 def _adjoint_list(adj: Sequence[Any] | None, primal: Sequence[Any], what: str, name: str) -> list:

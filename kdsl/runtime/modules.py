@@ -20,7 +20,7 @@ import types
 from collections.abc import Iterable, Mapping
 from typing import Any
 
-from kdsl.errors import KdslError
+from kdsl.errors import KdslError, api_boundary
 from kdsl.frontend.kernel import Kernel, kernels_of_module, modules_with_kernels
 from kdsl.runtime.device import Device, get_device, get_devices
 
@@ -120,6 +120,7 @@ class Module:
             del out["mode"]  # None: kdsl.config.mode decides
         return out
 
+    @api_boundary
     def load(self, device: Any = None, block_dim: int | None = None) -> Module:
         """Compile every kernel of this module for ``device`` (the default device when None).
 
@@ -236,6 +237,7 @@ def _devices(device: Any) -> list[Device]:
     return [get_device(device)]
 
 
+@api_boundary
 def force_load(
     device: Any = None,
     modules: Iterable[Module] | None = None,

@@ -21,7 +21,7 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable, Sequence
 from typing import Any, NamedTuple
 
-from kdsl.errors import KdslError
+from kdsl.errors import KdslError, api_boundary
 from kdsl.runtime.array import array
 
 # The active tapes, outermost first; launch() records on the last one.
@@ -152,6 +152,7 @@ class Tape:
             return a.grad
         return None
 
+    @api_boundary
     def backward(self, loss: array | None = None, grads: dict[array, array] | None = None) -> None:
         """Run the recorded launches' adjoints, newest first.
 
