@@ -92,8 +92,23 @@ def dlpack_device(source: Any) -> tuple[int, int]:
     """``source.__dlpack_device__()`` (or a capsule's device) as plain ints."""
     if is_capsule(source):
         return capsule_device(source)
-    kind, index = source.__dlpack_device__()
-    return int(kind), int(index)
+    try:
+        kind, index = source.__dlpack_device__()
+        kind = int(kind)
+        index = None if index is None else int(index)
+    except (TypeError, ValueError) as e:
+        raise InteropTypeError(
+            f"{_name(source)} reports a DLPack device kdsl cannot read: {e}"
+        ) from None
+    if index is not None:
+        return kind, index
+    if kind in HOST_TYPES:
+        return kind, 0  # host memory has no device index; Paddle 3.3 reports None
+    raise InteropDeviceError(
+        f"{_name(source)} reports DLPack device type {kind} without a device id (None), "
+        "so kdsl cannot tell which GPU holds it; convert it with the framework's adapter "
+        "(from_paddle, from_torch) or pass a DLPack capsule"
+    )
 
 
 def buffer_from_dlpack(source: Any) -> tuple[Any, Device]:
