@@ -35,7 +35,8 @@ FACADES = {"__init__", "__main__", "cli", "testing", "tools"}
 #: against the public API (``wp.sin``, ``wp.vec3``), as user code is: the frontend
 #: resolves those names when it compiles a body, and ``kdsl/__init__.py`` imports the
 #: standard library last, so ``import kdsl as wp`` there sees every name it needs.
-ALLOWED = {("stdlib", "__init__")}
+#: Scenes are user code on the public API (``import kdsl``), like the standard library.
+ALLOWED = {("stdlib", "__init__"), ("scenes", "__init__")}
 RANK = {unit: rank for rank, units in enumerate(LAYERS) for unit in units}
 
 
