@@ -261,21 +261,24 @@ class ControlFlowLowering(ExpressionLowering):
         self.finish_loop(carried, op.results, body_vars, body_maybe, saved, target)
 
     def lower_range_as_while(self, target, lb, ub, step, carried, saved, body, node) -> None:
-        self.vars["$iv"] = lb
-        carried = ["$iv", *carried]
+        # One counter name per nesting level: an inner loop lowered this way must not
+        # rebind (and then drop) the counter of the loop around it.
+        name = f"$iv{sum(n.startswith('$iv') for n in self.vars)}"
+        self.vars[name] = lb
+        carried = [name, *carried]
 
         def cond(vals: dict[str, Value]) -> Value:
-            iv = vals["$iv"]
+            iv = vals[name]
             up = self.emit("arith.cmp", iv, ub, node=node, pred="lt")
             down = self.emit("arith.cmp", iv, ub, node=node, pred="gt")
             pos = self.emit("arith.cmp", step, self.const(0, I32, node), node=node, pred="gt")
             return self.emit("arith.select", pos, up, down, node=node)
 
         def step_fn(vals: dict[str, Value]) -> None:
-            vals["$iv"] = self.emit("arith.add", vals["$iv"], step, node=node)
+            vals[name] = self.emit("arith.add", vals[name], step, node=node)
 
         self.lower_while(carried, saved, body, node, cond, target, step_fn)
-        self.vars.pop("$iv", None)
+        self.vars.pop(name, None)
 
     def lower_while(self, carried, saved, body, node, cond_fn, target=None, step_fn=None) -> None:
         """An ``scf.while``: the condition (and the exit flags) in the before region."""

@@ -49,9 +49,11 @@ def _resolve_backend(backend: Any, device: Device) -> Backend:
         name = backend or default_backend_for(device)
         try:
             b = get_backend(name)
-        except KdslError:
+        except KdslError as e:
             if backend is None and name == "cpu":  # a broken cpu plugin: fall back
                 b = get_backend("interp")
+            elif backend is not None:  # the caller's backend= argument: a launch mistake
+                raise KdslLaunchError(f"launch(backend={backend!r}): {e.message}") from None
             else:
                 raise
     if not b.serves(device.alias):
