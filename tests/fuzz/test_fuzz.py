@@ -96,6 +96,19 @@ def test_ulp_distance_treats_nans_and_infinities():
     assert ulp_distance(a, b).tolist() == [0.0, 0.0, 0.0, np.inf]
 
 
+def test_known_issues_are_matched_by_their_text():
+    failure = FuzzFailure(
+        "gradient-cpu/internal", "TypeError: cannot add values of type struct<P>", ""
+    )
+    known = {r"cannot add values of type struct": "struct adjoint (issue 13)"}
+    assert known_issue(failure, known) == "struct adjoint (issue 13)"
+    assert known_issue(failure, {r"loop variable": "other"}) is None
+    assert (
+        failure.signature()
+        == "gradient-cpu/internal: TypeError: cannot add values of type struct<P>"
+    )
+
+
 def test_internal_errors_are_told_apart_from_user_errors():
     assert is_internal(TypeError("cannot add values of type struct<Params>"))
     assert is_internal(KdslError("internal: loop variable $iv lost"))

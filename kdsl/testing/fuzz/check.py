@@ -214,8 +214,13 @@ def check_valid(program: Program, backends: Sequence[str] = ("interp", "cpu")) -
 # --------------------------------------------------------------------------- gradients
 
 
+def device_of(backend: str) -> str:
+    """The device a fuzzed program runs on for ``backend`` (as its ``run`` picks it)."""
+    return "cuda" if backend == "cuda" else "cpu"
+
+
 def _loss(module: ModuleType, backend: str, xs: np.ndarray) -> float:
-    args = module.make_args()
+    args = module.make_args(device=device_of(backend))
     args[0].assign(xs)
     module.run(backend, args)
     out, acc = args[4].numpy(), args[6].numpy()
@@ -252,14 +257,15 @@ def check_gradient(module: ModuleType, backend: str, source: str = "") -> None:
     """(d): ``Tape`` gradients of the loss in ``xs`` agree with finite differences."""
     import kdsl as wp
 
-    args = module.make_args(requires_grad=True)
+    device = device_of(backend)
+    args = module.make_args(requires_grad=True, device=device)
     x0 = args[0].numpy().astype(np.float64)
     tape = wp.Tape()
     with tape:
         module.run(backend, args)
     seeds = {
-        args[4]: wp.array(_WEIGHTS[:N], dtype=wp.float64),
-        args[6]: wp.array(_WEIGHTS[N:], dtype=wp.float64),
+        args[4]: wp.array(_WEIGHTS[:N], dtype=wp.float64, device=device),
+        args[6]: wp.array(_WEIGHTS[N:], dtype=wp.float64, device=device),
     }
     tape.backward(grads=seeds)
     ad = args[0].grad.numpy().astype(np.float64)

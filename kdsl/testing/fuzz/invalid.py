@@ -55,14 +55,14 @@ BAD_LINES: dict[str, tuple[str, ...]] = {
 
 #: Launch calls with wrong arguments (``run``'s launch line is replaced).
 BAD_LAUNCHES: tuple[str, ...] = (
-    "wp.launch(fuzz_kernel, dim=N, inputs=args[:-1], device='cpu', backend=backend)",
-    "wp.launch(fuzz_kernel, dim=N, inputs=[args[1], *args[1:]], device='cpu', backend=backend)",
-    "wp.launch(fuzz_kernel, dim=N, inputs=[*args[:2], F(1.0), *args[3:]], device='cpu', backend=backend)",
-    "wp.launch(fuzz_kernel, dim=N, inputs=[*args[:7], 5], device='cpu', backend=backend)",
-    "wp.launch(fuzz_kernel, dim=N, inputs=[*args, args[0]], device='cpu', backend=backend)",
-    "wp.launch(fuzz_kernel, dim=N, inputs=[*args[:4], args[5], args[5], *args[6:]], device='cpu', backend=backend)",
-    "wp.launch(fuzz_kernel, dim=N, inputs=args, device='cpu', backend='no_such_backend')",
-    "wp.launch(fuzz_kernel, dim=N, inputs=[args[0].reshape((2, 3)), *args[1:]], device='cpu', backend=backend)",
+    "wp.launch(fuzz_kernel, dim=N, inputs=args[:-1], device=device, backend=backend)",
+    "wp.launch(fuzz_kernel, dim=N, inputs=[args[1], *args[1:]], device=device, backend=backend)",
+    "wp.launch(fuzz_kernel, dim=N, inputs=[*args[:2], F(1.0), *args[3:]], device=device, backend=backend)",
+    "wp.launch(fuzz_kernel, dim=N, inputs=[*args[:7], 5], device=device, backend=backend)",
+    "wp.launch(fuzz_kernel, dim=N, inputs=[*args, args[0]], device=device, backend=backend)",
+    "wp.launch(fuzz_kernel, dim=N, inputs=[*args[:4], args[5], args[5], *args[6:]], device=device, backend=backend)",
+    "wp.launch(fuzz_kernel, dim=N, inputs=args, device=device, backend='no_such_backend')",
+    "wp.launch(fuzz_kernel, dim=N, inputs=[args[0].reshape((2, 3)), *args[1:]], device=device, backend=backend)",
 )
 
 

@@ -215,31 +215,32 @@ class Program:
         """``make_args`` and ``run``: the program's inputs and a launch on one backend."""
         a = self.inputs
         launch = self.launch_override or (
-            "wp.launch(fuzz_kernel, dim=N, inputs=args, device='cpu', backend=backend)"
+            "wp.launch(fuzz_kernel, dim=N, inputs=args, device=device, backend=backend)"
         )
         return [
             f"N = {N}",
             "",
             "",
-            "def make_args(requires_grad=False):",
+            "def make_args(requires_grad=False, device='cpu'):",
             '    """The kernel\'s arguments, in order (outputs zeroed)."""',
             "    dt = wp.dtype_to_numpy(F)",
-            f"    xs = wp.array(np.array({list(a.xs)!r}, dtype=dt), dtype=F, requires_grad=requires_grad)",
-            f"    ns = wp.array(np.array({list(a.ns)!r}, dtype=np.int32), dtype=wp.int32)",
+            f"    xs = wp.array(np.array({list(a.xs)!r}, dtype=dt), dtype=F, requires_grad=requires_grad, device=device)",
+            f"    ns = wp.array(np.array({list(a.ns)!r}, dtype=np.int32), dtype=wp.int32, device=device)",
             "    p = Params()",
             f"    p.a, p.v, p.n = F({a.pa!r}), V3({a.pv[0]!r}, {a.pv[1]!r}, {a.pv[2]!r}), {a.pn}",
             f"    p.inner.w, p.inner.k = F({a.pw!r}), wp.int16({a.pk})",
-            f"    ps = wp.array([p] * {M}, dtype=Params)",
-            "    out = wp.zeros(N, dtype=F, requires_grad=requires_grad)",
-            "    iout = wp.zeros(N, dtype=wp.int32)",
-            "    acc = wp.zeros(3, dtype=F, requires_grad=requires_grad)",
-            "    iacc = wp.zeros(3, dtype=wp.int32)",
+            f"    ps = wp.array([p] * {M}, dtype=Params, device=device)",
+            "    out = wp.zeros(N, dtype=F, requires_grad=requires_grad, device=device)",
+            "    iout = wp.zeros(N, dtype=wp.int32, device=device)",
+            "    acc = wp.zeros(3, dtype=F, requires_grad=requires_grad, device=device)",
+            "    iacc = wp.zeros(3, dtype=wp.int32, device=device)",
             "    return [xs, ns, p, ps, out, iout, acc, iacc]",
             "",
             "",
             "def run(backend, args=None):",
             '    """Launch the kernel on ``backend``; returns its argument list."""',
-            "    args = make_args() if args is None else args",
+            "    device = 'cuda' if backend == 'cuda' else 'cpu'",
+            "    args = make_args(device=device) if args is None else args",
             f"    {launch}",
             "    return args",
             "",

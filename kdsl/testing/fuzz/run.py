@@ -28,9 +28,8 @@ from kdsl.testing.fuzz.program import Program
 
 #: Open defects the fuzzer finds, by a pattern of the failure's text: what they are.
 #: Each is written up in docs/testing.md ("Findings"); remove an entry once it is fixed.
-KNOWN_ISSUES: dict[str, str] = {
-    r"cannot add values of type struct": "adjoint of a kernel that reads struct fields (issue 13)",
-}
+#: Empty while every finding is fixed; e.g. ``{r"cannot add values of type struct": "..."}``.
+KNOWN_ISSUES: dict[str, str] = {}
 
 
 def known_issue(failure: FuzzFailure, known: dict[str, str]) -> str | None:
