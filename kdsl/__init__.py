@@ -36,5 +36,6 @@ from kdsl.stdlib.api import *
 # ``kdsl.autograd`` and ``kdsl.utils`` (Warp's ``warp.autograd``, ``warp.utils``) are built
 # on the runtime above.
 from kdsl import autograd, utils
+from kdsl.geometry import *
 
 __version__ = "0.1.0"

@@ -27,6 +27,7 @@ from kdsl.frontend import (
     builtins_linalg,
     builtins_math,
     builtins_ops,
+    builtins_records,
     geometry,
     printing,
 )
@@ -39,6 +40,7 @@ TABLES: tuple[BuiltinTable, ...] = (
     builtins_math.TABLE,
     builtins_linalg.TABLE,
     builtins_ops.TABLE,
+    builtins_records.TABLE,
     geometry.TABLE,
     printing.TABLE,
 )

@@ -59,12 +59,14 @@ def static_callee(node: ast.expr, local_names: set[str], scope: dict[str, Any]) 
 def inout_positions(fn: Any, nargs: int) -> set[int]:
     """Argument positions a call of ``fn`` with ``nargs`` arguments may write back.
 
-    The union over ``fn``'s overloads of that arity: over-approximating only
-    costs an unchanged loop-carried value.
+    The union over ``fn``'s overloads that take ``nargs`` positional arguments (some
+    parameters may keep their defaults): over-approximating only costs an unchanged
+    loop-carried value.
     """
     out: set[int] = set()
     for ov in getattr(fn, "__kdsl_overloads__", None) or ():
         params = ov.inout_params()
-        if params and len(ov.src.tree.args.args) == nargs:
-            out.update(params)
+        spec = ov.src.tree.args
+        if params and len(spec.args) - len(spec.defaults) <= nargs <= len(spec.args):
+            out.update(p for p in params if p < nargs)
     return out

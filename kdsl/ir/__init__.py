@@ -14,6 +14,7 @@ from kdsl.ir import (
     ops_print,
     ops_scf,
     ops_vec,
+    records,
     types,
 )
 from kdsl.ir.builder import Builder, create_op, new_func

@@ -1,6 +1,7 @@
 """Public names of the standard library, star-imported into ``kdsl``."""
 
 from kdsl.stdlib.algorithms import *  # noqa: F403
+from kdsl.stdlib.bvh import *  # noqa: F403
 from kdsl.stdlib.linalg import *  # noqa: F403
 from kdsl.stdlib.noise import *  # noqa: F403
 from kdsl.stdlib.quat import *  # noqa: F403

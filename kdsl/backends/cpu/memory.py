@@ -19,6 +19,7 @@ from kdsl.errors import KdslCapabilityError
 from kdsl.ir import types as T
 from kdsl.ir.core import Operation, Value
 from kdsl.ir.lowering import LOWERINGS
+from kdsl.ir.records import element_strides, record_dtype
 
 CPU = LOWERINGS.for_backend("cpu")
 
@@ -69,8 +70,9 @@ def _components(em: Emitter, ptr: ir.Value, t: T.Type) -> list[ir.Value]:
 
 
 def _fields(em: Emitter, ptr: ir.Value, t: T.StructType) -> list[tuple[ir.Value, T.Type]]:
-    """(address, type) of each field of a struct stored at ``ptr`` (C layout, see types)."""
-    dt = T.storage_dtype(t)
+    """(address, type) of each field of a struct stored at ``ptr`` (C layout, see types;
+    ``record_dtype`` is ``storage_dtype`` extended to the records' array fields)."""
+    dt = record_dtype(t)
     out = []
     for name, ft in t.fields:
         off = ir.Constant(LT.I64, dt.fields[name][1])
@@ -96,6 +98,30 @@ def load_value(em: Emitter, ptr: ir.Value, t: T.Type) -> Any:
             raw = em.b.icmp_unsigned("!=", raw, em.const(raw.type, 0))
         out.append(raw)
     return out[0] if isinstance(t, T.ScalarType) else Parts(out)
+
+
+def load_record(em: Emitter, ptr: ir.Value, t: T.Type) -> Any:
+    """Load a record field of IR type ``t`` (``kdsl.ir.records``): as ``load_value``, plus
+    array descriptors, whose strides the record holds in bytes and registers in scalars."""
+    B = em.b
+    if isinstance(t, T.StructType):
+        return Parts(load_record(em, p, ft) for p, ft in _fields(em, ptr, t))
+    if isinstance(t, T.HandleType):
+        return B.load(ptr, typ=LT.I64, align=8)
+    if not isinstance(t, T.ArrayType):
+        return load_value(em, ptr, t)
+    desc = B.load(ptr, typ=LT.descriptor_type(t.ndim), align=8)
+    unit, _ = element_strides(t)
+    shift = ir.Constant(LT.I64, unit.bit_length() - 1)
+    for d in range(t.ndim):
+        s = B.extract_value(desc, [2, d])
+        desc = B.insert_value(desc, B.ashr(s, shift, flags=["exact"]), [2, d])
+    return desc
+
+
+def _record(em: Emitter, op: Operation) -> Any:
+    ptr = em.b.inttoptr(em.get(op.operands[0]), LT.PTR)
+    return load_record(em, ptr, op.results[0].type)
 
 
 def store_value(em: Emitter, value: Any, ptr: ir.Value, t: T.Type) -> None:
@@ -235,6 +261,7 @@ CPU.register("kd.block_dim", lambda em, op: ir.Constant(LT.I32, 1))  # one threa
 CPU.register("kd.array_shape", _array_shape)
 CPU.register("kd.load", _load)
 CPU.register("kd.array_view", _array_view)
+CPU.register("kd.record", _record)
 CPU.register("kd.store", _store)
 CPU.register("kd.atomic_rmw", _atomic)
 CPU.register("kd.atomic_cas", _atomic_cas)

@@ -79,6 +79,13 @@ def _array_view(em: FuncEmitter, op: Operation) -> str:
     return f"{name}({em.get(op.operands[0])}, {', '.join(em.get(i) for i in op.operands[1:])})"
 
 
+def _record(em: FuncEmitter, op: Operation) -> str:
+    """The object record at address ``id``: the C struct has the record's layout
+    (``kdsl.ir.records``; CUDA array descriptors also count strides in bytes)."""
+    t = op.results[0].type
+    return f"(*(const {em.ctype(t)} *){em.get(op.operands[0])})"
+
+
 def _store(em: FuncEmitter, op: Operation) -> None:
     t = op.operands[0].type
     v = em.get(op.operands[0])
@@ -261,6 +268,7 @@ CUDA.register("kd.block_dim", lambda em, op: "(int)blockDim.x")
 CUDA.register("kd.array_shape", _array_shape)
 CUDA.register("kd.load", _load)
 CUDA.register("kd.array_view", _array_view)
+CUDA.register("kd.record", _record)
 CUDA.register("kd.store", _store)
 CUDA.register("kd.atomic_rmw", _atomic)
 CUDA.register("kd.atomic_cas", _atomic_cas)

@@ -1,0 +1,9 @@
+"""Geometry objects on the shared runtime: ``Bvh`` (and, built on it, ``Mesh``).
+
+Their queries are kernel code in the standard library (``kdsl.stdlib.bvh``); this
+package builds and updates the objects' arrays and records.
+"""
+
+from kdsl.geometry.bvh import Bvh
+
+__all__ = ["Bvh"]

@@ -1,0 +1,146 @@
+"""The per-device object table: where runtime objects keep the records kernels read.
+
+A geometry object (``Bvh``, ``Mesh``...) is named in kernels by a ``uint64`` id, the
+address of its *record* on its device (see ``kdsl.ir.records``): a struct holding
+the object's array descriptors and scalars, first of all a tag that says which kind
+of object it is. This module allocates records, writes them and frees them.
+
+Records come from slabs that are never given back to the allocator: a freed record's
+tag is zeroed and its slot recycled oldest first, so a stale id still points at
+readable memory and a debug build's ``kd.check_record`` reports it instead of reading
+freed memory. ``owner_of`` tells which live object an id belongs to (the launch
+checks an id's device with it).
+"""
+
+from __future__ import annotations
+
+import collections
+import ctypes
+import threading
+import weakref
+from typing import Any
+
+import numpy as np
+
+from kdsl.errors import KdslLaunchError
+from kdsl.ir import types as T
+from kdsl.ir.records import record_dtype, record_tag
+from kdsl.runtime import alloc
+from kdsl.runtime.array import array
+from kdsl.runtime.device import Device, get_device
+
+#: Bytes per slab; records are rounded up to a multiple of ``_GRAIN``.
+_SLAB = 1 << 16
+_GRAIN = 64
+
+
+class _DeviceTable:
+    """The record slabs and free slots of one device."""
+
+    def __init__(self, device: Device) -> None:
+        self.device = device
+        self.slabs: list[array] = []  # kept alive for the life of the process
+        self.free: dict[int, collections.deque[int]] = collections.defaultdict(collections.deque)
+        self.next: tuple[int, int] = (0, 0)  # (slab base address, next free offset)
+
+    def allocate(self, size: int) -> int:
+        size = -(-size // _GRAIN) * _GRAIN
+        if size > _SLAB:
+            raise KdslLaunchError(f"an object record of {size} bytes exceeds {_SLAB}")
+        slots = self.free[size]
+        if slots:
+            return slots.popleft()
+        base, used = self.next
+        if not self.slabs or used + size > _SLAB:
+            slab = alloc.zeros(_SLAB, dtype=T.U8, device=self.device)
+            self.slabs.append(slab)
+            base, used = slab.ptr, 0
+        self.next = (base, used + size)
+        return base + used
+
+    def write(self, address: int, data: bytes) -> None:
+        if self.device.is_cpu:
+            ctypes.memmove(address, data, len(data))
+            return
+        slab, offset = self._locate(address)
+        src = np.frombuffer(data, dtype=np.uint8)
+        alloc.copy(slab, array(src, dtype=T.U8, device="cpu"), dest_offset=offset)
+
+    def _locate(self, address: int) -> tuple[array, int]:
+        for slab in self.slabs:
+            if slab.ptr <= address < slab.ptr + _SLAB:
+                return slab, address - slab.ptr
+        raise KdslLaunchError(f"address {address:#x} is not an object record of {self.device}")
+
+
+_tables: dict[str, _DeviceTable] = {}
+_owners: dict[int, tuple[weakref.ref, str, str]] = {}
+_lock = threading.Lock()
+
+
+def _table(device: Device) -> _DeviceTable:
+    table = _tables.get(device.alias)
+    if table is None:
+        table = _tables[device.alias] = _DeviceTable(device)
+    return table
+
+
+def pack_record(t: T.StructType, kind: str, fields: dict[str, Any]) -> bytes:
+    """The bytes of a record of struct type ``t`` for an object of ``kind``.
+
+    ``fields`` maps each field but the tag (the first) to its value: a ``kdsl.array``
+    for an array field (its descriptor is written: address, shape, byte strides), a
+    number or vector otherwise.
+    """
+    rec = np.zeros((), dtype=record_dtype(t))
+    tag_name = t.fields[0][0]
+    rec[tag_name] = record_tag(kind)
+    for name, ft in t.fields[1:]:
+        value = fields[name]
+        if isinstance(ft, T.ArrayType):
+            rec[name] = [value.ptr or 0, *value.shape, *value.strides]
+        else:
+            rec[name] = np.asarray(value)
+    return rec.tobytes()
+
+
+class ObjectRecord:
+    """One object's record on its device: allocated on creation, rewritten by ``write``,
+    its tag zeroed and slot recycled by ``free`` (or when the owner is collected)."""
+
+    def __init__(self, owner: Any, t: T.StructType, kind: str, device: Any) -> None:
+        self.type, self.kind = t, kind
+        self.device = get_device(device)
+        size = record_dtype(t).itemsize
+        with _lock:
+            self.id = _table(self.device).allocate(size)
+            _owners[self.id] = (weakref.ref(owner), kind, self.device.alias)
+        self._size = size
+        self._finalizer = weakref.finalize(owner, _release, self.device, self.id, size)
+
+    def write(self, fields: dict[str, Any]) -> None:
+        """Write the record from ``fields`` (see ``pack_record``)."""
+        data = pack_record(self.type, self.kind, fields)
+        with _lock:
+            _table(self.device).write(self.id, data)
+
+    def free(self) -> None:
+        """Zero the tag and recycle the slot now (idempotent)."""
+        self._finalizer()
+
+
+def _release(device: Device, address: int, size: int) -> None:
+    with _lock:
+        table = _table(device)
+        table.write(address, bytes(8))  # the tag: a stale id now fails kd.check_record
+        table.free[-(-size // _GRAIN) * _GRAIN].append(address)
+        _owners.pop(address, None)
+
+
+def owner_of(object_id: int) -> tuple[Any, str, str] | None:
+    """(owner object, kind, device alias) of a live object's id, or None."""
+    hit = _owners.get(int(object_id))
+    if hit is None:
+        return None
+    owner = hit[0]()
+    return None if owner is None else (owner, hit[1], hit[2])

@@ -1,0 +1,213 @@
+"""kdsl standard library: BVH queries (Warp's ``bvh_query_*``), in kdsl.
+
+A ``kdsl.Bvh`` is a binary tree of boxes over the boxes (items) it was built from.
+Kernels reach it through its record (``BvhRecord``, read with ``object_record``):
+
+- node ``n`` has bounds ``lowers[n]``, ``uppers[n]``; when ``left[n] >= 0`` it is an
+  inner node with children ``left[n]`` and ``right[n]``, otherwise a leaf holding the
+  items ``items[-left[n] - 1 : -left[n] - 1 + right[n]]``;
+- ``item_lowers`` / ``item_uppers`` are the boxes the BVH was built over (the user's
+  arrays), ``group_roots[g]`` is the root node of group ``g``'s subtree.
+
+A query is a ``BvhQuery`` value holding its own traversal stack; ``bvh_query_next``
+advances it (an in-out argument, as Warp's) and gives the next item whose box the
+query's shape touches. Items come in traversal order (depth first, left child first).
+"""
+
+import kdsl as wp
+from kdsl.frontend.inout import inout
+from kdsl.frontend.kernel import func
+from kdsl.types import vector
+
+__kdsl_group__ = "geometry"
+
+__all__ = [
+    "BvhQuery", "bvh_get_group_root", "bvh_query_aabb", "bvh_query_capsule", "bvh_query_next",
+    "bvh_query_ray", "bvh_query_sphere",
+]  # fmt: skip
+
+#: Depth of a query's traversal stack: the builders keep trees shallower than this.
+STACK_DEPTH = 64
+#: What a query tests: its kind.
+AABB, RAY, SPHERE, CAPSULE = 0, 1, 2, 3
+
+Stack = vector(STACK_DEPTH, wp.int32)
+
+
+@wp.struct
+class BvhRecord:
+    """The record of a ``kdsl.Bvh`` (see the module docstring)."""
+
+    tag: wp.uint64
+    lowers: wp.array(dtype=wp.vec3)
+    uppers: wp.array(dtype=wp.vec3)
+    left: wp.array(dtype=wp.int32)
+    right: wp.array(dtype=wp.int32)
+    items: wp.array(dtype=wp.int32)
+    item_lowers: wp.array(dtype=wp.vec3)
+    item_uppers: wp.array(dtype=wp.vec3)
+    group_roots: wp.array(dtype=wp.int32)
+    root: wp.int32
+
+
+@wp.struct
+class BvhQuery:
+    """A query in progress against a ``kdsl.Bvh`` (Warp's ``bvh_query_t``).
+
+    ``a``, ``b`` and ``radius`` hold the query's shape: the box ``[a, b]``, the ray
+    ``a + t b``, the sphere at ``a``, the capsule swept from ``a`` along ``b``.
+    """
+
+    bvh: wp.uint64
+    kind: wp.int32
+    a: wp.vec3
+    b: wp.vec3
+    inv_b: wp.vec3
+    radius: wp.float32
+    stack: Stack
+    count: wp.int32
+    leaf_pos: wp.int32
+    leaf_end: wp.int32
+
+
+@func
+def _bvh_query(
+    id: wp.uint64, kind: wp.int32, a: wp.vec3, b: wp.vec3, radius: float, root: int
+) -> BvhQuery:
+    q = BvhQuery()
+    q.bvh = id
+    q.kind = kind
+    q.a = a
+    q.b = b
+    q.inv_b = wp.vec3(_safe_inv(b[0]), _safe_inv(b[1]), _safe_inv(b[2]))
+    q.radius = radius
+    rec = wp.object_record(id, BvhRecord)
+    start = root
+    if start < 0:
+        start = rec.root
+    stack = Stack()
+    stack[0] = start
+    q.stack = stack
+    q.count = 1
+    if start < 0:  # an empty BVH
+        q.count = 0
+    q.leaf_pos = 0
+    q.leaf_end = 0
+    return q
+
+
+@func
+def _safe_inv(x: float) -> float:
+    # A zero direction component gives a slab that is all or nothing; a large finite
+    # value (not inf) keeps 0 * inv at 0 for a ray starting on the slab's face.
+    if x == 0.0:
+        return 1.0e30
+    return 1.0 / x
+
+
+@func
+def bvh_query_aabb(id: wp.uint64, low: wp.vec3, high: wp.vec3, root: int = -1) -> BvhQuery:
+    """A query for the items whose box overlaps ``[low, high]`` (closed boxes: touching
+    counts), from node ``root`` (-1: the BVH's root). Advance it with ``bvh_query_next``."""
+    return _bvh_query(id, AABB, low, high, 0.0, root)
+
+
+@func
+def bvh_query_ray(id: wp.uint64, start: wp.vec3, dir: wp.vec3, root: int = -1) -> BvhQuery:
+    """A query for the items whose box the ray ``start + t * dir`` (``t >= 0``, and ``t <=
+    max_dist`` of ``bvh_query_next``) meets. ``dir`` need not be normalized."""
+    return _bvh_query(id, RAY, start, dir, 0.0, root)
+
+
+@func
+def bvh_query_sphere(id: wp.uint64, center: wp.vec3, radius: float, root: int = -1) -> BvhQuery:
+    """A query for the items whose box is within ``radius`` of ``center``."""
+    return _bvh_query(id, SPHERE, center, wp.vec3(0.0), radius, root)
+
+
+@func
+def bvh_query_capsule(
+    id: wp.uint64, start: wp.vec3, dir: wp.vec3, radius: float, root: int = -1
+) -> BvhQuery:
+    """A conservative capsule sweep: the items whose box, grown by ``radius``, the ray
+    ``start + t * dir`` (``0 <= t <= max_dist``) meets."""
+    return _bvh_query(id, CAPSULE, start, dir, radius, root)
+
+
+@func
+def _ray_box(lo: wp.vec3, hi: wp.vec3, start: wp.vec3, inv: wp.vec3, max_t: float) -> bool:
+    """Whether the ray meets the closed box ``[lo, hi]`` at some ``0 <= t <= max_t``."""
+    t0 = wp.cw_mul(lo - start, inv)
+    t1 = wp.cw_mul(hi - start, inv)
+    tmin = wp.max(wp.max(wp.min(t0[0], t1[0]), wp.min(t0[1], t1[1])), wp.min(t0[2], t1[2]))
+    tmax = wp.min(wp.min(wp.max(t0[0], t1[0]), wp.max(t0[1], t1[1])), wp.max(t0[2], t1[2]))
+    return tmin <= tmax and tmax >= 0.0 and tmin <= max_t
+
+
+@func
+def _box_distance_sq(lo: wp.vec3, hi: wp.vec3, p: wp.vec3) -> float:
+    """Squared distance from ``p`` to the closed box ``[lo, hi]`` (0 inside)."""
+    d = wp.max(wp.max(lo - p, p - hi), wp.vec3(0.0))
+    return wp.dot(d, d)
+
+
+@func
+def _touches(q: BvhQuery, lo: wp.vec3, hi: wp.vec3, max_dist: float) -> bool:
+    """Whether the query's shape touches the box ``[lo, hi]``."""
+    if q.kind == AABB:
+        return (
+            lo[0] <= q.b[0] and hi[0] >= q.a[0] and lo[1] <= q.b[1] and hi[1] >= q.a[1]
+            and lo[2] <= q.b[2] and hi[2] >= q.a[2]
+        )  # fmt: skip
+    if q.kind == SPHERE:
+        return _box_distance_sq(lo, hi, q.a) <= q.radius * q.radius
+    if q.kind == CAPSULE:
+        r = wp.vec3(q.radius)
+        return _ray_box(lo - r, hi + r, q.a, q.inv_b, max_dist)
+    return _ray_box(lo, hi, q.a, q.inv_b, max_dist)
+
+
+@func
+def bvh_query_next(
+    query: inout(BvhQuery), index: inout(wp.int32), max_dist: float = 1.0e38
+) -> bool:
+    """Advance ``query`` to the next item its shape touches: writes the item's index
+    (into the arrays the BVH was built from) to ``index`` and gives True, or gives False
+    (``index`` unchanged) when no item is left. ``max_dist`` bounds ray and capsule
+    queries (in multiples of ``dir``'s length); it may only shrink during a query."""
+    rec = wp.object_record(query.bvh, BvhRecord)
+    found = False
+    while not found:
+        if query.leaf_pos < query.leaf_end:
+            item = rec.items[query.leaf_pos]
+            query.leaf_pos = query.leaf_pos + 1
+            if _touches(query, rec.item_lowers[item], rec.item_uppers[item], max_dist):
+                index = item  # noqa: F841 - an in-out parameter: the caller sees it
+                found = True
+        elif query.count == 0:
+            break
+        else:
+            query.count = query.count - 1
+            node = query.stack[query.count]
+            if _touches(query, rec.lowers[node], rec.uppers[node], max_dist):
+                left = rec.left[node]
+                if left < 0:
+                    query.leaf_pos = -left - 1
+                    query.leaf_end = query.leaf_pos + rec.right[node]
+                else:
+                    stack = query.stack
+                    stack[query.count] = rec.right[node]
+                    stack[query.count + 1] = left
+                    query.stack = stack
+                    query.count = query.count + 2
+    return found
+
+
+@func
+def bvh_get_group_root(id: wp.uint64, group: int) -> int:
+    """The root node of group ``group``'s subtree (pass it as a query's ``root``), or -1
+    for a group with no items."""
+    rec = wp.object_record(id, BvhRecord)
+    if group < 0 or group >= rec.group_roots.shape[0]:
+        return -1
+    return rec.group_roots[group]
