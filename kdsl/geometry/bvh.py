@@ -78,7 +78,7 @@ class Bvh:
         tree = self._tree
         self._topology = {
             name: array(getattr(tree, name), dtype=T.I32, device=self.device)
-            for name in ("left", "right", "items", "group_roots")
+            for name in ("skip", "first", "count", "items", "group_roots")
         }
         self._bounds = [
             array(np.zeros((tree.num_nodes, 3), np.float32), dtype=VEC3, device=self.device)

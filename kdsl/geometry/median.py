@@ -6,9 +6,9 @@ array passes per level rather than Python work per node. With groups, items are
 first ordered by group and a node holding several groups splits at the group
 boundary nearest its middle, so every group ends up as one subtree.
 
-The result (``Tree``) is the layout ``kdsl.stdlib.bvh`` documents: ``left``/``right``
-children (a leaf: ``left = -first - 1``, ``right = count``), ``items`` in leaf order,
-and per node its ``level`` (for the bottom-up bounds pass, ``refit_bounds``).
+The build numbers nodes level by level; ``Tree`` renumbers them in depth-first
+preorder, the layout ``kdsl.stdlib.bvh`` documents (``skip``, ``first``, ``count``),
+and keeps per node its ``level`` (for the bottom-up bounds pass, ``refit_bounds``).
 """
 
 from __future__ import annotations
@@ -20,10 +20,14 @@ import numpy as np
 
 @dataclass
 class Tree:
-    """A BVH's topology on the host (bounds come from ``refit_bounds``)."""
+    """A BVH's topology on the host, nodes in depth-first preorder (bounds come from
+    ``refit_bounds``). An inner node's left child is the next node; ``skip[n]`` is the
+    first node after ``n``'s subtree."""
 
-    left: np.ndarray  # int32 per node
-    right: np.ndarray  # int32 per node
+    skip: np.ndarray  # int32 per node
+    first: np.ndarray  # int32 per node: a leaf's first position in ``items``, -1 inner
+    count: np.ndarray  # int32 per node: a leaf's number of items, 0 inner
+    right: np.ndarray  # int32 per node: an inner node's right child, -1 for a leaf
     items: np.ndarray  # int32 item indices in leaf order
     level: np.ndarray  # int32 depth of each node
     group_roots: np.ndarray  # int32 root node of each group (-1 for an empty group)
@@ -31,7 +35,42 @@ class Tree:
     @property
     def num_nodes(self) -> int:
         """Number of nodes."""
-        return len(self.left)
+        return len(self.skip)
+
+
+def preorder_tree(
+    left: np.ndarray, right: np.ndarray, level: np.ndarray, items: np.ndarray,
+    group_roots: np.ndarray,
+) -> Tree:  # fmt: skip
+    """A ``Tree`` from a tree numbered in any top-down order (children after parents):
+    ``left[n] >= 0`` gives inner nodes' children, a leaf has ``left = -first - 1`` and
+    ``right = count``."""
+    m = len(left)
+    inner = left >= 0
+    size = np.ones(m, np.int64)
+    by_depth = np.argsort(level, kind="stable")
+    for d in range(int(level.max(initial=0)), -1, -1):  # subtree sizes, bottom up
+        at = by_depth[level[by_depth] == d]
+        at = at[inner[at]]
+        size[at] = 1 + size[left[at]] + size[right[at]]
+    pre = np.zeros(m, np.int64)
+    for d in range(int(level.max(initial=0)) + 1):  # preorder numbers, top down
+        at = by_depth[level[by_depth] == d]
+        at = at[inner[at]]
+        pre[left[at]] = pre[at] + 1
+        pre[right[at]] = pre[at] + 1 + size[left[at]]
+    skip = np.empty(m, np.int32)
+    first = np.full(m, -1, np.int32)
+    count = np.zeros(m, np.int32)
+    rchild = np.full(m, -1, np.int32)
+    skip[pre] = pre + size
+    first[pre[~inner]] = -left[~inner] - 1
+    count[pre[~inner]] = right[~inner]
+    rchild[pre[inner]] = pre[right[inner]]
+    lvl = np.empty(m, np.int32)
+    lvl[pre] = level
+    roots = np.where(group_roots >= 0, pre[np.maximum(group_roots, 0)], -1).astype(np.int32)
+    return Tree(skip, first, count, rchild, items.astype(np.int32), lvl, roots)
 
 
 def build_median(
@@ -53,7 +92,7 @@ def build_median(
     level = np.zeros(cap, np.int32)
     group_roots = np.full(ngroups, -1, np.int32)
     if n == 0:
-        return Tree(left[:0], right[:0], order.astype(np.int32), level[:0], group_roots)
+        return preorder_tree(left[:0], right[:0], level[:0], order, group_roots)
     starts, counts, nodes = np.array([0]), np.array([n]), np.array([0])
     next_node, depth = 1, 0
     while len(starts):
@@ -74,7 +113,7 @@ def build_median(
         nodes = kids
         depth += 1
     m = next_node
-    return Tree(left[:m], right[:m], order.astype(np.int32), level[:m], group_roots)
+    return preorder_tree(left[:m], right[:m], level[:m], order, group_roots)
 
 
 def _note_group_roots(group_of, order, starts, counts, nodes, group_roots) -> None:
@@ -131,16 +170,16 @@ def refit_bounds(
     hi = np.empty((m, 3), np.float32)
     if m == 0:
         return lo, hi
-    leaf = np.flatnonzero(tree.left < 0)
-    first = -tree.left[leaf] - 1
+    leaf = np.flatnonzero(tree.first >= 0)
+    first = tree.first[leaf]
     by_start = np.argsort(first)
     leaf, first = leaf[by_start], first[by_start]
     lo[leaf] = np.minimum.reduceat(lowers[tree.items], first, axis=0)
     hi[leaf] = np.maximum.reduceat(uppers[tree.items], first, axis=0)
-    inner = np.flatnonzero(tree.left >= 0)
+    inner = np.flatnonzero(tree.first < 0)
     for d in range(int(tree.level.max()), -1, -1):
         at = inner[tree.level[inner] == d]
-        a, b = tree.left[at], tree.right[at]
+        a, b = at + 1, tree.right[at]
         lo[at] = np.minimum(lo[a], lo[b])
         hi[at] = np.maximum(hi[a], hi[b])
     return lo, hi

@@ -3,21 +3,24 @@
 A ``kdsl.Bvh`` is a binary tree of boxes over the boxes (items) it was built from.
 Kernels reach it through its record (``BvhRecord``, read with ``object_record``):
 
-- node ``n`` has bounds ``lowers[n]``, ``uppers[n]``; when ``left[n] >= 0`` it is an
-  inner node with children ``left[n]`` and ``right[n]``, otherwise a leaf holding the
-  items ``items[-left[n] - 1 : -left[n] - 1 + right[n]]``;
+- nodes are numbered in depth-first preorder: node ``n`` has bounds ``lowers[n]``,
+  ``uppers[n]``; its subtree is the nodes ``n .. skip[n] - 1``; a leaf holds the items
+  ``items[first[n] : first[n] + count[n]]``, an inner node (``first[n] < 0``) has its
+  left child at ``n + 1``;
 - ``item_lowers`` / ``item_uppers`` are the boxes the BVH was built over (the user's
   arrays), ``group_roots[g]`` is the root node of group ``g``'s subtree.
 
-A query is a ``BvhQuery`` value holding its own traversal stack; ``bvh_query_next``
-advances it (an in-out argument, as Warp's) and gives the next item whose box the
-query's shape touches. Items come in traversal order (depth first, left child first).
+A query is a ``BvhQuery`` value; ``bvh_query_next`` advances it (an in-out argument,
+as Warp's) and gives the next item whose box the query's shape touches. Traversal is
+stackless: a node whose box the shape misses is skipped with ``skip[n]``, a node it
+touches is entered at ``n + 1``, so a query's state is four integers (no stack in
+local memory on a GPU, no dynamically indexed vector on a CPU). Items come in
+depth-first order, left child first.
 """
 
 import kdsl as wp
 from kdsl.frontend.inout import inout
 from kdsl.frontend.kernel import func
-from kdsl.types import vector
 
 __kdsl_group__ = "geometry"
 
@@ -26,12 +29,8 @@ __all__ = [
     "bvh_query_ray", "bvh_query_sphere",
 ]  # fmt: skip
 
-#: Depth of a query's traversal stack: the builders keep trees shallower than this.
-STACK_DEPTH = 64
 #: What a query tests: its kind.
 AABB, RAY, SPHERE, CAPSULE = 0, 1, 2, 3
-
-Stack = vector(STACK_DEPTH, wp.int32)
 
 
 @wp.struct
@@ -41,8 +40,9 @@ class BvhRecord:
     tag: wp.uint64
     lowers: wp.array(dtype=wp.vec3)
     uppers: wp.array(dtype=wp.vec3)
-    left: wp.array(dtype=wp.int32)
-    right: wp.array(dtype=wp.int32)
+    skip: wp.array(dtype=wp.int32)
+    first: wp.array(dtype=wp.int32)
+    count: wp.array(dtype=wp.int32)
     items: wp.array(dtype=wp.int32)
     item_lowers: wp.array(dtype=wp.vec3)
     item_uppers: wp.array(dtype=wp.vec3)
@@ -64,8 +64,8 @@ class BvhQuery:
     b: wp.vec3
     inv_b: wp.vec3
     radius: wp.float32
-    stack: Stack
-    count: wp.int32
+    node: wp.int32
+    stop: wp.int32
     leaf_pos: wp.int32
     leaf_end: wp.int32
 
@@ -85,12 +85,10 @@ def _bvh_query(
     start = root
     if start < 0:
         start = rec.root
-    stack = Stack()
-    stack[0] = start
-    q.stack = stack
-    q.count = 1
-    if start < 0:  # an empty BVH
-        q.count = 0
+    q.node = start
+    q.stop = start
+    if start >= 0:  # not an empty BVH
+        q.stop = rec.skip[start]
     q.leaf_pos = 0
     q.leaf_end = 0
     return q
@@ -184,22 +182,18 @@ def bvh_query_next(
             if _touches(query, rec.item_lowers[item], rec.item_uppers[item], max_dist):
                 index = item  # noqa: F841 - an in-out parameter: the caller sees it
                 found = True
-        elif query.count == 0:
+        elif query.node >= query.stop:
             break
         else:
-            query.count = query.count - 1
-            node = query.stack[query.count]
+            node = query.node
             if _touches(query, rec.lowers[node], rec.uppers[node], max_dist):
-                left = rec.left[node]
-                if left < 0:
-                    query.leaf_pos = -left - 1
-                    query.leaf_end = query.leaf_pos + rec.right[node]
-                else:
-                    stack = query.stack
-                    stack[query.count] = rec.right[node]
-                    stack[query.count + 1] = left
-                    query.stack = stack
-                    query.count = query.count + 2
+                first = rec.first[node]
+                if first >= 0:
+                    query.leaf_pos = first
+                    query.leaf_end = first + rec.count[node]
+                query.node = node + 1
+            else:
+                query.node = rec.skip[node]
     return found
 
 
