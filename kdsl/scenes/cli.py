@@ -136,13 +136,17 @@ def cmd_stability(args: argparse.Namespace) -> int:
             dt = "none"
         ratio = (r.dt_max / r.theory if r.dt_max and r.theory and math.isfinite(r.theory)
                  and r.bound == "measured" else None)  # fmt: skip
+        theory = "never" if r.theory == 0.0 else _fmt(r.theory)  # no dt is stable
         print(
-            f"{r.integrator:18s}{r.precision:6s}{dt:>11s}{_fmt(r.theory):>11s}"
+            f"{r.integrator:18s}{r.precision:6s}{dt:>11s}{theory:>11s}"
             f"{_fmt(ratio, '.3f'):>8s}{_fmt(r.drift, '+.2e'):>12s}"
         )
         if r.blowup:
             print(f"  blow-up {r.blowup}")
-    print("(dt_max '<': stable at every dt tried, up to 1e4x the start; 'none': at none)")
+    print(
+        "(dt_max '<': stable at every dt tried, up to 1e4x the start; 'none': at none; "
+        "theory 'never': no dt is stable, 'inf': every dt is)"
+    )
     if args.json:
         write_json(args.json, [r.as_dict() for r in results])
     return 0
