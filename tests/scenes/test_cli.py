@@ -84,3 +84,33 @@ def test_json_is_not_left_half_written(tmp_path, monkeypatch):
 class _Unserializable:
     def __float__(self):
         raise TypeError("not a number")
+
+
+def test_bad_param_syntax_and_missing_json_directory(capsys, tmp_path):
+    code, _, err = _run(capsys, "run", "chain", "--param", "count")
+    assert code == 2 and "--param takes NAME=VALUE" in err
+    code, _, err = _run(capsys, "run", "chain", "--param", "count=many")
+    assert code == 2 and "is not a number" in err
+    code, _, err = _run(capsys, "run", "chain", "--steps", "2", "--param", "count=2",
+                        "--json", str(tmp_path / "no" / "r.json"))  # fmt: skip
+    assert code == 2 and "no directory" in err
+
+
+def test_precision_the_backend_lacks_is_refused(monkeypatch):
+    from kdsl.backends.registry import get_backend
+    from kdsl.scenes import SceneError
+    from kdsl.scenes.measure import make_scene
+
+    backend = get_backend("interp")
+    monkeypatch.setattr(type(backend), "capabilities", frozenset({"fp32", "fp64"}))
+    with pytest.raises(
+        SceneError, match=r"backend 'interp' has no f16 \(it has: \['fp32', 'fp64'\]\)"
+    ):
+        make_scene("chain", "f16", backend="interp", count=2)
+
+
+def test_unknown_binding_is_refused():
+    from kdsl.scenes import SceneError, bind
+
+    with pytest.raises(SceneError, match="choices: kdsl, warp"):
+        bind("jax")
