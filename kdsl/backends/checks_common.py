@@ -6,9 +6,9 @@ record of ``RECORD_LEN`` 64-bit words, zeroed before the launch:
 =========  ==========================================================
 word       meaning
 =========  ==========================================================
-0          site + 1 of the first failed bounds check (0: none failed)
+0          site + 1 of the first failed bounds (or record) check (0: none failed)
 1          its thread's linear index (-1 inside a called function)
-2..5       its indices (sign-extended), 6..9 the array's shape
+2..5       its indices (sign-extended), 6..9 the array's shape (a record check: its id)
 10         site + 1 of the first failed finite check (0: none failed)
 11         its thread's linear index
 12         1 for NaN, 2 for Inf
@@ -27,7 +27,7 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from kdsl.errors import KdslRuntimeError
-from kdsl.ir.ops_debug import Site, bounds_message, fp_message
+from kdsl.ir.ops_debug import Site, bounds_message, fp_message, record_message
 
 RECORD_LEN = 16
 BOUNDS, BOUNDS_TID, BOUNDS_IDX, BOUNDS_SHAPE = 0, 1, 2, 6
@@ -61,7 +61,10 @@ def raise_for_record(
         idx = [int(x) for x in record[BOUNDS_IDX : BOUNDS_IDX + nd]]
         shape = [int(x) for x in record[BOUNDS_SHAPE : BOUNDS_SHAPE + nd]]
         arg = site.arg if site is not None else "array"
-        msg = bounds_message(kernel, arg, idx, shape)
+        if site is not None and site.op == "kd.check_record":
+            msg = record_message(kernel, arg, idx[0] % (1 << 64))
+        else:
+            msg = bounds_message(kernel, arg, idx, shape)
         tid = int(record[BOUNDS_TID])
     elif record[FP]:
         site = sites.get(int(record[FP]) - 1)

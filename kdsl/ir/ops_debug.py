@@ -1,7 +1,9 @@
 """The debug dialect: run-time checks that debug mode inserts (``bounds-check``, ``fp-check``).
 
 ``kd.check_bounds %arr, %i... {arg, site}`` fails when an index is outside the
-array's shape; it is placed right before the access it guards. ``kd.check_finite
+array's shape; it is placed right before the access it guards. ``kd.check_record %id
+{arg, site}`` fails when ``id`` is not the id of a live object whose record has type
+``arg`` (see ``kdsl.ir.records``); it is placed right before the ``kd.record``. ``kd.check_finite
 %value {arg, site}`` fails when a float value (any lane of a vector or matrix)
 is NaN or infinite; it is placed before the store that writes the value.
 
@@ -14,6 +16,7 @@ removes, merges or reorders them.
 
 from __future__ import annotations
 
+import ctypes
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -25,7 +28,8 @@ from kdsl.ir.builder import create_op
 from kdsl.ir.catalog import CATALOG, CHECK, WRITES, InterpRule, OpDef, TypeRule
 from kdsl.ir.core import Loc, Module, Operation, Value
 from kdsl.ir.ops_mem import check_access, element_index
-from kdsl.ir.types import ScalarType, Type, elem_type
+from kdsl.ir.records import record_tag
+from kdsl.ir.types import U64, ScalarType, Type, elem_type
 
 
 def _bounds_rule(ts: Sequence[Type], attrs: dict[str, Any]) -> list[Type]:
@@ -100,8 +104,37 @@ CHECK_FINITE = _define_check(
 )  # fmt: skip
 
 
+def _record_check_rule(ts: Sequence[Type], attrs: dict[str, Any]) -> list[Type]:
+    if list(ts) != [U64]:
+        raise TypeError(f"kd.check_record checks one uint64 id, not {list(map(str, ts))}")
+    return []
+
+
+def record_alive(address: int, record: str) -> bool:
+    """Whether ``address`` holds a live record of the struct type named ``record``."""
+    if address == 0:
+        return False
+    return int.from_bytes(ctypes.string_at(address, 8), "little") == record_tag(record)
+
+
+def _record_check_interp(ctx, op, rid):
+    if not record_alive(int(rid), op.attrs["arg"]):
+        kernel = getattr(ctx, "kernel_name", "?")
+        raise KdslRuntimeError(record_message(kernel, op.attrs["arg"], int(rid)), op.loc, kernel)
+
+
+CHECK_RECORD = _define_check(
+    "kd.check_record",
+    "Debug mode: stop with an error when ``id`` is not the id of a live runtime object "
+    "whose record is the struct named ``arg`` (0, freed, or never an object's id): the "
+    "record's first word must be that struct's tag (``kdsl.ir.records.record_tag``). "
+    "``site`` numbers the check in its module.",
+    _record_check_rule, _record_check_interp, 'kd.check_record %0 {arg = "BvhRecord", site = 2}',
+)  # fmt: skip
+
+
 #: The ops that hold a ``site`` attribute.
-CHECK_OPS = (CHECK_BOUNDS, CHECK_FINITE)
+CHECK_OPS = (CHECK_BOUNDS, CHECK_FINITE, CHECK_RECORD)
 
 
 @dataclass(frozen=True)
@@ -140,12 +173,16 @@ CheckPlan = tuple[list[Value], Operation]
 
 
 def insert_checks(
-    module: Module, check: OpDef, plan: Callable[[Operation], CheckPlan | None]
+    module: Module,
+    check: OpDef,
+    plan: Callable[[Operation], CheckPlan | None],
+    arg_of: Callable[[Operation], str] | None = None,
 ) -> bool:
     """Insert a ``check`` op for every access that ``plan`` asks one for; True if any.
 
-    Each check takes the access's location, the name of its array (``arg``) and the
-    next free ``site`` number. Checks inserted here are not visited themselves.
+    Each check takes the access's location, the name of its array (``arg``, or what
+    ``arg_of`` gives for the op) and the next free ``site`` number. Checks inserted
+    here are not visited themselves.
     """
     first = site = next_site(module)
     for func in module.funcs:
@@ -156,6 +193,8 @@ def insert_checks(
             operands, anchor = planned
             at = op.opdef.array_operand  # None for a kd.array_view: its array comes first
             arg = op.operands[at if at is not None else 0].name_hint or "array"
+            if arg_of is not None:
+                arg = arg_of(op)
             new = create_op(check.name, operands, [], {"arg": arg, "site": site}, loc=op.loc)
             anchor.parent.insert_before(anchor, new)
             site += 1
@@ -167,6 +206,15 @@ def bounds_message(kernel: str, arg: str, index: Sequence[int], shape: Sequence[
     return (
         f"index {list(index)} is out of bounds for array '{arg or 'array'}' of shape "
         f"{tuple(shape)} in kernel '{kernel}'"
+    )
+
+
+def record_message(kernel: str, record: str, address: int) -> str:
+    """The message of a failed ``kd.check_record``."""
+    what = "0 (a null id)" if address == 0 else f"{address:#x}"
+    return (
+        f"kernel '{kernel}' read object id {what} as a {record}, but no live object of that "
+        "kind has this id (never built, freed, or an id of another kind or device)"
     )
 
 

@@ -11,8 +11,8 @@ the standard library compile for every backend.
 The layout is NumPy's and C's natural struct layout (``record_dtype``, the same rule
 as ``types.storage_dtype``), where an array field is ``1 + 2 * ndim`` 64-bit words:
 the data address, the shape and the strides **in bytes**. A record's first field is
-a 64-bit *tag*, ``record_tag(kind)``, which the runtime zeroes when the object is
-freed: a debug build checks it (``kd.check_record``) before the read.
+a 64-bit *tag*, ``record_tag(name)`` of the struct's name, which the runtime zeroes
+when the object is freed: a debug build checks it (``kd.check_record``) before the read.
 """
 
 from __future__ import annotations
@@ -79,9 +79,9 @@ def field_offsets(t: StructType) -> list[int]:
     return [dt.fields[name][1] for name, _ in t.fields]
 
 
-def record_tag(kind: str) -> int:
-    """The 64-bit tag a live record of object kind ``kind`` starts with (never 0)."""
-    digest = hashlib.blake2b(f"kdsl-record:{kind}".encode(), digest_size=8).digest()
+def record_tag(record: str) -> int:
+    """The 64-bit tag a live record of the struct named ``record`` starts with (never 0)."""
+    digest = hashlib.blake2b(f"kdsl-record:{record}".encode(), digest_size=8).digest()
     return int.from_bytes(digest, "little") | 1
 
 

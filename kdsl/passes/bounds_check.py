@@ -12,6 +12,10 @@ remain, and nothing after it can remove them (they carry the WRITES trait). An
 access the optimizer deleted (an unused load) is not checked: it never happens.
 Accesses that already have their check right before them are skipped, so the
 pass is idempotent. No options.
+
+Every ``kd.record`` (a runtime object's record read from its id) likewise gets a
+``kd.check_record`` of the id, so a null, freed or foreign id stops the thread with
+an error instead of reading stray memory.
 """
 
 from __future__ import annotations
@@ -20,7 +24,8 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 from kdsl.ir import Module, Operation
-from kdsl.ir.ops_debug import CHECK_BOUNDS, CheckPlan, insert_checks
+from kdsl.ir.ops_debug import CHECK_BOUNDS, CHECK_RECORD, CheckPlan, insert_checks
+from kdsl.ir.records import RECORD
 from kdsl.passes.manager import ModulePass
 
 
@@ -48,4 +53,21 @@ class BoundsCheckPass(ModulePass):
     name: ClassVar[str] = "bounds-check"
 
     def apply(self, module: Module) -> bool:
-        return insert_checks(module, CHECK_BOUNDS, _plan)
+        arrays = insert_checks(module, CHECK_BOUNDS, _plan)
+        records = insert_checks(module, CHECK_RECORD, _plan_record, _record_name)
+        return arrays or records
+
+
+def _plan_record(op: Operation) -> CheckPlan | None:
+    if op.opdef is not RECORD:
+        return None
+    block = op.parent
+    pos = block.ops.index(op)
+    prev = block.ops[pos - 1] if pos > 0 else None
+    if prev is not None and prev.opdef is CHECK_RECORD and prev.operands[0] is op.operands[0]:
+        return None
+    return [op.operands[0]], op
+
+
+def _record_name(op: Operation) -> str:
+    return op.results[0].type.name

@@ -85,8 +85,8 @@ def _table(device: Device) -> _DeviceTable:
     return table
 
 
-def pack_record(t: T.StructType, kind: str, fields: dict[str, Any]) -> bytes:
-    """The bytes of a record of struct type ``t`` for an object of ``kind``.
+def pack_record(t: T.StructType, fields: dict[str, Any]) -> bytes:
+    """The bytes of a record of struct type ``t`` (its tag is ``t``'s name's).
 
     ``fields`` maps each field but the tag (the first) to its value: a ``kdsl.array``
     for an array field (its descriptor is written: address, shape, byte strides), a
@@ -94,7 +94,7 @@ def pack_record(t: T.StructType, kind: str, fields: dict[str, Any]) -> bytes:
     """
     rec = np.zeros((), dtype=record_dtype(t))
     tag_name = t.fields[0][0]
-    rec[tag_name] = record_tag(kind)
+    rec[tag_name] = record_tag(t.name)
     for name, ft in t.fields[1:]:
         value = fields[name]
         if isinstance(ft, T.ArrayType):
@@ -120,7 +120,7 @@ class ObjectRecord:
 
     def write(self, fields: dict[str, Any]) -> None:
         """Write the record from ``fields`` (see ``pack_record``)."""
-        data = pack_record(self.type, self.kind, fields)
+        data = pack_record(self.type, fields)
         with _lock:
             _table(self.device).write(self.id, data)
 

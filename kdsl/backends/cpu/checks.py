@@ -28,6 +28,7 @@ from kdsl.errors import KdslCapabilityError
 from kdsl.ir import types as T
 from kdsl.ir.core import Operation
 from kdsl.ir.lowering import LOWERINGS
+from kdsl.ir.records import record_tag
 
 CPU = LOWERINGS.for_backend("cpu")
 
@@ -152,5 +153,30 @@ def _check_finite(em: Emitter, op: Operation) -> None:
     B.position_at_end(cont)
 
 
+def _check_record(em: Emitter, op: Operation) -> None:
+    _record(em, op)
+    B = em.b
+    rid = em.get(op.operands[0])
+    read, fail, write, stop, cont = (
+        em.new_block(n) for n in ("record.read", "record.fail", "record.write", "record.stop",
+                                  "record.ok")
+    )  # fmt: skip
+    B.cbranch(B.icmp_unsigned("!=", rid, _i64(0)), read, fail).set_weights([1000, 1])
+    B.position_at_end(read)  # only a non-null id is read
+    word = B.load(B.inttoptr(rid, LT.PTR), typ=LT.I64, align=8)
+    tag = ir.Constant(LT.I64, record_tag(op.attrs["arg"]))
+    B.cbranch(B.icmp_unsigned("==", word, tag), cont, fail).set_weights([1000, 1])
+    B.position_at_end(fail)
+    B.cbranch(_claim(em, R.BOUNDS, op.attrs["site"]), write, stop)
+    B.position_at_end(write)
+    _put(em, R.BOUNDS_TID, _tid64(em))
+    _put(em, R.BOUNDS_IDX, rid)
+    B.branch(stop)
+    B.position_at_end(stop)
+    abort_thread(em)
+    B.position_at_end(cont)
+
+
 CPU.register("kd.check_bounds", _check_bounds)
+CPU.register("kd.check_record", _check_record)
 CPU.register("kd.check_finite", _check_finite)

@@ -19,6 +19,7 @@ from kdsl.errors import KdslCapabilityError
 from kdsl.ir import types as T
 from kdsl.ir.core import Operation
 from kdsl.ir.lowering import LOWERINGS
+from kdsl.ir.records import record_tag
 
 CUDA = LOWERINGS.for_backend("cuda")
 
@@ -86,5 +87,19 @@ def _check_finite(em: FuncEmitter, op: Operation) -> None:
     em.close()
 
 
+def _check_record(em: FuncEmitter, op: Operation) -> None:
+    _require_debug(em, op)
+    rid = em.get(op.operands[0])
+    tag = record_tag(op.attrs["arg"])
+    # ``||`` stops before the read of a null id.
+    em.open(f"if ({rid} == 0ull || *(const unsigned long long *){rid} != {tag}ull) {{")
+    em.open(f"if ({_claim(R.BOUNDS, op.attrs['site'])}) {{")
+    em.line(f"kd_err[{R.BOUNDS_TID}] = {_tid(em)}; kd_err[{R.BOUNDS_IDX}] = (long long){rid};")
+    em.close()
+    em.line(abort(em))
+    em.close()
+
+
 CUDA.register("kd.check_bounds", _check_bounds)
+CUDA.register("kd.check_record", _check_record)
 CUDA.register("kd.check_finite", _check_finite)
