@@ -30,6 +30,7 @@ from kdsl.runtime import timing as _timing
 from kdsl.runtime.args import ArgError, convert, launch_error
 from kdsl.runtime.array import array
 from kdsl.runtime.device import Device, get_device
+from kdsl.runtime.objects import foreign_id
 
 _CACHE_ATTR = "_kdsl_compiled"
 
@@ -271,6 +272,16 @@ def _converter(kernel: Any, index: int, name: str, t: Any, device: Device) -> An
                 return np_type(v)
             return slow(v)
 
+        if t == T.U64:  # maybe an object id (a mesh's, a BVH's): it must be on this device
+
+            def conv_id(v: Any) -> Any:
+                out = conv_int(v)
+                wrong = foreign_id(int(out), device.alias)
+                if wrong is not None:
+                    raise launch_error(_kernel_name(kernel), index, name, wrong)
+                return out
+
+            return conv_id
         return conv_int
     return slow
 

@@ -144,3 +144,12 @@ def owner_of(object_id: int) -> tuple[Any, str, str] | None:
         return None
     owner = hit[0]()
     return None if owner is None else (owner, hit[1], hit[2])
+
+
+def foreign_id(object_id: int, device: str) -> str | None:
+    """Why ``object_id`` cannot be used on ``device`` (it is a live object's id on another
+    device), or None (an object of this device, or no live object's id at all)."""
+    hit = _owners.get(object_id)
+    if hit is None or hit[2] == device:
+        return None
+    return f"{object_id:#x} is the id of a {hit[1]} on device '{hit[2]}', not on '{device}'"

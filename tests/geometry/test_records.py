@@ -154,3 +154,15 @@ def test_freed_slots_are_recycled_oldest_first():
         if keep[-1].id in (first, second):
             assert keep[-1].id == first
             break
+
+
+def test_an_id_of_another_devices_object_is_refused_at_launch(monkeypatch):
+    from kdsl.runtime import objects
+
+    grid = Grid(np.zeros((1, 1), np.float32), np.zeros((1, 3), np.float32))
+    owner, kind, _ = objects.owner_of(grid.id)
+    assert owner is grid
+    # As if the object lived on a GPU: the launch on cpu names both devices.
+    monkeypatch.setitem(objects._owners, grid.id, (objects._owners[grid.id][0], kind, "cuda:0"))
+    with pytest.raises(wp.KdslLaunchError, match="is the id of a grid on device 'cuda:0'"):
+        wp.launch(read_count, dim=1, inputs=[grid.id, wp.zeros(1, dtype=wp.int32)])
