@@ -44,7 +44,10 @@ def array_scan(in_array, out_array, inclusive: bool = True) -> None:
         elif inclusive:
             _host_cumsum(x, y)
         else:
-            _host_cumsum(x[:-1], y[1:])  # NumPy copies first where the two overlap
+            # In place, the output runs one ahead of the input: the threads of
+            # _host_cumsum would read inputs another chunk already overwrote.
+            src = x[:-1].copy() if np.shares_memory(x, y) else x[:-1]
+            _host_cumsum(src, y[1:])
             y[0] = 0
 
 

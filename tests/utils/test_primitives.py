@@ -40,6 +40,16 @@ def test_scan_matches_cumsum(device, n, dtype, inclusive):
 
 
 @pytest.mark.parametrize("device", DEVICES)
+@pytest.mark.parametrize("n", SIZES)
+def test_exclusive_scan_in_place(device, n):
+    # Split over threads, an in-place exclusive scan once read overwritten inputs.
+    x = np.random.default_rng(n).integers(0, 3, n).astype(np.int32)
+    a = wp.array(x, device=device)
+    wp.utils.array_scan(a, a, inclusive=False)
+    np.testing.assert_array_equal(a.numpy(), np.concatenate([[0], np.cumsum(x)[:-1]]))
+
+
+@pytest.mark.parametrize("device", DEVICES)
 def test_scan_of_vectors_is_componentwise_and_in_place(device):
     x = np.arange(30, dtype=np.float32).reshape(10, 3)
     a = wp.array(x, dtype=wp.vec3, device=device)
