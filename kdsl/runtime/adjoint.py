@@ -21,6 +21,7 @@ from kdsl.errors import KdslError, KdslLaunchError, KdslRuntimeError
 from kdsl.ir import Module, Operation
 from kdsl.ir import types as T
 from kdsl.ir.vjp import is_differentiable
+from kdsl.passes.adjoint.analysis import has_grad_arrays
 
 _ADJ_ATTR = "_kdsl_adjoint"
 _COUNT_ATTR = "_kdsl_counter"
@@ -153,6 +154,8 @@ def launch_adjoint(
                 # Gradients nobody asked for land in scratch memory of the right shape.
                 g = alloc.zeros_like(v, device=dev) if isinstance(v, array) else v
             adjoints.append(convs[n + i](g))
+        elif isinstance(t, T.StructType) and g is None and has_grad_arrays(t):
+            adjoints.append(convs[n + i](_struct_adjoint(v, dev)))
         else:
             # A scalar's adjoint is an unused input of the adjoint kernel (as in Warp).
             adjoints.append(primal[i] if g is None else convs[n + i](g))
@@ -169,6 +172,23 @@ def launch_adjoint(
             "its counting pass measured (control flow that changes between runs, such as one "
             "that depends on atomics); its gradients are incomplete"
         )
+
+
+def _struct_adjoint(value: Any, dev: Any) -> Any:
+    """The adjoint of a struct argument: its array fields' gradients (``.grad``, or
+    scratch zeros for an array without one), its other fields as they are (as Warp)."""
+    from kdsl.runtime import alloc
+
+    out = type(value)()
+    for name, ft in value.__kdsl_type__.fields:
+        x = getattr(value, name)
+        if isinstance(ft, T.ArrayType) and x is not None:
+            g = getattr(x, "grad", None)
+            x = g if g is not None else alloc.zeros_like(x, device=dev)
+        elif isinstance(ft, T.StructType) and x is not None and has_grad_arrays(ft):
+            x = _struct_adjoint(x, dev)
+        setattr(out, name, x)
+    return out
 
 
 def _hidden_args(kernel, adj, dims, primal, dev, backend, stream) -> tuple[list, Any]:

@@ -101,3 +101,60 @@ def test_kdsl_ir_adjoint_stage_of_struct_kernel(tmp_path):
     assert proc.returncode == 0, proc.stderr
     assert re.search(r"func.func @k_\w*__adj\(", proc.stdout), proc.stdout
     assert "internal error" not in proc.stderr
+
+
+@wp.struct
+class Weights:
+    w: wp.array(dtype=float)
+    scale: float
+
+
+@wp.struct
+class Model:
+    weights: Weights
+    bias: wp.array(dtype=float)
+
+
+@wp.kernel
+def weighted_sum(m: Model, x: wp.array(dtype=float), y: wp.array(dtype=float)):
+    i = wp.tid()
+    acc = 0.0
+    for j in range(m.weights.w.shape[0]):  # a dynamic loop over a struct's array
+        acc += m.weights.w[j] * x[i]
+    y[i] = acc * m.weights.scale + m.bias[i]
+
+
+@pytest.mark.parametrize("backend", ["interp", "cpu"])
+def test_gradients_reach_arrays_held_in_struct_fields(backend):
+    w = wp.array([1.0, 2.0, 3.0], dtype=float, requires_grad=True)
+    bias = wp.array([0.5, -0.5], dtype=float, requires_grad=True)
+    x = wp.array([1.0, 2.0], dtype=float, requires_grad=True)
+    y = wp.zeros(2, dtype=float, requires_grad=True)
+    m = Model()
+    m.weights = Weights()
+    m.weights.w, m.weights.scale, m.bias = w, 2.0, bias
+    tape = wp.Tape()
+    with tape:
+        wp.launch(weighted_sum, dim=2, inputs=[m, x], outputs=[y], backend=backend)
+    tape.backward(grads={y: wp.array([1.0, 10.0], dtype=float)})
+    # dy_i/dw_j = x_i * scale, dy_i/dbias_i = 1, dy_i/dx_i = scale * sum(w)
+    np.testing.assert_allclose(w.grad.numpy(), [2.0 * (1.0 + 20.0)] * 3)
+    np.testing.assert_allclose(bias.grad.numpy(), [1.0, 10.0])
+    np.testing.assert_allclose(x.grad.numpy(), [12.0, 120.0])
+    np.testing.assert_allclose(w.numpy(), [1.0, 2.0, 3.0])  # the inputs are untouched
+
+
+def test_struct_array_without_grad_gets_scratch_and_leaves_input_alone():
+    w = wp.array([1.0, 2.0, 3.0], dtype=float)  # no requires_grad
+    bias = wp.array([0.0, 0.0], dtype=float, requires_grad=True)
+    x = wp.array([1.0, 2.0], dtype=float, requires_grad=True)
+    y = wp.zeros(2, dtype=float, requires_grad=True)
+    m = Model()
+    m.weights = Weights()
+    m.weights.w, m.weights.scale, m.bias = w, 1.0, bias
+    tape = wp.Tape()
+    with tape:
+        wp.launch(weighted_sum, dim=2, inputs=[m, x], outputs=[y])
+    tape.backward(grads={y: wp.array([1.0, 1.0], dtype=float)})
+    np.testing.assert_allclose(w.numpy(), [1.0, 2.0, 3.0])
+    np.testing.assert_allclose(x.grad.numpy(), [6.0, 6.0])

@@ -13,7 +13,7 @@ import warnings
 
 from kdsl.errors import KdslError, KdslGradientWarning, render_loc
 from kdsl.ir import Module, Operation, Value
-from kdsl.ir.types import ArrayType
+from kdsl.ir.types import ArrayType, StructType, Type
 from kdsl.ir.vjp import is_differentiable
 
 #: Memory ops whose array operand's adjoint the sweeps read or write, with the
@@ -29,12 +29,9 @@ class Primal:
         self.func = kernel
         self.sym: str = kernel.attrs["sym_name"]
         self.block = kernel.regions[0].block
-        #: The kernel's array parameters that get a gradient array in the adjoint.
-        self.grad_arrays = {
-            a
-            for a in self.block.args
-            if isinstance(a.type, ArrayType) and is_differentiable(a.type.dtype)
-        }
+        #: The kernel's parameters that get gradient arrays in the adjoint: differentiable
+        #: arrays, and structs holding some (their adjoint struct holds the fields' grads).
+        self.grad_arrays = {a for a in self.block.args if has_grad_arrays(a.type)}
         self._matters: dict[Operation, bool] = {}
         self._owned: dict[Value, bool] = {}
 
@@ -111,10 +108,19 @@ def check_differentiable(primal: Primal) -> None:
                 written.discard(arr)  # warn once per array
 
 
+def has_grad_arrays(t: Type) -> bool:
+    """Whether values of ``t`` hold differentiable arrays: ``t`` is one, or a struct with
+    one among its fields (at any depth)."""
+    if isinstance(t, ArrayType):
+        return is_differentiable(t.dtype)
+    return isinstance(t, StructType) and any(has_grad_arrays(ft) for _, ft in t.fields)
+
+
 def base_array(arr: Value) -> Value:
-    """The array a ``kd.array_view`` chain starts from (``arr`` itself when not a view)."""
+    """Where an array comes from: the start of a ``kd.array_view`` chain, or the struct a
+    chain of ``struct.extract`` reads it from (``arr`` itself when neither)."""
     op = getattr(arr, "op", None)
-    while op is not None and op.name == "kd.array_view":
+    while op is not None and op.name in ("kd.array_view", "struct.extract"):
         arr = op.operands[0]
         op = getattr(arr, "op", None)
     return arr

@@ -104,14 +104,22 @@ class ReverseSweep:
                 self.accumulate(adj, operand, c)
 
     def grad_of(self, arr: Value, vmap: dict[Value, Value]) -> Value | None:
-        """The gradient array of ``arr``: a parameter's, or the same view of its base's
-        (``kd.array_view``, emitted here over the replayed indices); None when none."""
+        """The gradient array of ``arr``: a parameter's, the same view of its base's
+        (``kd.array_view``, emitted here over the replayed indices), or the same field of
+        its struct's adjoint (``struct.extract``: a struct parameter's adjoint holds its
+        array fields' gradients); None when none."""
         grad = self.grads.get(arr)
-        view = getattr(arr, "op", None)
-        if grad is None and view is not None and view.name == "kd.array_view":
-            base = self.grad_of(view.operands[0], vmap)
+        src = getattr(arr, "op", None)
+        if grad is not None or src is None:
+            return grad
+        if src.name == "kd.array_view":
+            base = self.grad_of(src.operands[0], vmap)
             if base is not None:
-                grad = self.b.value("kd.array_view", base, *[vmap[i] for i in view.operands[1:]])
+                grad = self.b.value("kd.array_view", base, *[vmap[i] for i in src.operands[1:]])
+        elif src.name == "struct.extract":
+            base = self.grad_of(src.operands[0], vmap)
+            if base is not None:
+                grad = self.b.value("struct.extract", base, field=src.attrs["field"])
         return grad
 
     def _reverse_load(self, op: Operation, vmap: dict[Value, Value], adj: Adjoints) -> None:
