@@ -5,5 +5,6 @@ package builds and updates the objects' arrays and records.
 """
 
 from kdsl.geometry.bvh import Bvh
+from kdsl.geometry.mesh import Mesh
 
-__all__ = ["Bvh"]
+__all__ = ["Bvh", "Mesh"]

@@ -1,0 +1,184 @@
+"""``kdsl.Mesh``: a triangle mesh queried from kernels by its id (Warp's ``warp.Mesh``).
+
+The mesh keeps the user's arrays as they are (no copy when they are already a 1-d
+vec3 array and contiguous int32 indices on one device); a ``kdsl.Bvh`` over the faces'
+boxes accelerates the queries, and the mesh's record (``MeshRecord`` of
+``kdsl.stdlib.mesh``) holds the arrays' descriptors and the BVH's id. Holding the id
+rather than a copy of the BVH's arrays costs a kernel one more record read per query
+(a few loads), and keeps one owner of the tree.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from kdsl.errors import KdslTypeError
+from kdsl.geometry.bvh import Bvh
+from kdsl.ir import types as T
+from kdsl.runtime.array import array
+from kdsl.runtime.objects import ObjectRecord
+from kdsl.stdlib.mesh import MeshRecord
+from kdsl.types import type_of
+
+VEC3 = T.VectorType(3, T.F32)
+
+
+def _as_points(a: Any, name: str) -> array:
+    """``a`` as a 1-d vec3 array: a vec3 array as it is, a float32 ``(n, 3)`` array
+    viewed as vec3 (no copy when contiguous)."""
+    if not isinstance(a, array):
+        raise KdslTypeError(
+            f"Mesh {name} must be a kdsl.array of vec3 (or float32 of shape (n, 3)), not "
+            f"{type(a).__name__}; convert with kdsl.array(...), kdsl.from_torch(...) or "
+            "kdsl.from_dlpack(...)"
+        )
+    t = type_of(a.dtype)
+    if t == VEC3 and a.ndim == 1:
+        return a
+    if t == T.F32 and a.ndim == 2 and a.shape[1] == 3:
+        return (a if a.is_contiguous else a.contiguous()).view(VEC3)
+    raise KdslTypeError(
+        f"Mesh {name} must be a 1-d array of vec3 or a float32 array of shape (n, 3), not "
+        f"{a.dtype.__name__ if hasattr(a.dtype, '__name__') else a.dtype} of shape {a.shape}"
+    )
+
+
+def _as_indices(a: Any) -> array:
+    """``a`` as a flat int32 array of ``3 * faces`` entries (an ``(m, 3)`` array is
+    flattened, without a copy when contiguous)."""
+    if not isinstance(a, array):
+        raise KdslTypeError(f"Mesh indices must be a kdsl.array of int32, not {type(a).__name__}")
+    if type_of(a.dtype) != T.I32:
+        raise KdslTypeError(f"Mesh indices must be int32, not {a.dtype}")
+    if a.ndim == 2:
+        if a.shape[1] != 3:
+            raise KdslTypeError(
+                f"Mesh indices of shape {a.shape}: a 2-d index array must be (faces, 3)"
+            )
+        a = (a if a.is_contiguous else a.contiguous()).flatten()
+    if a.ndim != 1:
+        raise KdslTypeError(f"Mesh indices must be 1-d or (faces, 3), not of shape {a.shape}")
+    if a.shape[0] % 3:
+        raise KdslTypeError(
+            f"Mesh indices hold {a.shape[0]} entries, not a multiple of 3 (three per triangle)"
+        )
+    return a
+
+
+class Mesh:
+    """A triangle mesh, as ``warp.Mesh``: ``points`` (vec3 per vertex), ``indices``
+    (three int32 per face, flat or ``(faces, 3)``), optional ``velocities``. Pass
+    ``mesh.id`` to kernels and query it with ``mesh_query_point``, ``mesh_query_ray``
+    and the other ``mesh_*`` functions. After moving the points (``mesh.points``, in
+    place or assigned), call ``refit()``. ``groups`` (int32 per face) makes each group
+    a subtree (``mesh_get_group_root``); ``bvh_constructor`` picks the BVH builder."""
+
+    def __init__(
+        self,
+        points: array,
+        indices: array,
+        velocities: array | None = None,
+        support_winding_number: bool = False,
+        bvh_constructor: str | None = None,
+        groups: array | None = None,
+        bvh_leaf_size: int = 1,
+    ) -> None:
+        pts = _as_points(points, "points")
+        idx = _as_indices(indices)
+        self.device = pts.device
+        if idx.device != self.device:
+            raise KdslTypeError(
+                f"Mesh points and indices are on different devices: {self.device} and {idx.device}"
+            )
+        vel = None
+        if velocities is not None:
+            vel = _as_points(velocities, "velocities")
+            if vel.device != self.device or vel.shape != pts.shape:
+                raise KdslTypeError(
+                    f"Mesh velocities must match the points ({pts.shape[0]} on {self.device}),"
+                    f" not {vel.shape[0]} on {vel.device}"
+                )
+        host_idx = idx.numpy()
+        if len(host_idx) and (host_idx.min() < 0 or host_idx.max() >= pts.shape[0]):
+            bad = host_idx[(host_idx < 0) | (host_idx >= pts.shape[0])][0]
+            raise KdslTypeError(f"Mesh indices out of range: {int(bad)} for {pts.shape[0]} points")
+        if groups is not None and (
+            not isinstance(groups, array) or groups.shape != (len(host_idx) // 3,)
+        ):
+            raise KdslTypeError("Mesh groups must be an int32 array with one entry per face")
+        self._points, self.indices, self.velocities = pts, idx, vel
+        self.support_winding_number = bool(support_winding_number)
+        self._faces = host_idx.reshape(-1, 3).astype(np.int64)
+        self._check_points()
+        n = len(self._faces)
+        self._lowers = array(np.zeros((n, 3), np.float32), dtype=VEC3, device=self.device)
+        self._uppers = array(np.zeros((n, 3), np.float32), dtype=VEC3, device=self.device)
+        self._no_velocities = array(np.zeros((0, 3), np.float32), dtype=VEC3, device=self.device)
+        self._write_boxes()
+        self.bvh = Bvh(
+            self._lowers, self._uppers, constructor=bvh_constructor, groups=groups,
+            leaf_size=bvh_leaf_size,
+        )  # fmt: skip
+        self._record = ObjectRecord(self, MeshRecord.__kdsl_type__, "mesh", self.device)
+        self._write_record()
+
+    @property
+    def id(self) -> int:
+        """The mesh's id (a ``uint64``) for kernels."""
+        return self._record.id
+
+    @property
+    def points(self) -> array:
+        """The vertex positions (vec3); after changing them, call ``refit()``."""
+        return self._points
+
+    @points.setter
+    def points(self, value: array) -> None:
+        pts = _as_points(value, "points")
+        if pts.shape != self._points.shape or pts.device != self.device:
+            raise KdslTypeError(
+                f"new Mesh points must be {self._points.shape[0]} vec3 on {self.device}, not "
+                f"{pts.shape[0]} on {pts.device}"
+            )
+        self._points = pts
+        self.refit()
+
+    def refit(self) -> None:
+        """Update the face boxes and the BVH's bounds from the current points (the tree
+        keeps its shape: rebuild with ``mesh.bvh.rebuild()`` after large motions)."""
+        self._check_points()
+        self._write_boxes()
+        self.bvh.refit()
+        self._write_record()
+
+    def _check_points(self) -> None:
+        host = self._points.numpy()
+        if not np.all(np.isfinite(host)):
+            bad = int(np.flatnonzero(~np.isfinite(host).all(axis=1))[0])
+            raise KdslTypeError(f"Mesh point {bad} is not finite: {host[bad].tolist()}")
+        self._host_points = host
+
+    def _write_boxes(self) -> None:
+        tri = self._host_points[self._faces]  # (faces, 3 corners, 3)
+        self._lowers.assign(tri.min(axis=1) if len(tri) else np.zeros((0, 3), np.float32))
+        self._uppers.assign(tri.max(axis=1) if len(tri) else np.zeros((0, 3), np.float32))
+
+    def _write_record(self) -> None:
+        tri = self._host_points[self._faces]
+        edges = np.concatenate(
+            [tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 1], tri[:, 0] - tri[:, 2]]
+        )
+        mean_edge = float(np.linalg.norm(edges, axis=1).mean()) if len(edges) else 0.0
+        self._record.write(
+            {
+                "points": self._points,
+                "velocities": self.velocities if self.velocities is not None
+                else self._no_velocities,
+                "indices": self.indices, "bvh": self.bvh.id,
+                "num_points": self._points.shape[0], "num_tris": len(self._faces),
+                "average_edge_length": mean_edge,
+                "support_winding_number": int(self.support_winding_number),
+            }
+        )  # fmt: skip

@@ -1,0 +1,920 @@
+"""kdsl standard library: triangle mesh queries (Warp's ``mesh_*``), in kdsl.
+
+A ``kdsl.Mesh`` is reached from a kernel through its record (``MeshRecord``): its
+points, velocities (empty when it has none) and flat triangle indices, and the id of
+the ``kdsl.Bvh`` over its triangles' boxes, whose layout ``kdsl.stdlib.bvh`` documents.
+Every query walks that BVH stacklessly (a box the query cannot use is jumped over
+with ``skip``), so its state is a few integers and floats: no stack in GPU local
+memory and no dynamically indexed vector on the CPU.
+
+Semantics are Warp 1.19's (signs, barycentric ``(u, v)`` weighing a face's first and
+second vertices, strict ``max_dist``/``max_t`` bounds). Where Warp's answer depends on
+its tree's visiting order, kdsl's does not: among faces at the same distance (or the
+same ray ``t``) the lowest face index wins. Point queries skip sliver triangles as
+Warp does (``mesh_primitives.is_sliver``). A NaN query point or ray finds nothing.
+docs/geometry.md ("Meshes") lists the choices.
+
+Each point and ray query comes in two forms, as in Warp: the struct-returning one
+(``mesh_query_point(id, p, max_dist) -> MeshQueryPoint``) and the older one with
+out-arguments (``mesh_query_point(id, p, max_dist, sign, face, u, v) -> bool``), told
+apart by their number of arguments.
+"""
+
+import kdsl as wp
+from kdsl.frontend.inout import inout
+from kdsl.frontend.kernel import func
+from kdsl.stdlib.bvh import (
+    BvhQuery,
+    BvhRecord,
+    bvh_get_group_root,
+    bvh_query_aabb,
+    bvh_query_next,
+    bvh_query_sphere,
+)
+from kdsl.stdlib.mesh_primitives import (
+    box_distance_sq,
+    box_furthest_distance_sq,
+    closest_point_to_triangle,
+    furthest_point_to_triangle,
+    intersect_ray_triangle,
+    is_sliver,
+    ray_box_entry,
+    ray_shear,
+    safe_inverse,
+    triangle_solid_angle,
+)
+from kdsl.stdlib.random import rand_init, randf
+
+__kdsl_group__ = "geometry"
+
+__all__ = [
+    "MeshQuery", "MeshQueryAABB", "MeshQueryPoint", "MeshQueryRay", "MeshRecord",
+    "mesh_eval_face_normal", "mesh_eval_position", "mesh_eval_velocity", "mesh_get",
+    "mesh_get_bvh", "mesh_get_group_root", "mesh_get_index", "mesh_get_point",
+    "mesh_get_velocity", "mesh_query_aabb", "mesh_query_aabb_next",
+    "mesh_query_furthest_point_no_sign", "mesh_query_next", "mesh_query_point",
+    "mesh_query_point_no_sign", "mesh_query_point_sign_normal",
+    "mesh_query_point_sign_parity", "mesh_query_point_sign_winding_number",
+    "mesh_query_ray", "mesh_query_ray_anyhit", "mesh_query_ray_count_intersections",
+    "mesh_query_sphere",
+]  # fmt: skip
+
+#: What a ``MeshQueryAABB`` tests.
+AABB, SPHERE = 0, 1
+#: The largest finite float32 (Warp's FLT_MAX), the bound of an unbounded ray.
+FLT_MAX = 3.402823466e38
+#: 1 / (4 pi): solid angle to winding number.
+INV_4PI = 0.07957747154594767
+
+
+@wp.struct
+class MeshRecord:
+    """The record of a ``kdsl.Mesh`` (``mesh_get`` returns it): ``points``,
+    ``velocities`` (empty without velocities), ``indices`` (three per face), ``bvh``
+    (the id of the BVH over the faces' boxes) and per-mesh constants."""
+
+    tag: wp.uint64
+    points: wp.array(dtype=wp.vec3)
+    velocities: wp.array(dtype=wp.vec3)
+    indices: wp.array(dtype=wp.int32)
+    bvh: wp.uint64
+    num_points: wp.int32
+    num_tris: wp.int32
+    average_edge_length: wp.float32
+    support_winding_number: wp.int32
+
+
+@wp.struct
+class MeshQueryPoint:
+    """A point query's answer (Warp's ``MeshQueryPoint``): ``result`` (a face was found),
+    ``sign`` (< 0 inside, >= 0 outside; 0 for the unsigned queries), ``face`` and the
+    barycentric ``u``, ``v`` of the closest (or furthest) point."""
+
+    result: wp.bool
+    sign: wp.float32
+    face: wp.int32
+    u: wp.float32
+    v: wp.float32
+
+
+@wp.struct
+class MeshQueryRay:
+    """A ray query's answer (Warp's ``MeshQueryRay``): ``result``, ``sign`` (> 0: the
+    ray hit the face's front), ``face``, ``t`` (in multiples of ``dir``), the
+    barycentric ``u``, ``v`` of the hit and the face's unit ``normal``."""
+
+    result: wp.bool
+    sign: wp.float32
+    face: wp.int32
+    t: wp.float32
+    u: wp.float32
+    v: wp.float32
+    normal: wp.vec3
+
+
+@wp.struct
+class MeshQueryAABB:
+    """A box or sphere query over a mesh's faces in progress (Warp's ``MeshQuery``);
+    advance it with ``mesh_query_next``."""
+
+    mesh: wp.uint64
+    kind: wp.int32
+    center: wp.vec3
+    radius: wp.float32
+    bvh: BvhQuery
+
+
+#: Warp's name for a query of either kind.
+MeshQuery = MeshQueryAABB
+
+
+# -- faces -------------------------------------------------------------------------
+
+
+@func
+def _vertex(rec: MeshRecord, face: int, corner: int) -> wp.vec3:
+    return rec.points[rec.indices[face * 3 + corner]]
+
+
+@func
+def _point_on_face(rec: MeshRecord, face: int, u: float, v: float) -> wp.vec3:
+    a = _vertex(rec, face, 0)
+    b = _vertex(rec, face, 1)
+    c = _vertex(rec, face, 2)
+    return a * u + b * v + c * (1.0 - u - v)
+
+
+@func
+def _face_bary(rec: MeshRecord, face: int, point: wp.vec3) -> wp.vec2:
+    return closest_point_to_triangle(
+        _vertex(rec, face, 0), _vertex(rec, face, 1), _vertex(rec, face, 2), point
+    )
+
+
+@func
+def _root_range(bvh: BvhRecord, root: int) -> wp.vec2i:
+    """The node range ``[start, stop)`` of the subtree at ``root`` (-1: the whole tree)."""
+    start = root
+    if start < 0:
+        start = bvh.root
+    if start < 0:  # an empty mesh
+        return wp.vec2i(0, 0)
+    return wp.vec2i(start, bvh.skip[start])
+
+
+# -- closest and furthest points -----------------------------------------------------
+
+
+@func
+def _closest_face(id: wp.uint64, point: wp.vec3, max_dist: float) -> int:
+    """The face closest to ``point`` at a distance strictly below ``max_dist`` (lowest
+    index among ties; slivers left out), or -1."""
+    rec = wp.object_record(id, MeshRecord)
+    bvh = wp.object_record(rec.bvh, BvhRecord)
+    best = max_dist * max_dist
+    best_face = -1
+    span = _root_range(bvh, -1)
+    node = span[0]
+    while node < span[1]:
+        if box_distance_sq(bvh.lowers[node], bvh.uppers[node], point) <= best:
+            first = bvh.first[node]
+            if first >= 0:
+                for k in range(first, first + bvh.count[node]):
+                    f = bvh.items[k]
+                    a = _vertex(rec, f, 0)
+                    b = _vertex(rec, f, 1)
+                    c = _vertex(rec, f, 2)
+                    if not is_sliver(a, b, c):
+                        uv = closest_point_to_triangle(a, b, c, point)
+                        q = a * uv[0] + b * uv[1] + c * (1.0 - uv[0] - uv[1])
+                        d = wp.length_sq(q - point)
+                        if d < best or (d == best and best_face >= 0 and f < best_face):
+                            best = d
+                            best_face = f
+            node = node + 1
+        else:
+            node = bvh.skip[node]
+    return best_face
+
+
+@func
+def _furthest_face(id: wp.uint64, point: wp.vec3, min_dist: float) -> int:
+    """The face whose furthest vertex from ``point`` is furthest, strictly beyond
+    ``min_dist`` (lowest index among ties; slivers left out), or -1."""
+    rec = wp.object_record(id, MeshRecord)
+    bvh = wp.object_record(rec.bvh, BvhRecord)
+    best = min_dist * min_dist
+    if min_dist < 0.0:
+        best = -1.0
+    best_face = -1
+    span = _root_range(bvh, -1)
+    node = span[0]
+    while node < span[1]:
+        if box_furthest_distance_sq(bvh.lowers[node], bvh.uppers[node], point) >= best:
+            first = bvh.first[node]
+            if first >= 0:
+                for k in range(first, first + bvh.count[node]):
+                    f = bvh.items[k]
+                    a = _vertex(rec, f, 0)
+                    b = _vertex(rec, f, 1)
+                    c = _vertex(rec, f, 2)
+                    if not is_sliver(a, b, c):
+                        uv = furthest_point_to_triangle(a, b, c, point)
+                        q = a * uv[0] + b * uv[1] + c * (1.0 - uv[0] - uv[1])
+                        d = wp.length_sq(q - point)
+                        if d > best or (d == best and best_face >= 0 and f < best_face):
+                            best = d
+                            best_face = f
+            node = node + 1
+        else:
+            node = bvh.skip[node]
+    return best_face
+
+
+@func
+def _point_answer(id: wp.uint64, point: wp.vec3, face: int, sign: float) -> MeshQueryPoint:
+    """A ``MeshQueryPoint`` for ``face`` (-1: no result). The barycentrics are computed
+    here, outside the search, so gradients reach ``point`` through them alone."""
+    q = MeshQueryPoint()
+    q.result = False
+    q.sign = 0.0
+    q.face = 0
+    q.u = 0.0
+    q.v = 0.0
+    if face >= 0:
+        rec = wp.object_record(id, MeshRecord)
+        uv = _face_bary(rec, face, point)
+        q.result = True
+        q.sign = sign
+        q.face = face
+        q.u = uv[0]
+        q.v = uv[1]
+    return q
+
+
+@func
+def mesh_query_point_no_sign(id: wp.uint64, point: wp.vec3, max_dist: float) -> MeshQueryPoint:
+    """The closest point of mesh ``id`` to ``point``, closer than ``max_dist``, without
+    the inside/outside sign (``sign`` is 0)."""
+    return _point_answer(id, point, _closest_face(id, point, max_dist), 0.0)
+
+
+@func
+def mesh_query_point_no_sign(  # noqa: F811 - the out-argument form
+    id: wp.uint64,
+    point: wp.vec3,
+    max_dist: float,
+    face: inout(wp.int32),
+    bary_u: inout(wp.float32),
+    bary_v: inout(wp.float32),
+) -> bool:
+    """Out-argument form: writes ``face``, ``bary_u``, ``bary_v`` and gives True when a
+    face closer than ``max_dist`` exists (the outputs are left alone otherwise)."""
+    q = mesh_query_point_no_sign(id, point, max_dist)
+    if q.result:
+        face = q.face  # noqa: F841 - in-out parameters: the caller sees them
+        bary_u = q.u  # noqa: F841
+        bary_v = q.v  # noqa: F841
+    return q.result
+
+
+@func
+def mesh_query_furthest_point_no_sign(
+    id: wp.uint64, point: wp.vec3, min_dist: float
+) -> MeshQueryPoint:
+    """The point of mesh ``id`` furthest from ``point`` (a vertex), further than
+    ``min_dist``; ``sign`` is 0."""
+    return _point_answer_far(id, point, _furthest_face(id, point, min_dist))
+
+
+@func
+def mesh_query_furthest_point_no_sign(  # noqa: F811 - the out-argument form
+    id: wp.uint64,
+    point: wp.vec3,
+    min_dist: float,
+    face: inout(wp.int32),
+    bary_u: inout(wp.float32),
+    bary_v: inout(wp.float32),
+) -> bool:
+    """Out-argument form of ``mesh_query_furthest_point_no_sign``."""
+    q = mesh_query_furthest_point_no_sign(id, point, min_dist)
+    if q.result:
+        face = q.face  # noqa: F841
+        bary_u = q.u  # noqa: F841
+        bary_v = q.v  # noqa: F841
+    return q.result
+
+
+@func
+def _point_answer_far(id: wp.uint64, point: wp.vec3, face: int) -> MeshQueryPoint:
+    q = MeshQueryPoint()
+    q.result = False
+    q.sign = 0.0
+    q.face = 0
+    q.u = 0.0
+    q.v = 0.0
+    if face >= 0:
+        rec = wp.object_record(id, MeshRecord)
+        uv = furthest_point_to_triangle(
+            _vertex(rec, face, 0), _vertex(rec, face, 1), _vertex(rec, face, 2), point
+        )
+        q.result = True
+        q.face = face
+        q.u = uv[0]
+        q.v = uv[1]
+    return q
+
+
+# -- rays ------------------------------------------------------------------------------
+
+
+@func
+def _ray_closest(
+    id: wp.uint64, start: wp.vec3, dir: wp.vec3, max_t: float, root: int
+) -> MeshQueryRay:
+    """The first hit along the ray at ``0 <= t < max_t`` (lowest face among equal ``t``)."""
+    rec = wp.object_record(id, MeshRecord)
+    bvh = wp.object_record(rec.bvh, BvhRecord)
+    shear = ray_shear(dir)
+    inv = wp.vec3(safe_inverse(dir[0]), safe_inverse(dir[1]), safe_inverse(dir[2]))
+    hit = MeshQueryRay()
+    hit.result = False
+    hit.sign = 0.0
+    hit.face = -1
+    hit.t = max_t
+    hit.u = 0.0
+    hit.v = 0.0
+    hit.normal = wp.vec3(0.0)
+    span = _root_range(bvh, root)
+    node = span[0]
+    while node < span[1]:
+        if ray_box_entry(bvh.lowers[node], bvh.uppers[node], start, inv, hit.t):
+            first = bvh.first[node]
+            if first >= 0:
+                for k in range(first, first + bvh.count[node]):
+                    f = bvh.items[k]
+                    h = intersect_ray_triangle(
+                        shear, start, _vertex(rec, f, 0), _vertex(rec, f, 1), _vertex(rec, f, 2)
+                    )
+                    t = h[0]
+                    if t >= 0.0 and (t < hit.t or (t == hit.t and hit.result and f < hit.face)):
+                        hit.result = True
+                        hit.t = t
+                        hit.face = f
+                        hit.u = h[1]
+                        hit.v = h[2]
+                        hit.sign = h[3]
+            node = node + 1
+        else:
+            node = bvh.skip[node]
+    if hit.result:
+        hit.normal = mesh_eval_face_normal(id, hit.face)
+    else:
+        hit.face = 0
+        hit.t = 0.0
+    return hit
+
+
+@func
+def mesh_query_ray(
+    id: wp.uint64, start: wp.vec3, dir: wp.vec3, max_t: float, root: int = -1
+) -> MeshQueryRay:
+    """The closest hit of the ray ``start + t * dir`` (``0 <= t < max_t``, ``t`` in
+    multiples of ``dir``'s length) with mesh ``id``, searching the subtree ``root``
+    (``mesh_get_group_root``; -1: the whole mesh). ``sign`` > 0 when the ray meets
+    the face's front (counter-clockwise) side."""
+    return _ray_closest(id, start, dir, max_t, root)
+
+
+@func
+def mesh_query_ray(  # noqa: F811 - the out-argument form
+    id: wp.uint64,
+    start: wp.vec3,
+    dir: wp.vec3,
+    max_t: float,
+    t: inout(wp.float32),
+    bary_u: inout(wp.float32),
+    bary_v: inout(wp.float32),
+    sign: inout(wp.float32),
+    normal: inout(wp.vec3),
+    face: inout(wp.int32),
+    root: int = -1,
+) -> bool:
+    """Out-argument form of ``mesh_query_ray``: writes the outputs only on a hit."""
+    h = _ray_closest(id, start, dir, max_t, root)
+    if h.result:
+        t = h.t  # noqa: F841 - in-out parameters: the caller sees them
+        bary_u = h.u  # noqa: F841
+        bary_v = h.v  # noqa: F841
+        sign = h.sign  # noqa: F841
+        normal = h.normal  # noqa: F841
+        face = h.face  # noqa: F841
+    return h.result
+
+
+@func
+def mesh_query_ray_anyhit(
+    id: wp.uint64, start: wp.vec3, dir: wp.vec3, max_t: float, root: int = -1
+) -> bool:
+    """Whether the ray ``start + t * dir`` hits mesh ``id`` at some ``0 <= t < max_t``
+    (stops at the first hit found)."""
+    rec = wp.object_record(id, MeshRecord)
+    bvh = wp.object_record(rec.bvh, BvhRecord)
+    shear = ray_shear(dir)
+    inv = wp.vec3(safe_inverse(dir[0]), safe_inverse(dir[1]), safe_inverse(dir[2]))
+    found = False
+    span = _root_range(bvh, root)
+    node = span[0]
+    while node < span[1] and not found:
+        if ray_box_entry(bvh.lowers[node], bvh.uppers[node], start, inv, max_t):
+            first = bvh.first[node]
+            if first >= 0:
+                for k in range(first, first + bvh.count[node]):
+                    f = bvh.items[k]
+                    h = intersect_ray_triangle(
+                        shear, start, _vertex(rec, f, 0), _vertex(rec, f, 1), _vertex(rec, f, 2)
+                    )
+                    if h[0] >= 0.0 and h[0] < max_t:
+                        found = True
+            node = node + 1
+        else:
+            node = bvh.skip[node]
+    return found
+
+
+@func
+def mesh_query_ray_count_intersections(
+    id: wp.uint64, start: wp.vec3, dir: wp.vec3, root: int = -1
+) -> int:
+    """The number of faces the ray ``start + t * dir`` (every ``t >= 0``) hits."""
+    rec = wp.object_record(id, MeshRecord)
+    bvh = wp.object_record(rec.bvh, BvhRecord)
+    shear = ray_shear(dir)
+    inv = wp.vec3(safe_inverse(dir[0]), safe_inverse(dir[1]), safe_inverse(dir[2]))
+    n = 0
+    span = _root_range(bvh, root)
+    node = span[0]
+    while node < span[1]:
+        if ray_box_entry(bvh.lowers[node], bvh.uppers[node], start, inv, FLT_MAX):
+            first = bvh.first[node]
+            if first >= 0:
+                for k in range(first, first + bvh.count[node]):
+                    f = bvh.items[k]
+                    h = intersect_ray_triangle(
+                        shear, start, _vertex(rec, f, 0), _vertex(rec, f, 1), _vertex(rec, f, 2)
+                    )
+                    if h[0] >= 0.0:
+                        n = n + 1
+            node = node + 1
+        else:
+            node = bvh.skip[node]
+    return n
+
+
+# -- inside/outside ----------------------------------------------------------------------
+
+
+@func
+def _sign_by_axis_rays(id: wp.uint64, point: wp.vec3) -> float:
+    """Warp's default sign: -1 when at least two of the rays along +x, +y, +z first
+    hit a face from behind (a miss votes outside), else 1."""
+    votes = 0
+    for axis in range(3):
+        d = wp.vec3(0.0)
+        d[axis] = 1.0
+        h = _ray_closest(id, point, d, FLT_MAX, -1)
+        if h.result and h.sign < 0.0:
+            votes = votes + 1
+    if votes >= 2:
+        return -1.0
+    return 1.0
+
+
+@func
+def _sign_by_parity(id: wp.uint64, point: wp.vec3, n_sample: int, scale: float) -> float:
+    """Warp's parity sign: ``n_sample`` rays along ``(1, 1, 1)`` perturbed by a fixed
+    random stream (seed 42); -1 when at least half cross an odd number of faces."""
+    votes = 0
+    state = rand_init(42)
+    for _i in range(n_sample):
+        d = wp.vec3(0.0)
+        while wp.length_sq(d) < 1.0e-8:
+            d = wp.vec3(1.0) + wp.vec3(
+                randf(state, -scale, scale),
+                randf(state, -scale, scale),
+                randf(state, -scale, scale),
+            )
+        if mesh_query_ray_count_intersections(id, point, d) % 2 == 1:
+            votes = votes + 1
+    if votes * 2 >= n_sample:
+        return -1.0
+    return 1.0
+
+
+@func
+def _winding_number(id: wp.uint64, point: wp.vec3) -> float:
+    """The exact generalized winding number of the mesh at ``point`` (the sum of its
+    faces' solid angles over 4 pi), by brute force over every face."""
+    rec = wp.object_record(id, MeshRecord)
+    total = 0.0
+    for f in range(rec.num_tris):
+        total = total + triangle_solid_angle(
+            _vertex(rec, f, 0), _vertex(rec, f, 1), _vertex(rec, f, 2), point
+        )
+    return total * INV_4PI
+
+
+@func
+def mesh_query_point(id: wp.uint64, point: wp.vec3, max_dist: float) -> MeshQueryPoint:
+    """The closest point of mesh ``id`` to ``point`` (closer than ``max_dist``), with
+    the sign by a majority vote of three axis rays (each votes inside when its first hit
+    is a face's back; a miss votes outside). The sign ignores ``max_dist``."""
+    face = _closest_face(id, point, max_dist)
+    sign = 0.0
+    if face >= 0:
+        sign = _sign_by_axis_rays(id, point)
+    return _point_answer(id, point, face, sign)
+
+
+@func
+def mesh_query_point(  # noqa: F811 - the out-argument form
+    id: wp.uint64,
+    point: wp.vec3,
+    max_dist: float,
+    inside: inout(wp.float32),
+    face: inout(wp.int32),
+    bary_u: inout(wp.float32),
+    bary_v: inout(wp.float32),
+) -> bool:
+    """Out-argument form of ``mesh_query_point``: writes ``inside`` (< 0 inside),
+    ``face``, ``bary_u``, ``bary_v`` when a face closer than ``max_dist`` exists."""
+    q = mesh_query_point(id, point, max_dist)
+    if q.result:
+        inside = q.sign  # noqa: F841 - in-out parameters: the caller sees them
+        face = q.face  # noqa: F841
+        bary_u = q.u  # noqa: F841
+        bary_v = q.v  # noqa: F841
+    return q.result
+
+
+@func
+def mesh_query_point_sign_parity(
+    id: wp.uint64,
+    point: wp.vec3,
+    max_dist: float,
+    n_sample: int = 1,
+    perturbation_scale: float = 0.1,
+) -> MeshQueryPoint:
+    """The closest point, signed by ray parity: ``n_sample`` rays (a fixed, deterministic
+    set) each count their crossings; inside when at least half count an odd number
+    (``n_sample <= 0``: always inside, as Warp)."""
+    face = _closest_face(id, point, max_dist)
+    sign = 0.0
+    if face >= 0:
+        sign = _sign_by_parity(id, point, n_sample, perturbation_scale)
+    return _point_answer(id, point, face, sign)
+
+
+@func
+def mesh_query_point_sign_parity(  # noqa: F811 - the out-argument form
+    id: wp.uint64,
+    point: wp.vec3,
+    max_dist: float,
+    inside: inout(wp.float32),
+    face: inout(wp.int32),
+    bary_u: inout(wp.float32),
+    bary_v: inout(wp.float32),
+    n_sample: int = 1,
+    perturbation_scale: float = 0.1,
+) -> bool:
+    """Out-argument form of ``mesh_query_point_sign_parity``."""
+    q = mesh_query_point_sign_parity(id, point, max_dist, n_sample, perturbation_scale)
+    if q.result:
+        inside = q.sign  # noqa: F841
+        face = q.face  # noqa: F841
+        bary_u = q.u  # noqa: F841
+        bary_v = q.v  # noqa: F841
+    return q.result
+
+
+@func
+def mesh_query_point_sign_winding_number(
+    id: wp.uint64,
+    point: wp.vec3,
+    max_dist: float,
+    accuracy: float = 2.0,
+    threshold: float = 0.5,
+) -> MeshQueryPoint:
+    """The closest point, signed by the winding number: inside when it exceeds
+    ``threshold``. kdsl computes the winding number exactly over every face (``accuracy``
+    is accepted for Warp's signature and unused); on a mesh built without
+    ``support_winding_number`` the sign is ``mesh_query_point``'s, as in Warp."""
+    face = _closest_face(id, point, max_dist)
+    sign = 0.0
+    if face >= 0:
+        rec = wp.object_record(id, MeshRecord)
+        if rec.support_winding_number != 0:
+            sign = 1.0
+            if _winding_number(id, point) > threshold:
+                sign = -1.0
+        else:
+            sign = _sign_by_axis_rays(id, point)
+    return _point_answer(id, point, face, sign)
+
+
+@func
+def mesh_query_point_sign_winding_number(  # noqa: F811 - the out-argument form
+    id: wp.uint64,
+    point: wp.vec3,
+    max_dist: float,
+    inside: inout(wp.float32),
+    face: inout(wp.int32),
+    bary_u: inout(wp.float32),
+    bary_v: inout(wp.float32),
+    accuracy: float = 2.0,
+    threshold: float = 0.5,
+) -> bool:
+    """Out-argument form of ``mesh_query_point_sign_winding_number``."""
+    q = mesh_query_point_sign_winding_number(id, point, max_dist, accuracy, threshold)
+    if q.result:
+        inside = q.sign  # noqa: F841
+        face = q.face  # noqa: F841
+        bary_u = q.u  # noqa: F841
+        bary_v = q.v  # noqa: F841
+    return q.result
+
+
+@func
+def _corner_angle(e0: wp.vec3, e1: wp.vec3) -> float:
+    return wp.acos(wp.clamp(wp.dot(wp.normalize(e0), wp.normalize(e1)), -1.0, 1.0))
+
+
+@func
+def _feature_weight(a: wp.vec3, b: wp.vec3, c: wp.vec3, q: wp.vec3, eps_sq: float) -> float:
+    """The angle-weighted pseudo-normal weight of the face's feature nearest ``q``: its
+    corner angle at a vertex, pi on an edge, 2 pi inside the face (Warp's rule)."""
+    e0 = b - a
+    e1 = c - a
+    e2 = c - b
+    qa = q - a
+    qb = q - b
+    if wp.length_sq(qa) < eps_sq:
+        return _corner_angle(e0, e1)
+    if wp.length_sq(qb) < eps_sq:
+        return _corner_angle(e2, -e0)
+    if wp.length_sq(q - c) < eps_sq:
+        return _corner_angle(-e1, -e2)
+    n0 = wp.dot(e0, e0)
+    n1 = wp.dot(e1, e1)
+    n2 = wp.dot(e2, e2)
+    d0 = wp.dot(e0, qa)
+    d2 = wp.dot(e2, qb)
+    d1 = wp.dot(e1, qa)
+    on_edge = (
+        wp.length_sq(qa) * n0 - d0 * d0 < eps_sq * n0
+        or wp.length_sq(qb) * n2 - d2 * d2 < eps_sq * n2
+        or wp.length_sq(qa) * n1 - d1 * d1 < eps_sq * n1
+    )
+    if on_edge:
+        return 3.14159265359
+    return 2.0 * 3.14159265359
+
+
+@func
+def mesh_query_point_sign_normal(
+    id: wp.uint64, point: wp.vec3, max_dist: float, epsilon: float = 1.0e-3
+) -> MeshQueryPoint:
+    """The closest point, signed by the angle-weighted pseudo-normal of the closest
+    feature (faces within ``epsilon`` times the mean edge length of the closest distance
+    count as touching it): fast, for watertight, non-self-intersecting meshes."""
+    rec = wp.object_record(id, MeshRecord)
+    bvh = wp.object_record(rec.bvh, BvhRecord)
+    eps = rec.average_edge_length * epsilon
+    best = max_dist
+    best_face = -1
+    normal = wp.vec3(0.0)
+    span = _root_range(bvh, -1)
+    node = span[0]
+    while node < span[1]:
+        reach = best + eps
+        if box_distance_sq(bvh.lowers[node], bvh.uppers[node], point) <= reach * reach:
+            first = bvh.first[node]
+            if first >= 0:
+                for k in range(first, first + bvh.count[node]):
+                    f = bvh.items[k]
+                    a = _vertex(rec, f, 0)
+                    b = _vertex(rec, f, 1)
+                    c = _vertex(rec, f, 2)
+                    if not is_sliver(a, b, c):
+                        uv = closest_point_to_triangle(a, b, c, point)
+                        q = a * uv[0] + b * uv[1] + c * (1.0 - uv[0] - uv[1])
+                        d = wp.length(q - point)
+                        if d < best + eps:
+                            n = wp.normalize(wp.cross(b - a, c - a))
+                            w = _feature_weight(a, b, c, q, eps * eps)
+                            if d > best - eps:  # as close as the best: add its normal
+                                normal = normal + w * n
+                                if d < best or (d == best and best_face >= 0 and f < best_face):
+                                    best = d
+                                    best_face = f
+                            else:  # clearly closer: start again from this face
+                                best = d
+                                best_face = f
+                                normal = w * n
+            node = node + 1
+        else:
+            node = bvh.skip[node]
+    if not (best < max_dist):
+        best_face = -1
+    sign = 0.0
+    if best_face >= 0:
+        uv = _face_bary(rec, best_face, point)
+        q = _point_on_face(rec, best_face, uv[0], uv[1])
+        sign = -1.0
+        if wp.dot(normal, point - q) > 0.0:
+            sign = 1.0
+    return _point_answer(id, point, best_face, sign)
+
+
+@func
+def mesh_query_point_sign_normal(  # noqa: F811 - the out-argument form
+    id: wp.uint64,
+    point: wp.vec3,
+    max_dist: float,
+    inside: inout(wp.float32),
+    face: inout(wp.int32),
+    bary_u: inout(wp.float32),
+    bary_v: inout(wp.float32),
+    epsilon: float = 1.0e-3,
+) -> bool:
+    """Out-argument form of ``mesh_query_point_sign_normal``."""
+    q = mesh_query_point_sign_normal(id, point, max_dist, epsilon)
+    if q.result:
+        inside = q.sign  # noqa: F841
+        face = q.face  # noqa: F841
+        bary_u = q.u  # noqa: F841
+        bary_v = q.v  # noqa: F841
+    return q.result
+
+
+# -- box and sphere queries --------------------------------------------------------------
+
+
+@func
+def mesh_query_aabb(id: wp.uint64, low: wp.vec3, high: wp.vec3) -> MeshQueryAABB:
+    """A query for the faces whose bounding box overlaps ``[low, high]`` (broad phase
+    only); advance it with ``mesh_query_next``."""
+    q = MeshQueryAABB()
+    q.mesh = id
+    q.kind = AABB
+    q.center = low
+    q.radius = 0.0
+    q.bvh = bvh_query_aabb(wp.object_record(id, MeshRecord).bvh, low, high)
+    return q
+
+
+@func
+def mesh_query_sphere(id: wp.uint64, center: wp.vec3, radius: float) -> MeshQueryAABB:
+    """A query for the faces within ``radius`` of ``center`` (touching counts; a negative
+    radius is 0; a zero-area face is tested as its longest edge); advance it with
+    ``mesh_query_next``."""
+    r = wp.max(radius, 0.0)
+    q = MeshQueryAABB()
+    q.mesh = id
+    q.kind = SPHERE
+    q.center = center
+    q.radius = r
+    q.bvh = bvh_query_sphere(wp.object_record(id, MeshRecord).bvh, center, r)
+    return q
+
+
+@func
+def _face_within(rec: MeshRecord, face: int, center: wp.vec3, radius: float) -> bool:
+    a = _vertex(rec, face, 0)
+    b = _vertex(rec, face, 1)
+    c = _vertex(rec, face, 2)
+    ab = b - a
+    ac = c - a
+    n = wp.cross(ab, ac)
+    q = wp.vec3(0.0)
+    if wp.dot(n, n) == 0.0:  # no area: the longest edge stands for the face
+        bc = c - b
+        lab = wp.dot(ab, ab)
+        lac = wp.dot(ac, ac)
+        lbc = wp.dot(bc, bc)
+        p0 = b
+        p1 = c
+        len2 = lbc
+        if lab >= lac and lab >= lbc:
+            p0 = a
+            p1 = b
+            len2 = lab
+        elif lac >= lbc:
+            p0 = a
+            p1 = c
+            len2 = lac
+        t = 0.0
+        if len2 > 0.0:
+            t = wp.clamp(wp.dot(center - p0, p1 - p0) / len2, 0.0, 1.0)
+        q = p0 + t * (p1 - p0)
+    else:
+        uv = closest_point_to_triangle(a, b, c, center)
+        q = a * uv[0] + b * uv[1] + c * (1.0 - uv[0] - uv[1])
+    return wp.length_sq(q - center) <= radius * radius
+
+
+@func
+def mesh_query_next(query: inout(MeshQueryAABB), index: inout(wp.int32)) -> bool:
+    """Advance a ``mesh_query_aabb`` or ``mesh_query_sphere`` query: writes the next
+    matching face to ``index`` and gives True, or gives False (``index`` unchanged)."""
+    rec = wp.object_record(query.mesh, MeshRecord)
+    bq = query.bvh
+    face = 0
+    found = False
+    while not found and bvh_query_next(bq, face):
+        if query.kind == AABB or _face_within(rec, face, query.center, query.radius):
+            found = True
+    query.bvh = bq
+    if found:
+        index = face  # noqa: F841 - in-out parameter: the caller sees it
+    return found
+
+
+@func
+def mesh_query_aabb_next(query: inout(MeshQueryAABB), index: inout(wp.int32)) -> bool:
+    """``mesh_query_next`` under its older name."""
+    return mesh_query_next(query, index)
+
+
+# -- evaluation and access ------------------------------------------------------------------
+
+
+@func
+def mesh_eval_position(id: wp.uint64, face: int, bary_u: float, bary_v: float) -> wp.vec3:
+    """``u * v0 + v * v1 + (1 - u - v) * v2`` over face ``face``'s vertex positions."""
+    rec = wp.object_record(id, MeshRecord)
+    return _point_on_face(rec, face, bary_u, bary_v)
+
+
+@func
+def mesh_eval_velocity(id: wp.uint64, face: int, bary_u: float, bary_v: float) -> wp.vec3:
+    """The velocities of face ``face``'s vertices interpolated as ``mesh_eval_position``
+    does; zero for a mesh without velocities."""
+    rec = wp.object_record(id, MeshRecord)
+    if rec.velocities.shape[0] == 0:
+        return wp.vec3(0.0)
+    a = rec.velocities[rec.indices[face * 3]]
+    b = rec.velocities[rec.indices[face * 3 + 1]]
+    c = rec.velocities[rec.indices[face * 3 + 2]]
+    return a * bary_u + b * bary_v + c * (1.0 - bary_u - bary_v)
+
+
+@func
+def mesh_eval_face_normal(id: wp.uint64, face: int) -> wp.vec3:
+    """The unit normal of face ``face``, oriented by its winding (zero for a face of no
+    area)."""
+    rec = wp.object_record(id, MeshRecord)
+    a = _vertex(rec, face, 0)
+    return wp.normalize(wp.cross(_vertex(rec, face, 1) - a, _vertex(rec, face, 2) - a))
+
+
+@func
+def mesh_get(id: wp.uint64) -> MeshRecord:
+    """The mesh's record: its ``points``, ``velocities`` and ``indices`` arrays."""
+    return wp.object_record(id, MeshRecord)
+
+
+@func
+def mesh_get_point(id: wp.uint64, index: int) -> wp.vec3:
+    """The position of face-vertex ``index`` (``points[indices[index]]``)."""
+    rec = wp.object_record(id, MeshRecord)
+    return rec.points[rec.indices[index]]
+
+
+@func
+def mesh_get_velocity(id: wp.uint64, index: int) -> wp.vec3:
+    """The velocity of face-vertex ``index`` (zero for a mesh without velocities)."""
+    rec = wp.object_record(id, MeshRecord)
+    if rec.velocities.shape[0] == 0:
+        return wp.vec3(0.0)
+    return rec.velocities[rec.indices[index]]
+
+
+@func
+def mesh_get_index(id: wp.uint64, index: int) -> int:
+    """The point index of face-vertex ``index`` (``indices[index]``)."""
+    return wp.object_record(id, MeshRecord).indices[index]
+
+
+@func
+def mesh_get_bvh(id: wp.uint64) -> wp.uint64:
+    """The id of the mesh's BVH over its faces, for the ``bvh_query_*`` functions (their
+    items are face indices)."""
+    return wp.object_record(id, MeshRecord).bvh
+
+
+@func
+def mesh_get_group_root(id: wp.uint64, group: int) -> int:
+    """The root node of group ``group``'s faces (pass it as a ray query's ``root``), or
+    -1 (the whole mesh) for a group with no faces."""
+    return bvh_get_group_root(wp.object_record(id, MeshRecord).bvh, group)
