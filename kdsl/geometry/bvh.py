@@ -10,9 +10,12 @@ from typing import Any
 
 import numpy as np
 
-from kdsl.errors import KdslTypeError
-from kdsl.geometry.median import Tree, build_median, refit_bounds
+from kdsl.errors import KdslError, KdslTypeError
+from kdsl.geometry.device_tree import DeviceTree, refit, upload_tree
+from kdsl.geometry.lbvh import build_lbvh
+from kdsl.geometry.median import build_median
 from kdsl.ir import types as T
+from kdsl.runtime.alloc import empty
 from kdsl.runtime.array import array
 from kdsl.runtime.objects import ObjectRecord
 from kdsl.stdlib.bvh import BvhRecord
@@ -20,8 +23,24 @@ from kdsl.types import type_of
 
 VEC3 = T.VectorType(3, T.F32)
 
-#: The constructors by name; each builds a ``Tree`` from host boxes.
-CONSTRUCTORS = {"median": build_median}
+
+class BvhError(KdslError, RuntimeError):
+    """A bad ``Bvh`` argument value (a ``RuntimeError`` too, as Warp's Bvh errors are)."""
+
+
+def _host_build(build):
+    """A host constructor (``Tree`` from NumPy boxes) as a ``DeviceTree`` constructor."""
+
+    def construct(lowers, uppers, leaf_size, groups, num_groups) -> DeviceTree:
+        g = None if groups is None else groups.numpy()
+        tree = build(lowers.numpy(), uppers.numpy(), leaf_size, g, num_groups)
+        return upload_tree(tree, lowers.device)
+
+    return construct
+
+
+#: The constructors by name: each builds a ``DeviceTree`` from the boxes.
+CONSTRUCTORS = {"median": _host_build(build_median), "lbvh": build_lbvh}
 
 
 def _check_boxes(lowers: Any, uppers: Any) -> None:
@@ -38,12 +57,31 @@ def _check_boxes(lowers: Any, uppers: Any) -> None:
         )
 
 
+def _check_groups(groups: Any, lowers: array) -> int:
+    """Check ``groups`` against the boxes; the number of groups (0 without groups)."""
+    if groups is None:
+        return 0
+    if not isinstance(groups, array) or type_of(groups.dtype) != T.I32 or groups.ndim != 1:
+        raise KdslTypeError(f"Bvh groups must be a 1-d kdsl.array of int32, not {groups!r}")
+    if groups.shape != lowers.shape:
+        raise KdslTypeError(f"Bvh groups has {groups.shape[0]} entries for {lowers.shape[0]} boxes")
+    if groups.device != lowers.device:
+        raise KdslTypeError(f"Bvh groups is on {groups.device}, the boxes on {lowers.device}")
+    g = groups.numpy()  # one read (of ints) per build, for the number of groups
+    if len(g) and int(g.min()) < 0:
+        raise BvhError(f"Bvh groups must be >= 0, found {int(g.min())}")
+    return int(g.max()) + 1 if len(g) else 0
+
+
 class Bvh:
     """A BVH over the boxes ``[lowers[i], uppers[i]]`` (vec3 arrays on one device), as
     ``warp.Bvh``. Pass ``bvh.id`` to kernels and query it with ``bvh_query_aabb``,
     ``bvh_query_ray``, ``bvh_query_sphere`` or ``bvh_query_capsule``. ``groups`` (int32
-    per item) builds each group as a subtree (``bvh_get_group_root``). After changing the
-    boxes, ``refit()`` updates the bounds; ``rebuild()`` builds the tree again."""
+    per item, >= 0) builds each group as a subtree (``bvh_get_group_root``).
+    ``constructor`` is ``"lbvh"``, ``"median"``, ``"sah"`` or None (the device's
+    default, ``DEFAULT_CONSTRUCTOR``); ``leaf_size`` is the most items a leaf holds.
+    After changing the boxes, ``refit()`` updates the bounds; ``rebuild()`` builds the
+    tree again."""
 
     def __init__(
         self,
@@ -54,13 +92,17 @@ class Bvh:
         leaf_size: int = 1,
     ) -> None:
         _check_boxes(lowers, uppers)
+        if isinstance(leaf_size, bool) or not isinstance(leaf_size, int | np.integer):
+            raise KdslTypeError(f"Bvh leaf_size must be an int, not {leaf_size!r}")
+        if leaf_size < 1:
+            raise BvhError(f"Bvh leaf_size must be at least 1, not {leaf_size}")
         self.lowers, self.uppers = lowers, uppers
         self.device = lowers.device
+        self._num_groups = _check_groups(groups, lowers)
         self.groups = groups
         self.leaf_size = int(leaf_size)
-        self.constructor = _constructor(constructor)
+        self.constructor = _constructor(constructor, self.device)
         self._record = ObjectRecord(self, BvhRecord.__kdsl_type__, "bvh", self.device)
-        self._tree: Tree | None = None
         self.rebuild()
 
     @property
@@ -71,40 +113,38 @@ class Bvh:
     def rebuild(self, constructor: str | None = None) -> None:
         """Build the tree again from the current boxes (optionally with another constructor)."""
         if constructor is not None:
-            self.constructor = _constructor(constructor)
-        groups = None if self.groups is None else self.groups.numpy()
-        lo, hi = self.lowers.numpy(), self.uppers.numpy()
-        self._tree = CONSTRUCTORS[self.constructor](lo, hi, self.leaf_size, groups)
-        tree = self._tree
-        self._topology = {
-            name: array(getattr(tree, name), dtype=T.I32, device=self.device)
-            for name in ("skip", "first", "count", "items", "group_roots")
-        }
-        self._bounds = [
-            array(np.zeros((tree.num_nodes, 3), np.float32), dtype=VEC3, device=self.device)
-            for _ in range(2)
-        ]
+            self.constructor = _constructor(constructor, self.device)
+        if self.groups is not None:
+            self._num_groups = _check_groups(self.groups, self.lowers)
+        build = CONSTRUCTORS[self.constructor]
+        tree = build(self.lowers, self.uppers, self.leaf_size, self.groups, self._num_groups)
+        self._tree = tree
+        self._bounds = [empty(tree.num_nodes, dtype=VEC3, device=self.device) for _ in range(2)]
         self.refit()
-
-    def refit(self) -> None:
-        """Recompute the node bounds from the current boxes (the tree keeps its shape)."""
-        lo, hi = refit_bounds(self._tree, self.lowers.numpy(), self.uppers.numpy())
-        self._bounds[0].assign(lo)
-        self._bounds[1].assign(hi)
         self._record.write(
             {
                 "lowers": self._bounds[0], "uppers": self._bounds[1],
-                **self._topology,
+                "skip": tree.skip, "first": tree.first, "count": tree.count,
+                "items": tree.items, "group_roots": tree.group_roots,
                 "item_lowers": self.lowers, "item_uppers": self.uppers,
-                "root": 0 if self._tree.num_nodes else -1,
+                "root": 0 if tree.num_nodes else -1,
             }
         )  # fmt: skip
 
+    def refit(self) -> None:
+        """Recompute the node bounds from the current boxes (the tree keeps its shape), with
+        kernels on the BVH's device."""
+        refit(self._tree, self.lowers, self.uppers, self._bounds[0], self._bounds[1])
 
-def _constructor(name: str | None) -> str:
-    name = name or "median"
+
+#: The constructor a BVH gets without ``constructor=``, per device kind: the one that
+#: measured fastest to build plus query (docs/performance.md, "Geometry").
+DEFAULT_CONSTRUCTOR = {"cpu": "lbvh", "cuda": "lbvh"}
+
+
+def _constructor(name: str | None, device: Any) -> str:
+    if name is None:
+        return DEFAULT_CONSTRUCTOR["cuda" if device.is_cuda else "cpu"]
     if name not in CONSTRUCTORS:
-        raise KdslTypeError(
-            f"unknown BVH constructor {name!r}; choose one of {sorted(CONSTRUCTORS)}"
-        )
+        raise BvhError(f"unknown BVH constructor {name!r}; choose one of {sorted(CONSTRUCTORS)}")
     return name

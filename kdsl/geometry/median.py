@@ -74,16 +74,18 @@ def preorder_tree(
 
 
 def build_median(
-    lowers: np.ndarray, uppers: np.ndarray, leaf_size: int = 1, groups: np.ndarray | None = None
-) -> Tree:
-    """Build a tree over the boxes ``lowers[i], uppers[i]`` (``(n, 3)`` arrays)."""
+    lowers: np.ndarray, uppers: np.ndarray, leaf_size: int = 1,
+    groups: np.ndarray | None = None, num_groups: int | None = None,
+) -> Tree:  # fmt: skip
+    """Build a tree over the boxes ``lowers[i], uppers[i]`` (``(n, 3)`` arrays); with
+    ``groups`` (ids >= 0), ``num_groups`` (default: the largest id + 1) group roots."""
     n = len(lowers)
     leaf_size = max(1, int(leaf_size))
     centers = 0.5 * (lowers.astype(np.float64) + uppers.astype(np.float64))
     if groups is not None:
         group_of = np.asarray(groups, dtype=np.int64)
         order = np.argsort(group_of, kind="stable")
-        ngroups = int(group_of.max()) + 1 if n else 0
+        ngroups = num_groups if num_groups is not None else int(group_of.max(initial=-1)) + 1
     else:
         group_of, order, ngroups = None, np.arange(n), 0
     cap = max(1, 2 * n - 1)

@@ -1,0 +1,116 @@
+"""A BVH's arrays on its device, and the refit kernels that compute its node bounds.
+
+Every constructor ends in a ``DeviceTree``: the preorder topology ``kdsl.stdlib.bvh``
+documents (``skip``, ``first``, ``count``, ``items``, ``group_roots``) on the boxes'
+device, plus what a refit needs: ``by_level``, the inner nodes ordered deepest level
+first, and ``levels``, the ``(start, count)`` of each level in it (on the host, so a
+refit reads nothing back from a GPU). An inner node ``n``'s children are ``n + 1`` and
+``skip[n + 1]``, so the tree needs no child arrays.
+
+``refit`` runs as kdsl kernels on the device: one launch for the leaves (the union of
+their items' boxes), then one per level of inner nodes, deepest first, each the union
+of its two children (a level's nodes are independent, so no atomics or fences).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+import kdsl as wp
+from kdsl.geometry.median import Tree
+from kdsl.runtime.array import array
+
+
+@dataclass
+class DeviceTree:
+    """A BVH's topology on its device (see the module docstring)."""
+
+    skip: array
+    first: array
+    count: array
+    items: array
+    group_roots: array
+    by_level: array
+    levels: list[tuple[int, int]]  # (start, count) in ``by_level``, deepest level first
+    num_nodes: int
+
+
+def _device_ints(a: np.ndarray, device) -> array:
+    return array(np.ascontiguousarray(a, dtype=np.int32), dtype=wp.int32, device=device)
+
+
+def level_order(first: np.ndarray, depth: np.ndarray, device) -> tuple[array, list]:
+    """``by_level`` (on ``device``) and ``levels`` of a tree from its nodes' ``first`` and
+    depth (host arrays)."""
+    inner = np.flatnonzero(first < 0)
+    d = depth[inner]
+    deepest = int(d.max(initial=-1))
+    # A radix sort (NumPy sorts 16-bit keys by radix) of the depths, deepest first.
+    key = (deepest - d).astype(np.uint16 if deepest < 1 << 16 else np.int64)
+    by_level = inner[np.argsort(key, kind="stable")]
+    counts = np.bincount(key, minlength=deepest + 1)
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    levels = [(int(s), int(c)) for s, c in zip(starts, counts) if c]
+    return _device_ints(by_level, device), levels
+
+
+def upload_tree(tree: Tree, device) -> DeviceTree:
+    """A host-built ``Tree`` copied to ``device``."""
+    by_level, levels = level_order(tree.first, tree.level, device)
+    return DeviceTree(
+        _device_ints(tree.skip, device), _device_ints(tree.first, device),
+        _device_ints(tree.count, device), _device_ints(tree.items, device),
+        _device_ints(tree.group_roots, device), by_level, levels, tree.num_nodes,
+    )  # fmt: skip
+
+
+@wp.kernel
+def _refit_leaves(
+    first: wp.array(dtype=wp.int32), count: wp.array(dtype=wp.int32),
+    items: wp.array(dtype=wp.int32), item_lowers: wp.array(dtype=wp.vec3),
+    item_uppers: wp.array(dtype=wp.vec3), lowers: wp.array(dtype=wp.vec3),
+    uppers: wp.array(dtype=wp.vec3),
+):  # fmt: skip
+    n = wp.tid()
+    f = first[n]
+    if f >= 0:
+        k = items[f]
+        lo = item_lowers[k]
+        hi = item_uppers[k]
+        for j in range(f + 1, f + count[n]):
+            k = items[j]
+            lo = wp.min(lo, item_lowers[k])
+            hi = wp.max(hi, item_uppers[k])
+        lowers[n] = lo
+        uppers[n] = hi
+
+
+@wp.kernel
+def _refit_level(
+    by_level: wp.array(dtype=wp.int32), start: wp.int32, skip: wp.array(dtype=wp.int32),
+    lowers: wp.array(dtype=wp.vec3), uppers: wp.array(dtype=wp.vec3),
+):  # fmt: skip
+    n = by_level[start + wp.tid()]
+    a = n + 1
+    b = skip[a]
+    lowers[n] = wp.min(lowers[a], lowers[b])
+    uppers[n] = wp.max(uppers[a], uppers[b])
+
+
+def refit(tree: DeviceTree, item_lowers: array, item_uppers: array, lowers: array,
+          uppers: array) -> None:  # fmt: skip
+    """Write the node bounds of ``tree`` over the item boxes into ``lowers``/``uppers``."""
+    if tree.num_nodes == 0:
+        return
+    device = item_lowers.device
+    wp.launch(
+        _refit_leaves, dim=tree.num_nodes, device=device,
+        inputs=[tree.first, tree.count, tree.items, item_lowers, item_uppers, lowers, uppers],
+    )  # fmt: skip
+    for start, count in tree.levels:
+        wp.launch(
+            _refit_level, dim=count, device=device,
+            inputs=[tree.by_level, start, tree.skip, lowers, uppers],
+        )  # fmt: skip

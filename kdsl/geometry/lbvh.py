@@ -1,0 +1,372 @@
+"""The ``"lbvh"`` BVH constructor: a linear BVH built on the boxes' device by kdsl kernels.
+
+Karras' construction ("Maximizing parallelism in the construction of BVHs, octrees and
+k-d trees", HPG 2012): the items are sorted by the Morton code of their centre (30
+bits, 10 per axis, in the centres' bounding box; with groups, the group id above
+them, so every group is a contiguous run and becomes one subtree); each of the
+``n - 1`` inner nodes then finds its own range of sorted items and split independently
+(equal codes are told apart by their positions). Every node covers a contiguous range
+``[a, b]`` of the sorted items, which is what makes the rest parallel too:
+
+- a node with at most ``leaf_size`` items of one group becomes a leaf (its subtree is
+  dropped): it is *kept* when its parent is not such a leaf;
+- depth-first preorder sorts the kept nodes by ``(a, -b)``: nodes starting at a
+  smaller position come first, and of the nodes starting at ``a`` (a chain of left
+  children) the larger comes first. So a node's preorder number is the number of kept
+  nodes starting before ``a`` (an exclusive scan of per-position counts) plus its rank
+  in its chain (a short walk up its parents), and ``skip`` is the number of kept nodes
+  starting before ``b + 1``.
+
+The leaves' items are the sorted item indices themselves. The build reads back from
+the device only a few scalars and the per-level node counts.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+import kdsl as wp
+from kdsl.geometry.device_tree import DeviceTree, level_order
+from kdsl.runtime.array import array
+from kdsl.utils import array_scan, radix_sort_pairs
+
+#: Items a thread reduces when the centres' bounds are computed.
+_CHUNK = 1024
+
+
+@wp.kernel
+def _centre_bounds_partial(
+    lowers: wp.array(dtype=wp.vec3), uppers: wp.array(dtype=wp.vec3), n: wp.int32,
+    part_lo: wp.array(dtype=wp.vec3), part_hi: wp.array(dtype=wp.vec3),
+):  # fmt: skip
+    t = wp.tid()
+    begin = t * _CHUNK
+    end = wp.min(begin + _CHUNK, n)
+    c = 0.5 * (lowers[begin] + uppers[begin])
+    lo = c
+    hi = c
+    for i in range(begin + 1, end):
+        c = 0.5 * (lowers[i] + uppers[i])
+        lo = wp.min(lo, c)
+        hi = wp.max(hi, c)
+    part_lo[t] = lo
+    part_hi[t] = hi
+
+
+@wp.kernel
+def _centre_bounds_total(
+    part_lo: wp.array(dtype=wp.vec3), part_hi: wp.array(dtype=wp.vec3), parts: wp.int32
+):  # fmt: skip
+    lo = part_lo[0]
+    hi = part_hi[0]
+    for i in range(1, parts):
+        lo = wp.min(lo, part_lo[i])
+        hi = wp.max(hi, part_hi[i])
+    part_lo[0] = lo
+    part_hi[0] = hi
+
+
+@wp.func
+def _spread_bits(v: wp.uint64) -> wp.uint64:
+    """The low 10 bits of ``v`` spread to every third bit."""
+    x = v & wp.uint64(0x3FF)
+    x = (x | (x << wp.uint64(16))) & wp.uint64(0x030000FF)
+    x = (x | (x << wp.uint64(8))) & wp.uint64(0x0300F00F)
+    x = (x | (x << wp.uint64(4))) & wp.uint64(0x030C30C3)
+    x = (x | (x << wp.uint64(2))) & wp.uint64(0x09249249)
+    return x
+
+
+@wp.func
+def _quantize(x: float, lo: float, scale: float) -> wp.uint64:
+    # NaN centres (NaN boxes) land in cell 0: the comparison below is false for NaN.
+    q = (x - lo) * scale
+    if q >= 0.0:
+        return wp.uint64(wp.min(q, 1023.0))
+    return wp.uint64(0)
+
+
+@wp.kernel
+def _morton_keys(
+    lowers: wp.array(dtype=wp.vec3), uppers: wp.array(dtype=wp.vec3),
+    bounds_lo: wp.array(dtype=wp.vec3), bounds_hi: wp.array(dtype=wp.vec3),
+    groups: wp.array(dtype=wp.int32), has_groups: wp.int32,
+    keys: wp.array(dtype=wp.uint64), values: wp.array(dtype=wp.int32),
+):  # fmt: skip
+    i = wp.tid()
+    c = 0.5 * (lowers[i] + uppers[i])
+    lo = bounds_lo[0]
+    extent = bounds_hi[0] - lo
+    code = wp.uint64(0)
+    for k in range(3):
+        scale = 0.0
+        if extent[k] > 0.0:
+            scale = 1023.0 / extent[k]
+        code = code | (_spread_bits(_quantize(c[k], lo[k], scale)) << wp.uint64(2 - k))
+    if has_groups != 0:
+        code = code | (wp.uint64(groups[i]) << wp.uint64(32))
+    keys[i] = code
+    values[i] = i
+
+
+@wp.func
+def _clz64(x: wp.uint64) -> int:
+    """Leading zero bits of ``x`` (64 for zero)."""
+    if x == wp.uint64(0):
+        return 64
+    v = x
+    n = 0
+    if (v >> wp.uint64(32)) == wp.uint64(0):
+        n += 32
+        v = v << wp.uint64(32)
+    if (v >> wp.uint64(48)) == wp.uint64(0):
+        n += 16
+        v = v << wp.uint64(16)
+    if (v >> wp.uint64(56)) == wp.uint64(0):
+        n += 8
+        v = v << wp.uint64(8)
+    if (v >> wp.uint64(60)) == wp.uint64(0):
+        n += 4
+        v = v << wp.uint64(4)
+    if (v >> wp.uint64(62)) == wp.uint64(0):
+        n += 2
+        v = v << wp.uint64(2)
+    if (v >> wp.uint64(63)) == wp.uint64(0):
+        n += 1
+    return n
+
+
+@wp.func
+def _delta(keys: wp.array(dtype=wp.uint64), n: int, i: int, j: int) -> int:
+    """Length of the common prefix of sorted keys ``i`` and ``j`` (their positions break
+    ties), or -1 when ``j`` is out of range."""
+    if j < 0 or j >= n:
+        return -1
+    a = keys[i]
+    b = keys[j]
+    if a == b:
+        return 64 + _clz64(wp.uint64(i ^ j))
+    return _clz64(a ^ b)
+
+
+@wp.kernel
+def _karras_nodes(
+    keys: wp.array(dtype=wp.uint64), n: wp.int32, range_a: wp.array(dtype=wp.int32),
+    range_b: wp.array(dtype=wp.int32), parent: wp.array(dtype=wp.int32),
+):  # fmt: skip
+    i = wp.tid()
+    if i >= n - 1:  # a leaf: node n - 1 + k holds sorted item k
+        k = i - (n - 1)
+        range_a[i] = k
+        range_b[i] = k
+        if n == 1:
+            parent[i] = -1
+        return
+    if i == 0:
+        parent[0] = -1
+    d = 1
+    if _delta(keys, n, i, i + 1) < _delta(keys, n, i, i - 1):
+        d = -1
+    dmin = _delta(keys, n, i, i - d)
+    lmax = 2
+    while _delta(keys, n, i, i + lmax * d) > dmin:
+        lmax = lmax * 2
+    ln = 0
+    t = lmax // 2
+    while t >= 1:
+        if _delta(keys, n, i, i + (ln + t) * d) > dmin:
+            ln = ln + t
+        t = t // 2
+    j = i + ln * d
+    dnode = _delta(keys, n, i, j)
+    s = 0
+    div = 2
+    t = (ln + div - 1) // div
+    while t >= 1:
+        if _delta(keys, n, i, i + (s + t) * d) > dnode:
+            s = s + t
+        if t == 1:
+            break
+        div = div * 2
+        t = (ln + div - 1) // div
+    gamma = i + s * d + wp.min(d, 0)
+    a = wp.min(i, j)
+    b = wp.max(i, j)
+    range_a[i] = a
+    range_b[i] = b
+    left = gamma
+    if a == gamma:
+        left = n - 1 + gamma
+    right = gamma + 1
+    if b == gamma + 1:
+        right = n - 1 + gamma + 1
+    parent[left] = i
+    parent[right] = i
+
+
+@wp.func
+def _is_leaf(
+    keys: wp.array(dtype=wp.uint64), a: int, b: int, leaf_size: int
+) -> bool:  # fmt: skip
+    """Whether a node over sorted items ``[a, b]`` is a leaf: few items, one group."""
+    return b - a + 1 <= leaf_size and (keys[a] >> wp.uint64(32)) == (keys[b] >> wp.uint64(32))
+
+
+@wp.func
+def _is_kept(
+    keys: wp.array(dtype=wp.uint64), range_a: wp.array(dtype=wp.int32),
+    range_b: wp.array(dtype=wp.int32), parent: wp.array(dtype=wp.int32), x: int,
+    leaf_size: int,
+) -> bool:  # fmt: skip
+    p = parent[x]
+    if p < 0:
+        return True
+    return not _is_leaf(keys, range_a[p], range_b[p], leaf_size)
+
+
+@wp.kernel
+def _count_starts(
+    keys: wp.array(dtype=wp.uint64), range_a: wp.array(dtype=wp.int32),
+    range_b: wp.array(dtype=wp.int32), parent: wp.array(dtype=wp.int32),
+    leaf_size: wp.int32, starts: wp.array(dtype=wp.int32),
+):  # fmt: skip
+    x = wp.tid()
+    if _is_kept(keys, range_a, range_b, parent, x, leaf_size):
+        wp.atomic_add(starts, range_a[x], 1)
+
+
+@wp.kernel
+def _preorder(
+    keys: wp.array(dtype=wp.uint64), range_a: wp.array(dtype=wp.int32),
+    range_b: wp.array(dtype=wp.int32), parent: wp.array(dtype=wp.int32),
+    leaf_size: wp.int32, before: wp.array(dtype=wp.int32), has_groups: wp.int32,
+    skip: wp.array(dtype=wp.int32), first: wp.array(dtype=wp.int32),
+    count: wp.array(dtype=wp.int32), depth: wp.array(dtype=wp.int32),
+    level_count: wp.array(dtype=wp.int32), max_depth: wp.array(dtype=wp.int32),
+    count_levels: wp.int32, group_roots: wp.array(dtype=wp.int32),
+):  # fmt: skip
+    x = wp.tid()
+    if not _is_kept(keys, range_a, range_b, parent, x, leaf_size):
+        return
+    a = range_a[x]
+    b = range_b[x]
+    rank = 0
+    levels = 0
+    on_chain = True
+    p = parent[x]
+    while p >= 0:  # kept ancestors: all of them, since a kept node's parent is kept
+        levels += 1
+        if on_chain and range_a[p] == a:
+            rank += 1
+        else:
+            on_chain = False
+        p = parent[p]
+    pre = before[a] + rank
+    skip[pre] = before[b + 1]
+    depth[pre] = levels
+    if _is_leaf(keys, a, b, leaf_size):
+        first[pre] = a
+        count[pre] = b - a + 1
+    else:
+        first[pre] = -1
+        count[pre] = 0
+        if count_levels != 0:
+            wp.atomic_add(level_count, levels, 1)
+            wp.atomic_max(max_depth, 0, levels)
+    if has_groups != 0:
+        g = keys[a] >> wp.uint64(32)
+        if g == (keys[b] >> wp.uint64(32)):
+            q = parent[x]
+            if q < 0 or (keys[range_a[q]] >> wp.uint64(32)) != (keys[range_b[q]] >> wp.uint64(32)):
+                group_roots[int(g)] = pre
+
+
+@wp.kernel
+def _bucket_levels(
+    first: wp.array(dtype=wp.int32), depth: wp.array(dtype=wp.int32),
+    level_start: wp.array(dtype=wp.int32), level_fill: wp.array(dtype=wp.int32),
+    by_level: wp.array(dtype=wp.int32),
+):  # fmt: skip
+    n = wp.tid()
+    if first[n] < 0:
+        d = depth[n]
+        slot = wp.atomic_add(level_fill, d, 1)
+        by_level[level_start[d] + slot] = n
+
+
+def build_lbvh(lowers: array, uppers: array, leaf_size: int, groups: array | None,
+               num_groups: int) -> DeviceTree:  # fmt: skip
+    """Build a ``DeviceTree`` over the boxes on their device (see the module docstring)."""
+    device = lowers.device
+    n = lowers.shape[0]
+    leaf_size = max(1, int(leaf_size))
+
+    def ints(size: int, fill: int = 0) -> array:
+        return wp.full(size, fill, dtype=wp.int32, device=device)
+
+    if n == 0:
+        empty = ints(0)
+        return DeviceTree(empty, empty, empty, empty, ints(num_groups, -1), empty, [], 0)
+    parts = -(-n // _CHUNK)
+    part_lo = wp.empty(parts, dtype=wp.vec3, device=device)
+    part_hi = wp.empty(parts, dtype=wp.vec3, device=device)
+    wp.launch(_centre_bounds_partial, dim=parts, device=device,
+              inputs=[lowers, uppers, n, part_lo, part_hi])  # fmt: skip
+    wp.launch(_centre_bounds_total, dim=1, device=device, inputs=[part_lo, part_hi, parts])
+    keys = wp.empty(2 * n, dtype=wp.uint64, device=device)
+    values = wp.empty(2 * n, dtype=wp.int32, device=device)
+    group_arg = groups if groups is not None else ints(1)
+    wp.launch(
+        _morton_keys, dim=n, device=device,
+        inputs=[lowers, uppers, part_lo, part_hi, group_arg, int(groups is not None), keys, values],
+    )  # fmt: skip
+    radix_sort_pairs(keys, values, n)
+    nodes = 2 * n - 1
+    range_a, range_b, parent = ints(nodes), ints(nodes), ints(nodes)
+    wp.launch(_karras_nodes, dim=nodes, device=device,
+              inputs=[keys, n, range_a, range_b, parent])  # fmt: skip
+    starts = ints(n + 1)
+    wp.launch(_count_starts, dim=nodes, device=device,
+              inputs=[keys, range_a, range_b, parent, leaf_size, starts])  # fmt: skip
+    array_scan(starts, starts, inclusive=False)
+    skip, first, count, depth = ints(nodes), ints(nodes), ints(nodes), ints(nodes)
+    level_count, max_depth = ints(nodes), ints(1)
+    group_roots = ints(max(num_groups, 1), -1)
+    wp.launch(
+        _preorder, dim=nodes, device=device,
+        inputs=[keys, range_a, range_b, parent, leaf_size, starts, int(groups is not None),
+                skip, first, count, depth, level_count, max_depth, int(device.is_cuda),
+                group_roots],
+    )  # fmt: skip
+    num_nodes = int(starts[n : n + 1].numpy()[0])
+    skip, first, count, depth = (
+        skip[:num_nodes],
+        first[:num_nodes],
+        count[:num_nodes],
+        depth[:num_nodes],
+    )
+    if device.is_cpu:  # NumPy's radix sort of small ints beats contended atomics on a CPU
+        by_level, levels = level_order(first.numpy(), depth.numpy(), device)
+    else:
+        by_level, levels = _device_level_order(first, depth, level_count, max_depth)
+    if num_groups == 0:
+        group_roots = group_roots[:0]
+    return DeviceTree(skip, first, count, values[:n], group_roots, by_level, levels, num_nodes)
+
+
+def _device_level_order(first: array, depth: array, level_count: array, max_depth: array):
+    """``by_level`` and ``levels`` (see ``DeviceTree``) bucketed by kernels on the device,
+    from the inner nodes' counts per depth ``_preorder`` took with atomics."""
+    device = first.device
+    deepest = int(max_depth.numpy()[0])
+    counts = level_count[: deepest + 1].numpy().astype(np.int64)
+    level_start = np.zeros(deepest + 1, np.int64)  # deepest level first in ``by_level``
+    level_start[::-1] = np.concatenate([[0], np.cumsum(counts[::-1])[:-1]])
+    by_level = wp.empty(max(int(counts.sum()), 1), dtype=wp.int32, device=device)
+    wp.launch(
+        _bucket_levels, dim=first.shape[0], device=device,
+        inputs=[first, depth, array(level_start.astype(np.int32), dtype=wp.int32, device=device),
+                wp.zeros(deepest + 1, dtype=wp.int32, device=device), by_level],
+    )  # fmt: skip
+    levels = [(int(level_start[d]), int(counts[d])) for d in range(deepest, -1, -1) if counts[d]]
+    return by_level, levels
