@@ -66,7 +66,13 @@ def test_invalid_programs_give_located_errors(program):
 @given(programs(max_depth=0, max_stmts=1, differentiable=False))
 def test_an_invalid_program_that_compiles_is_reported(program):
     # A program labelled invalid but with nothing broken must fail check_invalid.
-    bad = replace(program, invalid="nothing broken", body=(Line("pass  # <- error here"),))
+    bad = replace(
+        program,
+        invalid="nothing broken",
+        body=(Line("pass  # <- error here"),),
+        result_f="xs[i]",
+        result_i="i",
+    )
     with pytest.raises(FuzzFailure, match="invalid/accepted"):
         check_invalid(bad)
 
@@ -74,7 +80,9 @@ def test_an_invalid_program_that_compiles_is_reported(program):
 @budget(1)
 @given(programs(max_depth=0, max_stmts=1, differentiable=False))
 def test_a_valid_program_kdsl_rejects_is_reported(program):
-    bad = replace(program, body=(Assign("v", "xs[i] + wp.int32(1)"),))
+    bad = replace(
+        program, body=(Assign("v", "xs[i] + wp.int32(1)"),), result_f="xs[i]", result_i="i"
+    )
     with pytest.raises(FuzzFailure, match="rejected-valid"):
         check_program(bad)
 

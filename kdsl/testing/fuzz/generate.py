@@ -125,7 +125,8 @@ class Gen:
         if depth <= 0:
             choice = self.pick(leaves)
         else:
-            ops = ["leaf", "bin", "bin", "div", "unary", "minmax", "cast_int"]
+            ops = ["leaf", "bin", "bin", "div", "unary", "minmax", "cast_int", "ifexp", "fmod"]
+            ops.append("atan2")
             if self.has("widths") and not self.differentiable:
                 # A round trip through a narrower float is piecewise constant: its
                 # finite differences are 0 where the tape passes the gradient through.
@@ -168,14 +169,27 @@ class Gen:
             b = self.float_expr(d)
             return f"({self.float_expr(d)} / (F(1.0) + {b} * {b}))"
         if choice == "unary":
-            fn = self.pick(["wp.sin", "wp.cos", "wp.abs", "-", "sqrt1", "wp.tanh"])
+            fn = self.pick(["wp.sin", "wp.cos", "wp.abs", "-", "sqrt1", "wp.tanh", "exp", "log1",
+                            "wp.floor", "wp.atan", "clamp"])  # fmt: skip
             a = self.float_expr(d)
             if fn == "sqrt1":
                 return f"wp.sqrt(F(1.0) + {a} * {a})"
+            if fn == "exp":  # bounded argument: no overflow in any width
+                return f"wp.exp(wp.sin({a}))"
+            if fn == "log1":
+                return f"wp.log(F(1.0) + {a} * {a})"
+            if fn == "clamp":
+                return f"wp.clamp({a}, F(-1.0), F(2.0))"
             return f"-({a})" if fn == "-" else f"{fn}({a})"
         if choice == "minmax":
             fn = self.pick(["wp.min", "wp.max"])
             return f"{fn}({self.float_expr(d)}, {self.float_expr(d)})"
+        if choice == "ifexp":
+            return f"({self.float_expr(d)} if {self.bool_expr(d)} else {self.float_expr(d)})"
+        if choice == "fmod":
+            return f"({self.float_expr(d)} % F({self.pick([0.75, 1.5, -2.0])}))"
+        if choice == "atan2":
+            return f"wp.atan2({self.float_expr(d)}, F(1.0) + wp.abs({self.float_expr(d)}))"
         if choice == "cast_int":
             return f"F({self.int_expr('i32', d)})"
         if choice == "cast_width":
@@ -227,7 +241,7 @@ class Gen:
         if depth <= 0:
             choice = self.pick(leaves)
         else:
-            choice = self.pick(["leaf", "bin", "bin", "bits", "divmod", "minmax", "cast", "shift"]
+            choice = self.pick(["leaf", "bin", "bin", "bits", "divmod", "minmax", "cast", "shift", "from_bool"]
                                + (["g"] if self.has("funcs") and t == "i32" else []))  # fmt: skip
             if choice == "leaf":
                 choice = self.pick(leaves)
@@ -259,6 +273,8 @@ class Gen:
         if choice == "g":
             self.uses.add("g")
             return f"g({self.int_expr(t, d)}, {self.int_expr(t, d)})"
+        if choice == "from_bool":
+            return f"{CTOR[t]}({self.bool_expr(d)})"
         # a cast: from another integer width, or from a clamped float (in range for t)
         if self.has("widths") and self.flag():
             other = self.pick(list(INTS))
@@ -447,6 +463,8 @@ class Gen:
                     else Assign("tmp_" + self.fresh(), self.float_expr(1))
                 )
             t, name = self.pick(targets)
+            if t == "V3" and self.flag():  # a component store
+                return Assign(f"{name}[{self.draw(st.integers(0, 2))}]", self.float_expr(1))
             op = self.pick(["+", "-", "*"] if t != "V3" else ["+", "-"])
             return Assign(name, self.expr(t, 1), op)
         if kind == "if":
@@ -487,6 +505,32 @@ class Gen:
             )
         fn = {"fadd": "atomic_add", "fmax": "atomic_max", "fmin": "atomic_min"}[which]
         return Line(f"wp.{fn}(acc, {['fadd', 'fmax', 'fmin'].index(which)}, {self.float_expr(2)})")
+
+    def live_terms(self) -> tuple[list[str], list[str]]:
+        """Every top-level local, as float and int terms the results add up, so what the
+        body computed reaches an output (and is compared, and differentiated)."""
+        floats: list[str] = []
+        ints: list[str] = []
+        for t, names in self.env.items():
+            for n in names:
+                if t == "F":
+                    floats.append(n)
+                elif t in FLOATS:
+                    floats.append(f"F({n})")
+                elif t == "V3":
+                    floats.append(f"{n}[{self.draw(st.integers(0, 2))}]")
+                elif t == "M33":
+                    floats.append(f"wp.trace({n})")
+                elif t == "Q":
+                    floats.append(f"{n}[{self.draw(st.integers(0, 3))}]")
+                elif t == "TF":
+                    floats.append(f"wp.transform_get_translation({n})[0]")
+                elif t == "S":
+                    floats.append(f"{n}.a + {n}.inner.w")
+                    ints.append(f"wp.int32({n}.inner.k)")
+                elif t in INTS or t == "bool":
+                    ints.append(n if t == "i32" else f"wp.int32({n})")
+        return floats, ints
 
     def struct_local(self) -> Any:
         """``s = Params()`` then field stores, as one ``If(True)``-free block of lines."""
@@ -548,7 +592,8 @@ def programs(
     )
     g = Gen(draw, frozenset(features), differentiable)
     body = tuple(g.stmt(max_depth) for _ in range(draw(st.integers(1, max_stmts))))
-    result_f = g.float_expr(2)
-    result_i = g.int_expr("i32", 1)
+    float_terms, int_terms = g.live_terms()
+    result_f = " + ".join([g.float_expr(2), *float_terms])
+    result_i = " ^ ".join([g.int_expr("i32", 1), *int_terms])
     uses = frozenset(g.uses | {"Params"})
     return Program(ftype, body, result_f, result_i, uses, draw(inputs()), differentiable)
