@@ -22,6 +22,7 @@ from kdsl.ir import Module, Operation
 from kdsl.ir import types as T
 from kdsl.ir.vjp import is_differentiable
 from kdsl.passes.adjoint.analysis import has_grad_arrays
+from kdsl.runtime.graphs.state import run_or_record
 
 _ADJ_ATTR = "_kdsl_adjoint"
 _COUNT_ATTR = "_kdsl_counter"
@@ -165,7 +166,7 @@ def launch_adjoint(
         if name == "grad_owned":
             hidden[j] = _owned_mask(args, adj_args)
     converted = primal + adjoints + [convs[2 * n + i](h) for i, h in enumerate(hidden)]
-    plan.backend.launch(plan.compiled, dims, converted, stream)
+    run_or_record(plan, dims, converted, stream)
     if status is not None and int(status.numpy()[0]) != 0:
         raise KdslRuntimeError(
             f"the backward pass of kernel '{kernel.name}' ran a dynamic loop more times than "
@@ -265,7 +266,7 @@ def _tape_slots(kernel, adj, dims, primal, dev, backend, stream, used) -> list[i
     plan = launch_plan(counter, dev, backend)
     counts = alloc.zeros(len(slots), dtype=class_of(T.I32), device=dev)
     args = primal + [plan.converters[-1](counts)]
-    plan.backend.launch(plan.compiled, dims, args, stream)
+    run_or_record(plan, dims, args, stream)
     measured = counts.numpy()
     return [int(measured[i]) if s < 0 else s for i, s in enumerate(slots)]
 

@@ -23,6 +23,7 @@ from kdsl.runtime.dtypes import (
     np_dtype,
     resolve_dtype,
 )
+from kdsl.runtime.graphs import state as graphs
 from kdsl.runtime.stream import Stream, get_stream
 from kdsl.runtime.tape import record_copy
 
@@ -54,9 +55,14 @@ def _make(
             raise KdslError(f"cannot fill an array of {t} with {init!r}: {e}") from None
         with mem.scope(dev):
             try:
-                buf[...] = mem.cupy().asarray(value) if dev.is_cuda else value
+                if graphs.ACTIVE:
+                    graphs.captured_fill(buf, dev, value, fresh=True)
+                else:
+                    buf[...] = mem.cupy().asarray(value) if dev.is_cuda else value
             except ValueError as e:
                 raise KdslError(f"cannot fill an array of {t} with {init!r}: {e}") from None
+    elif graphs.ACTIVE:
+        graphs.captured_fill(buf, dev, None, fresh=True)
     return array._wrap(buf, t, dev, requires_grad)
 
 
@@ -189,9 +195,14 @@ def copy(
             f"copy() of {n} elements from offset {src_offset} of {src.size} to offset "
             f"{dest_offset} of {dest.size} is out of range"
         )
-    mem.copy_elements(
-        dest._buf, dest.device, dest_offset, src._buf, src.device, src_offset, n, dest._inner,
-        stream,
-    )  # fmt: skip
+    rec = graphs.cpu_recording(dest.device) if src.device.is_cpu else None
+    if rec is not None:  # a CPU capture records the copy for its replays
+        rec.record_host(graphs.copy_rows(dest_offset, src_offset, n, dest._inner), dest._buf,
+                        src._buf)  # fmt: skip
+    else:
+        mem.copy_elements(
+            dest._buf, dest.device, dest_offset, src._buf, src.device, src_offset, n,
+            dest._inner, stream,
+        )  # fmt: skip
     # On an active kdsl.Tape a copy between arrays with gradients is differentiable.
     record_copy(dest, src, dest_offset, src_offset, n)

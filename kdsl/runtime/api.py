@@ -30,6 +30,20 @@ from kdsl.runtime.device import (
     is_device_available,
     set_device,
 )
+from kdsl.runtime.graphs.capture import (
+    CaptureMode,
+    ScopedCapture,
+    capture_begin,
+    capture_end,
+    capture_if,
+    capture_launch,
+    capture_load,
+    capture_load_from_bytes,
+    capture_save,
+    capture_while,
+    is_conditional_graph_supported,
+)
+from kdsl.runtime.graphs.graph import Graph
 from kdsl.runtime.indexed import (
     indexedarray,
     indexedarray1d,
@@ -119,4 +133,8 @@ __all__ = [
     "is_mempool_enabled", "is_mempool_supported", "load_module", "set_logger",
     "set_mempool_enabled", "set_mempool_release_threshold", "set_module_options",
     "timing_begin", "timing_end", "timing_print",
+    # graphs (issue 17, item 1)
+    "CaptureMode", "Graph", "ScopedCapture", "capture_begin", "capture_end", "capture_if",
+    "capture_launch", "capture_load", "capture_load_from_bytes", "capture_save", "capture_while",
+    "is_conditional_graph_supported",
 ]  # fmt: skip

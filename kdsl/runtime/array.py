@@ -32,6 +32,7 @@ from kdsl.runtime.dtypes import (
     resolve_dtype,
     scalar_dtype_of_numpy,
 )
+from kdsl.runtime.graphs import state as graphs
 
 
 def _is_any(dtype: Any) -> bool:
@@ -233,6 +234,8 @@ class array:
         """
         if self._device.is_cuda:
             return mem.to_host(self._buf, self._device)
+        if graphs.ACTIVE:  # captured CPU work has not run: refuse, as on CUDA
+            graphs.refuse_host_read(self._device, "numpy()")
         return self._buf.view()
 
     @property
@@ -303,6 +306,10 @@ class array:
             return self._update_records(..., value)
         try:
             with mem.scope(self._device):
+                if graphs.ACTIVE:  # recorded on the CPU, a fill kernel on CUDA
+                    host = np.asarray(host_value(self._t, value), dtype=self._buf.dtype)
+                    graphs.captured_fill(self._buf, self._device, host)
+                    return self
                 self._buf[...] = self._device_value(value)
         except ValueError as e:
             raise KdslError(f"cannot fill an array of {self._t} with {value!r}: {e}") from None
@@ -312,6 +319,9 @@ class array:
 
     def zero_(self) -> array:
         """Set every element to zero."""
+        if graphs.ACTIVE and self._device.is_cpu:
+            graphs.captured_fill(self._buf, self._device, np.zeros((), self._buf.dtype))
+            return self
         with mem.scope(self._device):
             if self._device.is_cuda and isinstance(self._t, T.StructType):
                 self._buf.data.memset_async(0, self._buf.nbytes)  # CuPy cannot fill records
@@ -321,6 +331,12 @@ class array:
 
     def assign(self, src: Any) -> array:
         """Copy ``src`` (an array on any device, a NumPy/CuPy array or a list) into this one."""
+        if graphs.ACTIVE and self._device.is_cpu and graphs.record_assign(self, src):
+            if isinstance(src, array):
+                from kdsl.runtime.tape import record_copy
+
+                record_copy(self, src, 0, 0, self.size)
+            return self
         if isinstance(src, array):
             data = src._buf if src._device == self._device else src.to(self._device)._buf
         elif mem.is_cuda_buffer(src):

@@ -14,7 +14,9 @@ from typing import Any
 import numpy as np
 
 from kdsl.errors import KdslError
+from kdsl.runtime import allocators
 from kdsl.runtime.device import Device, cupy
+from kdsl.runtime.graphs.state import refuse_host_read, refuse_upload
 from kdsl.runtime.mempool import note_allocation
 from kdsl.runtime.stream import Stream, get_stream
 
@@ -86,10 +88,10 @@ class scope:
 def empty(shape: tuple[int, ...], dtype: np.dtype, device: Device) -> Any:
     """An uninitialized buffer on ``device`` (a NumPy or CuPy array)."""
     if device.is_cpu:
-        return np.empty(shape, dtype)
+        return allocators.host_empty(shape, dtype, device)
     nbytes = int(np.prod(shape, dtype=np.int64)) * np.dtype(dtype).itemsize
     with scope(device, nbytes=nbytes):
-        buf = cupy().empty(shape, dtype)
+        buf = allocators.cuda_empty(shape, dtype, device, nbytes)
         note_allocation(device.ordinal)
         return buf
 
@@ -104,12 +106,14 @@ def zeros_like(buf: Any, device: Device) -> Any:
 
 def to_host(buf: Any, device: Device) -> np.ndarray:
     """A NumPy copy of a CUDA buffer; waits for the device's stream (the seeds' rule)."""
+    refuse_host_read(device, "reading device data on the host (numpy(), an element, print)")
     with scope(device):
         return buf.get()  # copies on the current (kdsl) stream and synchronizes it
 
 
 def from_host(data: np.ndarray, device: Device) -> Any:
     """``data`` copied to ``device`` (enqueued on its stream)."""
+    refuse_upload(device, "uploading host data")
     out = empty(data.shape, data.dtype, device)
     with scope(device):
         out.set(np.ascontiguousarray(data))
@@ -172,6 +176,8 @@ def copy_elements(
     if dest_dev.is_cpu and src_dev.is_cpu:
         _copy_cpu(dest, dest_offset, src, src_offset, count, inner)
         return
+    if dest_dev.is_cpu or src_dev.is_cpu:
+        refuse_upload(dest_dev if dest_dev.is_cuda else src_dev, f"copy() from '{src_dev}' to '{dest_dev}'")
     s = stream or get_stream(dest_dev if dest_dev.is_cuda else src_dev)
     if s.device not in (dest_dev, src_dev):
         raise KdslError(

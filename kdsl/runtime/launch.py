@@ -30,6 +30,7 @@ from kdsl.runtime import timing as _timing
 from kdsl.runtime.args import ArgError, convert, launch_error
 from kdsl.runtime.array import array
 from kdsl.runtime.device import Device, get_device
+from kdsl.runtime.graphs import state as _graphs
 from kdsl.runtime.objects import foreign_id
 
 _CACHE_ATTR = "_kdsl_compiled"
@@ -457,14 +458,24 @@ def launch(
                 f"({', '.join(names)}) but {len(args)} were given ({len(inputs)} inputs, "
                 f"{len(outputs)} outputs)"
             )
-        converted = [conv(v) for conv, v in zip(convs, args)]
+        dev = plan.device
+        rec = None
+        if _graphs.ACTIVE and not record_cmd:  # a capture: repeated launches skip the checks
+            stream = resolve_stream(dev, stream)
+            rec = _graphs.recording(dev, stream)
+        converted = None if rec is None else rec.converted(plan, args)
+        if converted is None:
+            converted = [conv(v) for conv, v in zip(convs, args)]
+            if rec is not None:
+                rec.remember(plan, args, converted)
         if len(dims) > 1 or (getattr(kernel, "tid_ndim", 0) or 0) > 1:
             check_tid(kernel, dims)
-        dev = plan.device
         stream = resolve_stream(dev, stream)
         if record_cmd:
             return Launch(kernel, plan.backend, plan.compiled, dims, converted, dev, stream)
-        if _timing.RECORDING is None:
+        if rec is not None:
+            rec.record_launch(plan, dims, converted, stream)
+        elif _timing.RECORDING is None:
             plan.backend.launch(plan.compiled, dims, converted, stream)
         else:
             _timing.timed_launch(

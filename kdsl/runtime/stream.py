@@ -27,6 +27,7 @@ from kdsl.runtime.device import (
     cupy,
     get_device,
 )
+from kdsl.runtime.graphs.state import refuse_sync
 
 _current: dict[int, Stream] = {}  # device ordinal -> its current stream
 _used: set[int] = set()  # ordinals that have had a kdsl stream (what synchronize() waits for)
@@ -59,6 +60,7 @@ class _CudaWork:
 
     def synchronize(self) -> None:
         """Block the host until the stream's (or event's) work has finished."""
+        refuse_sync(f"{type(self).__name__}.synchronize()")
         self.cupy.synchronize()
 
 
@@ -98,6 +100,11 @@ class Stream(_CudaWork):
     def priority(self) -> int:
         """The stream's priority (lower numbers run first)."""
         return int(self.cupy.priority)
+
+    @property
+    def is_capturing(self) -> bool:
+        """True while a graph capture (kdsl's or another library's) is open on the stream."""
+        return bool(self.cupy.is_capturing())
 
     @property
     def is_blocking(self) -> bool:
@@ -265,6 +272,7 @@ def get_event_elapsed_time(start_event: Event, end_event: Event, synchronize: bo
 
 def synchronize() -> None:
     """Block the host until all work kdsl enqueued on every device has finished."""
+    refuse_sync("synchronize()")
     if not cuda_initialized():
         return  # without CuPy loaded nothing can be pending
     cp = cupy()
@@ -285,6 +293,7 @@ def _release_pools() -> None:
 def synchronize_device(device: Any = None) -> None:
     """Block the host until all work on ``device`` has finished (a no-op for the CPU)."""
     dev = get_device(device)
+    refuse_sync("synchronize_device()")
     if dev.is_cuda:
         with cupy().cuda.Device(dev.ordinal) as d:
             d.synchronize()

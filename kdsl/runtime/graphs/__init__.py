@@ -1,0 +1,1 @@
+"""Graph capture and replay (Warp's ``capture_*`` API): see ``capture`` and docs/runtime.md."""
