@@ -15,7 +15,8 @@ nothing of kdsl never reads as a success.
 
 Workloads: saxpy, particles, nbody, nbody_fast, jacobi, cloth, launch,
 launch_prepared (``suite.workloads``), plus triad (Numba's STREAM triad bandwidth,
-which saxpy's is held to), scaling (kdsl's n-body speedup from 1 to 2 threads), and
+which saxpy's is held to), scaling (kdsl's n-body speedup from 1 to 2 threads), graph
+(kdsl's 100-kernel step replayed as one graph against 100 launches: the speedup), and
 cold_compile, compile and warm_start, measured in fresh processes with a fresh (then
 reused) kernel cache directory.
 """
@@ -46,7 +47,7 @@ PEERS = FRAMEWORKS[1:]
 #: Step workloads in run order: Taichi's fast-math n-body re-initializes Taichi, so last.
 RUN_ORDER = ("saxpy", "particles", "nbody", "jacobi", "cloth", "launch", "launch_prepared",
              "nbody_fast")  # fmt: skip
-ALL = (*WORKLOADS, "triad", "scaling", *PROCESS_WORKLOADS)
+ALL = (*WORKLOADS, "triad", "scaling", "graph", *PROCESS_WORKLOADS)
 RESULTS = Path(__file__).resolve().parent / "results"
 PROCESS_REPS = 3
 
@@ -154,6 +155,11 @@ def target_rows(cells: dict[str, dict[str, Cell]], saxpy_n: int) -> list[list[st
             title, unit = "n-body 1->2 threads", "x"
             best, ratio = "-", "-"
             target = "-" if mine is None else ("yes" if mine >= 1.8 else "no") + " (>=1.8x)"
+        elif wname == "graph":
+            from suite.graph_step import graph_title
+
+            title, unit = graph_title(row.get("kdsl")), "x"
+            best, ratio = "-", "-"
         elif wname == "launch_prepared" and mine is not None:
             target = ("yes" if mine < 2e-6 else "no") + " (<2us)"
         elif wname in ("cold_compile", "compile"):
@@ -230,6 +236,10 @@ def main() -> int:
             cells["scaling"] = {"kdsl": run_scaling(mods["kdsl"], args.quick, args.reps)}
         except Exception as e:
             cells["scaling"] = {"kdsl": Cell(status=harness.short_error(e))}
+    if "graph" in only and not isinstance(mods.get("kdsl", "x"), str):
+        from suite.graph_step import run_graph
+
+        cells["graph"] = {"kdsl": run_graph("cpu", args.quick, args.reps)}
     if any(w in only for w in PROCESS_WORKLOADS):
         for f in chosen:
             m = mods[f]

@@ -21,7 +21,9 @@ again with the same cache (warm); "compile" is first launch to first result,
 "start" is process start to first result.
 
 Frameworks that are not installed are reported and skipped; a failing cell shows
-``error [k]`` with the message in a note under the table. Without a CUDA device the
+``error [k]`` with the message in a note under the table. The graph row (kdsl only)
+replays a 100-kernel step captured with ``kdsl.ScopedCapture`` against the same 100
+launches; its cell is the speedup (target >= 5x). Without a CUDA device the
 script says so and exits 1: nothing was measured (``--device cpu`` runs its logic
 on the CPU, CuPy skipped: a check of the script, not a benchmark). It also exits 1
 when a kdsl result failed its check against the reference. Everything, samples included,
@@ -57,7 +59,9 @@ COMPILE_ROWS = {
     "warm_compile": ("warm compile [ms]", 1e3),
     "warm_start": ("warm start [s]", 1.0),
 }
-ALL = (*RUN_ORDER, "compile")
+ALL = (*RUN_ORDER, "graph", "compile")
+#: The graph row's target: a 100-kernel step replayed as one graph this much faster.
+GRAPH_TARGET = 5.0
 RESULTS = Path(__file__).resolve().parent / "results"
 PROCESS_REPS = 3
 #: The share of the copy bandwidth kdsl's saxpy at 2^26 must reach.
@@ -266,6 +270,15 @@ class Table:
                 ok = share >= BANDWIDTH_TARGET
                 why = f">={BANDWIDTH_TARGET:.0%} copy"
                 self.add("saxpy 2^26 [GB/s]", texts, "copy", f"{share:.2f}", _yes(ok, why), ok)
+        if "graph" in cells:
+            from suite.graph_step import graph_title
+
+            cell = cells["graph"].get("kdsl")
+            mine = _median(cell)
+            text = cell_text(cell, 1.0, self.notes, "kdsl graph")
+            ok = None if mine is None else mine >= GRAPH_TARGET
+            self.add(f"{graph_title(cell)} [x]", [text, "-", "-", "-"], "-", "-",
+                     "-" if ok is None else _yes(ok, f">={GRAPH_TARGET:.0f}x"), ok)  # fmt: skip
         warp = _median(cells.get("cold_compile", {}).get("warp"))
 
         def vs_warp(mine: float) -> tuple[bool, str] | None:
@@ -337,6 +350,11 @@ def main() -> int:
         )
         yard = run_steps(["copy"], {"cupy": cupy}, args.device, args.quick, args.reps)
         cells["copy"] = yard["copy"]
+    if "graph" in only and not isinstance(mods.get("kdsl", "x"), str):
+        from suite.graph_step import run_graph
+
+        cells["graph"] = {"kdsl": run_graph(args.device, args.quick, args.reps)}
+        print(f"  {'graph':16s} kdsl    {harness.format_cell(cells['graph']['kdsl'], 'x')}")
     if "compile" in only and not args.skip_compile:
         for f, m in mods.items():
             got = run_compile(m, args.device, args.quick)
