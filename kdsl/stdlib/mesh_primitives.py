@@ -24,6 +24,8 @@ SLIVER_RATIO = 1.0e-6
 #: Relative growth of a box's exit distance so rounding never loses a triangle that
 #: touches the box's face (``2 * gamma(3)`` of Ize's robust slab test).
 BOX_EXIT_SLACK = 1.0000004
+#: Relative padding of boxes in the ray/box test (see ``ray_box_entry``).
+BOX_PAD = 1.0e-6
 
 
 @func
@@ -131,9 +133,14 @@ def safe_inverse(x: float) -> float:
 @func
 def ray_box_entry(lo: wp.vec3, hi: wp.vec3, start: wp.vec3, inv: wp.vec3, max_t: float) -> bool:
     """Whether the ray ``start + t dir`` (``inv`` = componentwise ``1 / dir``) meets the
-    closed box ``[lo, hi]`` at some ``0 <= t <= max_t``."""
-    t0 = wp.cw_mul(lo - start, inv)
-    t1 = wp.cw_mul(hi - start, inv)
+    closed box ``[lo, hi]`` at some ``0 <= t <= max_t``.
+
+    The box grows by a relative ``BOX_PAD``: a ray with a zero direction component
+    (``inv`` = 1e30) that lies exactly in one of the box's face planes would otherwise
+    see that slab as a point (``0 * inv = 0`` on both sides) and miss the box."""
+    pad = (wp.abs(lo) + wp.abs(hi)) * BOX_PAD + wp.vec3(1.0e-20)
+    t0 = wp.cw_mul(lo - pad - start, inv)
+    t1 = wp.cw_mul(hi + pad - start, inv)
     tmin = wp.max(wp.max(wp.min(t0[0], t1[0]), wp.min(t0[1], t1[1])), wp.min(t0[2], t1[2]))
     tmax = wp.min(wp.min(wp.max(t0[0], t1[0]), wp.max(t0[1], t1[1])), wp.max(t0[2], t1[2]))
     tmax = tmax * BOX_EXIT_SLACK
