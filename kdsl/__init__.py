@@ -7,18 +7,31 @@ gathers them. Importing kdsl imports no GPU, torch or jax package.
 
 from kdsl import config, errors
 from kdsl.errors import (
+    KdslAttributeError,
     KdslCapabilityError,
+    KdslDeterminismError,
     KdslError,
+    KdslIndexError,
+    KdslKeyError,
     KdslLaunchError,
     KdslNameError,
     KdslRuntimeError,
     KdslSyntaxError,
     KdslTypeError,
+    KdslValueError,
     KdslVerifyError,
+    WarpCodegenAttributeError,
+    WarpCodegenError,
+    WarpCodegenIndexError,
+    WarpCodegenKeyError,
+    WarpCodegenTypeError,
+    WarpCodegenValueError,
+    WarpDeterminismError,
 )
 from kdsl.frontend.api import *
 from kdsl.interop.api import *
 from kdsl.runtime.api import *
+from kdsl.runtime.api_platform import *
 from kdsl.types import *
 from kdsl.types import (
     bool,  # noqa: A004 - Warp's name

@@ -91,6 +91,40 @@ class KdslRuntimeError(KdslError):
     """A failure while a kernel ran (out-of-bounds access in debug mode, ...)."""
 
 
+class KdslAttributeError(KdslTypeError, AttributeError):
+    """An attribute a value in a kernel does not have (``v.w`` on a vec3, an unknown field)."""
+
+
+class KdslIndexError(KdslTypeError, IndexError):
+    """A constant index out of range in a kernel (a tuple's, a vector's)."""
+
+
+class KdslKeyError(KdslError, KeyError):
+    """A name looked up in a table that lacks it (an unknown option, stage or backend)."""
+
+    def __str__(self) -> str:  # KeyError's own __str__ would print the message's repr
+        return KdslError.__str__(self)
+
+
+class KdslValueError(KdslError, ValueError):
+    """An argument of the right type but a wrong value (a negative size, an unknown mode)."""
+
+
+class KdslDeterminismError(KdslError, RuntimeError):
+    """A determinism mode kdsl cannot provide for a kernel (Warp's ``WarpDeterminismError``)."""
+
+
+# Warp's names for its compile errors: a Warp program's ``except wp.WarpCodegenError``
+# catches kdsl's (every kdsl error, as Warp raises that class for every codegen failure).
+WarpCodegenError = KdslError
+WarpCodegenTypeError = KdslTypeError
+WarpCodegenAttributeError = KdslAttributeError
+WarpCodegenIndexError = KdslIndexError
+WarpCodegenKeyError = KdslKeyError
+WarpCodegenValueError = KdslValueError
+WarpDeterminismError = KdslDeterminismError
+
+
 class KdslGradientWarning(UserWarning):
     """A differentiable kernel whose gradient may be wrong (e.g. it reads an array it wrote)."""
 

@@ -9,7 +9,14 @@ from typing import Any
 
 import numpy as np
 
-from kdsl.errors import KdslError, KdslNameError, KdslSyntaxError, KdslTypeError
+from kdsl.errors import (
+    KdslAttributeError,
+    KdslError,
+    KdslIndexError,
+    KdslNameError,
+    KdslSyntaxError,
+    KdslTypeError,
+)
 from kdsl.frontend import geometry, structs
 from kdsl.frontend.builtins import PYTHON_ALIASES, PYTHON_CASTS
 from kdsl.frontend.builtins_base import Builtin, cast
@@ -79,7 +86,9 @@ class ExpressionLowering(Emitter):
                     KdslNameError, f"{describe(base)} has no attribute '{node.attr}'", node
                 ) from None
             return self.python_value(obj, node)
-        raise self.error(KdslTypeError, f"{describe(base)} has no attribute '{node.attr}'", node)
+        raise self.error(
+            KdslAttributeError, f"{describe(base)} has no attribute '{node.attr}'", node
+        )
 
     def value_attribute(self, v: Value, attr: str, node: ast.AST) -> Any:
         t = v.type
@@ -90,13 +99,13 @@ class ExpressionLowering(Emitter):
         if isinstance(t, VectorType) and attr in COMPONENTS:
             k = COMPONENTS[attr]
             if k >= t.length:
-                raise self.error(KdslTypeError, f"a {t} has no component '.{attr}'", node)
+                raise self.error(KdslAttributeError, f"a {t} has no component '.{attr}'", node)
             return self.emit("vec.extract", v, self.const(k, I32, node), node=node)
         if is_indexed(t) and attr == "shape":
             return structs.indexed_shape(self, v, node)
         if isinstance(t, StructType):
             return self.emit("struct.extract", v, node=node, field=attr)
-        raise self.error(KdslTypeError, f"a {t} has no attribute '.{attr}'", node)
+        raise self.error(KdslAttributeError, f"a {t} has no attribute '.{attr}'", node)
 
     def visit_Tuple(self, node: ast.Tuple) -> Any:
         return tuple(self.visit(e) for e in node.elts)
@@ -230,7 +239,7 @@ class ExpressionLowering(Emitter):
         if isinstance(base, tuple):
             if len(idx) == 1 and isinstance(idx[0], int) and -len(base) <= idx[0] < len(base):
                 return base[idx[0]]
-            raise self.error(KdslTypeError, "a tuple needs one constant index in range", node)
+            raise self.error(KdslIndexError, "a tuple needs one constant index in range", node)
         if not isinstance(base, Value):
             raise self.error(KdslTypeError, f"cannot index {describe(base)}", node)
         return self.load_element(base, idx, node)

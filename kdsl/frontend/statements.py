@@ -5,7 +5,7 @@ from __future__ import annotations
 import ast
 from typing import Any
 
-from kdsl.errors import KdslNameError, KdslSyntaxError, KdslTypeError
+from kdsl.errors import KdslAttributeError, KdslNameError, KdslSyntaxError, KdslTypeError
 from kdsl.frontend import geometry, structs
 from kdsl.frontend.analysis import BREAK, CONTINUE, RETURN, always_exits, exits
 from kdsl.frontend.builtins import BUILTINS, PYTHON_ALIASES
@@ -208,7 +208,9 @@ class StatementLowering(ControlFlowLowering):
             v = self.value(value, target, want=t.field_type(target.attr))
             new = self.emit("struct.insert", base, v, node=target, field=target.attr)
         else:
-            raise self.error(KdslTypeError, f"a {t} has no attribute '.{target.attr}'", target)
+            raise self.error(
+                KdslAttributeError, f"a {t} has no attribute '.{target.attr}'", target
+            )
         self.assign(target.value, new, target)
 
     # --- control flow ---------------------------------------------------------------

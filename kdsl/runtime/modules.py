@@ -22,6 +22,7 @@ from typing import Any
 
 from kdsl.errors import KdslError, api_boundary
 from kdsl.frontend.kernel import Kernel, kernels_of_module, modules_with_kernels
+from kdsl.runtime.build_options import ModuleBuildOptions, check_build_options, check_deterministic
 from kdsl.runtime.device import Device, get_device, get_devices
 
 #: Warp 1.19's module options and their defaults (``warp.config`` values at import).
@@ -70,6 +71,10 @@ def _check_option(key: str, value: Any) -> None:
             raise KdslError(
                 f"set_module_options: {key!r} must be a non-negative int, not {value!r}"
             )
+    elif key == "extra_build_options":
+        check_build_options(value)
+    elif key == "deterministic":
+        check_deterministic(value)
     elif key == "optimization_level" and value not in (None, 0, 1, 2, 3):
         raise KdslError(
             f"set_module_options: 'optimization_level' must be 0 to 3 or None, not {value!r}"
@@ -118,6 +123,10 @@ class Module:
         out = {k: self._set[k] for k in COMPILE_KEYS if k in self._set}
         if out.get("mode", 0) is None:
             del out["mode"]  # None: kdsl.config.mode decides
+        extra = self._set.get("extra_build_options")
+        if isinstance(extra, ModuleBuildOptions) and extra.extra_build_dependencies:
+            # Warp hashes the dependencies' contents into the module hash: so does the key.
+            out["build_dependencies"] = extra.dependency_digest()
         return out
 
     @api_boundary
