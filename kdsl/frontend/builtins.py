@@ -66,5 +66,20 @@ def merge_tables(tables: tuple[BuiltinTable, ...]) -> tuple[dict[str, Builtin], 
 
 BUILTINS, PYTHON_ALIASES = merge_tables(TABLES)
 
+
+
+def register_host_alias(python: Any, builtin: Builtin) -> None:
+    """In kernels, calling the host function ``python`` calls ``builtin``.
+
+    For names a higher layer defines with a host meaning of their own (the runtime's
+    ``zeros`` allocates an array, in kernels it makes a local array): that layer hands
+    the function down once. Registering another builtin for the same object is an error.
+    """
+    old = PYTHON_ALIASES.get(python)
+    if old is not None and old is not builtin:
+        raise ValueError(f"{python!r} already means the builtin {old.name!r} in kernels")
+    PYTHON_ALIASES[python] = builtin
+
+
 #: Python types usable as casts: float -> f32, int -> i32, bool -> bool.
 PYTHON_CASTS: dict[Any, ScalarType] = {py.float: F32, py.int: ScalarType("int", 32), py.bool: BOOL}

@@ -9,6 +9,7 @@ from kdsl.ir import (
     ops_arith,
     ops_debug,
     ops_func,
+    ops_local,
     ops_math,
     ops_mem,
     ops_print,

@@ -1,5 +1,7 @@
 """Public names of the runtime (arrays, devices, streams, launch, Tape)."""
 
+from kdsl.frontend.builtins import register_host_alias
+from kdsl.frontend.builtins_local import LOCAL_ZEROS
 from kdsl.runtime import context
 from kdsl.runtime.alloc import (
     clone,
@@ -30,6 +32,7 @@ from kdsl.runtime.device import (
     is_device_available,
     set_device,
 )
+from kdsl.runtime.fixedarray import fixedarray
 from kdsl.runtime.graphs.capture import (
     CaptureMode,
     ScopedCapture,
@@ -137,4 +140,9 @@ __all__ = [
     "CaptureMode", "Graph", "ScopedCapture", "capture_begin", "capture_end", "capture_if",
     "capture_launch", "capture_load", "capture_load_from_bytes", "capture_save", "capture_while",
     "is_conditional_graph_supported",
+    # thread-local arrays in kernels (issue 14)
+    "fixedarray",
 ]  # fmt: skip
+
+# In kernels, ``zeros(shape, dtype)`` makes a thread-local array (Warp's fixedarray).
+register_host_alias(zeros, LOCAL_ZEROS)

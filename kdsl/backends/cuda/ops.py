@@ -7,10 +7,20 @@ an op missing from the table is reported as a capability error naming the op.
 
 from __future__ import annotations
 
-from kdsl.backends.cuda import arith, checks, control, mathops, memory, printing, vector
+from kdsl.backends.cuda import arith, checks, control, local, mathops, memory, printing, vector
 from kdsl.backends.cuda.emitter import Lowering
 from kdsl.ir.lowering import LOWERINGS
 
 TABLE: dict[str, Lowering] = LOWERINGS.table("cuda")
 
-__all__ = ["TABLE", "arith", "checks", "control", "mathops", "memory", "printing", "vector"]
+__all__ = [
+    "TABLE",
+    "arith",
+    "checks",
+    "control",
+    "local",
+    "mathops",
+    "memory",
+    "printing",
+    "vector",
+]
