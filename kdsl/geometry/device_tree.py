@@ -18,9 +18,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-import kdsl as wp
+from kdsl.frontend.api import kernel, tid
+from kdsl.frontend.api import max as vmax
+from kdsl.frontend.api import min as vmin
 from kdsl.geometry.median import Tree
 from kdsl.runtime.array import array
+from kdsl.runtime.launch import launch
+from kdsl.types import int32, vec3
 
 
 @dataclass
@@ -38,7 +42,7 @@ class DeviceTree:
 
 
 def _device_ints(a: np.ndarray, device) -> array:
-    return array(np.ascontiguousarray(a, dtype=np.int32), dtype=wp.int32, device=device)
+    return array(np.ascontiguousarray(a, dtype=np.int32), dtype=int32, device=device)
 
 
 def level_order(first: np.ndarray, depth: np.ndarray, device) -> tuple[array, list]:
@@ -66,14 +70,14 @@ def upload_tree(tree: Tree, device) -> DeviceTree:
     )  # fmt: skip
 
 
-@wp.kernel
+@kernel
 def _refit_leaves(
-    first: wp.array(dtype=wp.int32), count: wp.array(dtype=wp.int32),
-    items: wp.array(dtype=wp.int32), item_lowers: wp.array(dtype=wp.vec3),
-    item_uppers: wp.array(dtype=wp.vec3), lowers: wp.array(dtype=wp.vec3),
-    uppers: wp.array(dtype=wp.vec3),
+    first: array(dtype=int32), count: array(dtype=int32),
+    items: array(dtype=int32), item_lowers: array(dtype=vec3),
+    item_uppers: array(dtype=vec3), lowers: array(dtype=vec3),
+    uppers: array(dtype=vec3),
 ):  # fmt: skip
-    n = wp.tid()
+    n = tid()
     f = first[n]
     if f >= 0:
         k = items[f]
@@ -81,22 +85,22 @@ def _refit_leaves(
         hi = item_uppers[k]
         for j in range(f + 1, f + count[n]):
             k = items[j]
-            lo = wp.min(lo, item_lowers[k])
-            hi = wp.max(hi, item_uppers[k])
+            lo = vmin(lo, item_lowers[k])
+            hi = vmax(hi, item_uppers[k])
         lowers[n] = lo
         uppers[n] = hi
 
 
-@wp.kernel
+@kernel
 def _refit_level(
-    by_level: wp.array(dtype=wp.int32), start: wp.int32, skip: wp.array(dtype=wp.int32),
-    lowers: wp.array(dtype=wp.vec3), uppers: wp.array(dtype=wp.vec3),
+    by_level: array(dtype=int32), start: int32, skip: array(dtype=int32),
+    lowers: array(dtype=vec3), uppers: array(dtype=vec3),
 ):  # fmt: skip
-    n = by_level[start + wp.tid()]
+    n = by_level[start + tid()]
     a = n + 1
     b = skip[a]
-    lowers[n] = wp.min(lowers[a], lowers[b])
-    uppers[n] = wp.max(uppers[a], uppers[b])
+    lowers[n] = vmin(lowers[a], lowers[b])
+    uppers[n] = vmax(uppers[a], uppers[b])
 
 
 def refit(tree: DeviceTree, item_lowers: array, item_uppers: array, lowers: array,
@@ -105,12 +109,12 @@ def refit(tree: DeviceTree, item_lowers: array, item_uppers: array, lowers: arra
     if tree.num_nodes == 0:
         return
     device = item_lowers.device
-    wp.launch(
+    launch(
         _refit_leaves, dim=tree.num_nodes, device=device,
         inputs=[tree.first, tree.count, tree.items, item_lowers, item_uppers, lowers, uppers],
     )  # fmt: skip
     for start, count in tree.levels:
-        wp.launch(
+        launch(
             _refit_level, dim=count, device=device,
             inputs=[tree.by_level, start, tree.skip, lowers, uppers],
         )  # fmt: skip

@@ -25,119 +25,124 @@ from __future__ import annotations
 
 import numpy as np
 
-import kdsl as wp
+from kdsl.frontend.api import atomic_add, atomic_max, func, kernel, tid
+from kdsl.frontend.api import max as vmax
+from kdsl.frontend.api import min as vmin
 from kdsl.geometry.device_tree import DeviceTree, level_order
+from kdsl.runtime.alloc import empty, full, zeros
 from kdsl.runtime.array import array
+from kdsl.runtime.launch import launch
+from kdsl.types import int32, uint64, vec3
 from kdsl.utils import array_scan, radix_sort_pairs
 
 #: Items a thread reduces when the centres' bounds are computed.
 _CHUNK = 1024
 
 
-@wp.kernel
+@kernel
 def _centre_bounds_partial(
-    lowers: wp.array(dtype=wp.vec3), uppers: wp.array(dtype=wp.vec3), n: wp.int32,
-    part_lo: wp.array(dtype=wp.vec3), part_hi: wp.array(dtype=wp.vec3),
+    lowers: array(dtype=vec3), uppers: array(dtype=vec3), n: int32,
+    part_lo: array(dtype=vec3), part_hi: array(dtype=vec3),
 ):  # fmt: skip
-    t = wp.tid()
+    t = tid()
     begin = t * _CHUNK
-    end = wp.min(begin + _CHUNK, n)
+    end = vmin(begin + _CHUNK, n)
     c = 0.5 * (lowers[begin] + uppers[begin])
     lo = c
     hi = c
     for i in range(begin + 1, end):
         c = 0.5 * (lowers[i] + uppers[i])
-        lo = wp.min(lo, c)
-        hi = wp.max(hi, c)
+        lo = vmin(lo, c)
+        hi = vmax(hi, c)
     part_lo[t] = lo
     part_hi[t] = hi
 
 
-@wp.kernel
+@kernel
 def _centre_bounds_total(
-    part_lo: wp.array(dtype=wp.vec3), part_hi: wp.array(dtype=wp.vec3), parts: wp.int32
+    part_lo: array(dtype=vec3), part_hi: array(dtype=vec3), parts: int32
 ):  # fmt: skip
     lo = part_lo[0]
     hi = part_hi[0]
     for i in range(1, parts):
-        lo = wp.min(lo, part_lo[i])
-        hi = wp.max(hi, part_hi[i])
+        lo = vmin(lo, part_lo[i])
+        hi = vmax(hi, part_hi[i])
     part_lo[0] = lo
     part_hi[0] = hi
 
 
-@wp.func
-def _spread_bits(v: wp.uint64) -> wp.uint64:
+@func
+def _spread_bits(v: uint64) -> uint64:
     """The low 10 bits of ``v`` spread to every third bit."""
-    x = v & wp.uint64(0x3FF)
-    x = (x | (x << wp.uint64(16))) & wp.uint64(0x030000FF)
-    x = (x | (x << wp.uint64(8))) & wp.uint64(0x0300F00F)
-    x = (x | (x << wp.uint64(4))) & wp.uint64(0x030C30C3)
-    x = (x | (x << wp.uint64(2))) & wp.uint64(0x09249249)
+    x = v & uint64(0x3FF)
+    x = (x | (x << uint64(16))) & uint64(0x030000FF)
+    x = (x | (x << uint64(8))) & uint64(0x0300F00F)
+    x = (x | (x << uint64(4))) & uint64(0x030C30C3)
+    x = (x | (x << uint64(2))) & uint64(0x09249249)
     return x
 
 
-@wp.func
-def _quantize(x: float, lo: float, scale: float) -> wp.uint64:
+@func
+def _quantize(x: float, lo: float, scale: float) -> uint64:
     # NaN centres (NaN boxes) land in cell 0: the comparison below is false for NaN.
     q = (x - lo) * scale
     if q >= 0.0:
-        return wp.uint64(wp.min(q, 1023.0))
-    return wp.uint64(0)
+        return uint64(vmin(q, 1023.0))
+    return uint64(0)
 
 
-@wp.kernel
+@kernel
 def _morton_keys(
-    lowers: wp.array(dtype=wp.vec3), uppers: wp.array(dtype=wp.vec3),
-    bounds_lo: wp.array(dtype=wp.vec3), bounds_hi: wp.array(dtype=wp.vec3),
-    groups: wp.array(dtype=wp.int32), has_groups: wp.int32,
-    keys: wp.array(dtype=wp.uint64), values: wp.array(dtype=wp.int32),
+    lowers: array(dtype=vec3), uppers: array(dtype=vec3),
+    bounds_lo: array(dtype=vec3), bounds_hi: array(dtype=vec3),
+    groups: array(dtype=int32), has_groups: int32,
+    keys: array(dtype=uint64), values: array(dtype=int32),
 ):  # fmt: skip
-    i = wp.tid()
+    i = tid()
     c = 0.5 * (lowers[i] + uppers[i])
     lo = bounds_lo[0]
     extent = bounds_hi[0] - lo
-    code = wp.uint64(0)
+    code = uint64(0)
     for k in range(3):
         scale = 0.0
         if extent[k] > 0.0:
             scale = 1023.0 / extent[k]
-        code = code | (_spread_bits(_quantize(c[k], lo[k], scale)) << wp.uint64(2 - k))
+        code = code | (_spread_bits(_quantize(c[k], lo[k], scale)) << uint64(2 - k))
     if has_groups != 0:
-        code = code | (wp.uint64(groups[i]) << wp.uint64(32))
+        code = code | (uint64(groups[i]) << uint64(32))
     keys[i] = code
     values[i] = i
 
 
-@wp.func
-def _clz64(x: wp.uint64) -> int:
+@func
+def _clz64(x: uint64) -> int:
     """Leading zero bits of ``x`` (64 for zero)."""
-    if x == wp.uint64(0):
+    if x == uint64(0):
         return 64
     v = x
     n = 0
-    if (v >> wp.uint64(32)) == wp.uint64(0):
+    if (v >> uint64(32)) == uint64(0):
         n += 32
-        v = v << wp.uint64(32)
-    if (v >> wp.uint64(48)) == wp.uint64(0):
+        v = v << uint64(32)
+    if (v >> uint64(48)) == uint64(0):
         n += 16
-        v = v << wp.uint64(16)
-    if (v >> wp.uint64(56)) == wp.uint64(0):
+        v = v << uint64(16)
+    if (v >> uint64(56)) == uint64(0):
         n += 8
-        v = v << wp.uint64(8)
-    if (v >> wp.uint64(60)) == wp.uint64(0):
+        v = v << uint64(8)
+    if (v >> uint64(60)) == uint64(0):
         n += 4
-        v = v << wp.uint64(4)
-    if (v >> wp.uint64(62)) == wp.uint64(0):
+        v = v << uint64(4)
+    if (v >> uint64(62)) == uint64(0):
         n += 2
-        v = v << wp.uint64(2)
-    if (v >> wp.uint64(63)) == wp.uint64(0):
+        v = v << uint64(2)
+    if (v >> uint64(63)) == uint64(0):
         n += 1
     return n
 
 
-@wp.func
-def _delta(keys: wp.array(dtype=wp.uint64), n: int, i: int, j: int) -> int:
+@func
+def _delta(keys: array(dtype=uint64), n: int, i: int, j: int) -> int:
     """Length of the common prefix of sorted keys ``i`` and ``j`` (their positions break
     ties), or -1 when ``j`` is out of range."""
     if j < 0 or j >= n:
@@ -145,16 +150,16 @@ def _delta(keys: wp.array(dtype=wp.uint64), n: int, i: int, j: int) -> int:
     a = keys[i]
     b = keys[j]
     if a == b:
-        return 64 + _clz64(wp.uint64(i ^ j))
+        return 64 + _clz64(uint64(i ^ j))
     return _clz64(a ^ b)
 
 
-@wp.kernel
+@kernel
 def _karras_nodes(
-    keys: wp.array(dtype=wp.uint64), n: wp.int32, range_a: wp.array(dtype=wp.int32),
-    range_b: wp.array(dtype=wp.int32), parent: wp.array(dtype=wp.int32),
+    keys: array(dtype=uint64), n: int32, range_a: array(dtype=int32),
+    range_b: array(dtype=int32), parent: array(dtype=int32),
 ):  # fmt: skip
-    i = wp.tid()
+    i = tid()
     if i >= n - 1:  # a leaf: node n - 1 + k holds sorted item k
         k = i - (n - 1)
         range_a[i] = k
@@ -189,9 +194,9 @@ def _karras_nodes(
             break
         div = div * 2
         t = (ln + div - 1) // div
-    gamma = i + s * d + wp.min(d, 0)
-    a = wp.min(i, j)
-    b = wp.max(i, j)
+    gamma = i + s * d + vmin(d, 0)
+    a = vmin(i, j)
+    b = vmax(i, j)
     range_a[i] = a
     range_b[i] = b
     left = gamma
@@ -204,18 +209,18 @@ def _karras_nodes(
     parent[right] = i
 
 
-@wp.func
+@func
 def _is_leaf(
-    keys: wp.array(dtype=wp.uint64), a: int, b: int, leaf_size: int
+    keys: array(dtype=uint64), a: int, b: int, leaf_size: int
 ) -> bool:  # fmt: skip
     """Whether a node over sorted items ``[a, b]`` is a leaf: few items, one group."""
-    return b - a + 1 <= leaf_size and (keys[a] >> wp.uint64(32)) == (keys[b] >> wp.uint64(32))
+    return b - a + 1 <= leaf_size and (keys[a] >> uint64(32)) == (keys[b] >> uint64(32))
 
 
-@wp.func
+@func
 def _is_kept(
-    keys: wp.array(dtype=wp.uint64), range_a: wp.array(dtype=wp.int32),
-    range_b: wp.array(dtype=wp.int32), parent: wp.array(dtype=wp.int32), x: int,
+    keys: array(dtype=uint64), range_a: array(dtype=int32),
+    range_b: array(dtype=int32), parent: array(dtype=int32), x: int,
     leaf_size: int,
 ) -> bool:  # fmt: skip
     p = parent[x]
@@ -224,28 +229,28 @@ def _is_kept(
     return not _is_leaf(keys, range_a[p], range_b[p], leaf_size)
 
 
-@wp.kernel
+@kernel
 def _count_starts(
-    keys: wp.array(dtype=wp.uint64), range_a: wp.array(dtype=wp.int32),
-    range_b: wp.array(dtype=wp.int32), parent: wp.array(dtype=wp.int32),
-    leaf_size: wp.int32, starts: wp.array(dtype=wp.int32),
+    keys: array(dtype=uint64), range_a: array(dtype=int32),
+    range_b: array(dtype=int32), parent: array(dtype=int32),
+    leaf_size: int32, starts: array(dtype=int32),
 ):  # fmt: skip
-    x = wp.tid()
+    x = tid()
     if _is_kept(keys, range_a, range_b, parent, x, leaf_size):
-        wp.atomic_add(starts, range_a[x], 1)
+        atomic_add(starts, range_a[x], 1)
 
 
-@wp.kernel
+@kernel
 def _preorder(
-    keys: wp.array(dtype=wp.uint64), range_a: wp.array(dtype=wp.int32),
-    range_b: wp.array(dtype=wp.int32), parent: wp.array(dtype=wp.int32),
-    leaf_size: wp.int32, before: wp.array(dtype=wp.int32), has_groups: wp.int32,
-    skip: wp.array(dtype=wp.int32), first: wp.array(dtype=wp.int32),
-    count: wp.array(dtype=wp.int32), depth: wp.array(dtype=wp.int32),
-    level_count: wp.array(dtype=wp.int32), max_depth: wp.array(dtype=wp.int32),
-    count_levels: wp.int32, group_roots: wp.array(dtype=wp.int32),
+    keys: array(dtype=uint64), range_a: array(dtype=int32),
+    range_b: array(dtype=int32), parent: array(dtype=int32),
+    leaf_size: int32, before: array(dtype=int32), has_groups: int32,
+    skip: array(dtype=int32), first: array(dtype=int32),
+    count: array(dtype=int32), depth: array(dtype=int32),
+    level_count: array(dtype=int32), max_depth: array(dtype=int32),
+    count_levels: int32, group_roots: array(dtype=int32),
 ):  # fmt: skip
-    x = wp.tid()
+    x = tid()
     if not _is_kept(keys, range_a, range_b, parent, x, leaf_size):
         return
     a = range_a[x]
@@ -271,26 +276,26 @@ def _preorder(
         first[pre] = -1
         count[pre] = 0
         if count_levels != 0:
-            wp.atomic_add(level_count, levels, 1)
-            wp.atomic_max(max_depth, 0, levels)
+            atomic_add(level_count, levels, 1)
+            atomic_max(max_depth, 0, levels)
     if has_groups != 0:
-        g = keys[a] >> wp.uint64(32)
-        if g == (keys[b] >> wp.uint64(32)):
+        g = keys[a] >> uint64(32)
+        if g == (keys[b] >> uint64(32)):
             q = parent[x]
-            if q < 0 or (keys[range_a[q]] >> wp.uint64(32)) != (keys[range_b[q]] >> wp.uint64(32)):
+            if q < 0 or (keys[range_a[q]] >> uint64(32)) != (keys[range_b[q]] >> uint64(32)):
                 group_roots[int(g)] = pre
 
 
-@wp.kernel
+@kernel
 def _bucket_levels(
-    first: wp.array(dtype=wp.int32), depth: wp.array(dtype=wp.int32),
-    level_start: wp.array(dtype=wp.int32), level_fill: wp.array(dtype=wp.int32),
-    by_level: wp.array(dtype=wp.int32),
+    first: array(dtype=int32), depth: array(dtype=int32),
+    level_start: array(dtype=int32), level_fill: array(dtype=int32),
+    by_level: array(dtype=int32),
 ):  # fmt: skip
-    n = wp.tid()
+    n = tid()
     if first[n] < 0:
         d = depth[n]
-        slot = wp.atomic_add(level_fill, d, 1)
+        slot = atomic_add(level_fill, d, 1)
         by_level[level_start[d] + slot] = n
 
 
@@ -302,37 +307,37 @@ def build_lbvh(lowers: array, uppers: array, leaf_size: int, groups: array | Non
     leaf_size = max(1, int(leaf_size))
 
     def ints(size: int, fill: int = 0) -> array:
-        return wp.full(size, fill, dtype=wp.int32, device=device)
+        return full(size, fill, dtype=int32, device=device)
 
     if n == 0:
-        empty = ints(0)
-        return DeviceTree(empty, empty, empty, empty, ints(num_groups, -1), empty, [], 0)
+        none = ints(0)
+        return DeviceTree(none, none, none, none, ints(num_groups, -1), none, [], 0)
     parts = -(-n // _CHUNK)
-    part_lo = wp.empty(parts, dtype=wp.vec3, device=device)
-    part_hi = wp.empty(parts, dtype=wp.vec3, device=device)
-    wp.launch(_centre_bounds_partial, dim=parts, device=device,
+    part_lo = empty(parts, dtype=vec3, device=device)
+    part_hi = empty(parts, dtype=vec3, device=device)
+    launch(_centre_bounds_partial, dim=parts, device=device,
               inputs=[lowers, uppers, n, part_lo, part_hi])  # fmt: skip
-    wp.launch(_centre_bounds_total, dim=1, device=device, inputs=[part_lo, part_hi, parts])
-    keys = wp.empty(2 * n, dtype=wp.uint64, device=device)
-    values = wp.empty(2 * n, dtype=wp.int32, device=device)
+    launch(_centre_bounds_total, dim=1, device=device, inputs=[part_lo, part_hi, parts])
+    keys = empty(2 * n, dtype=uint64, device=device)
+    values = empty(2 * n, dtype=int32, device=device)
     group_arg = groups if groups is not None else ints(1)
-    wp.launch(
+    launch(
         _morton_keys, dim=n, device=device,
         inputs=[lowers, uppers, part_lo, part_hi, group_arg, int(groups is not None), keys, values],
     )  # fmt: skip
     radix_sort_pairs(keys, values, n)
     nodes = 2 * n - 1
     range_a, range_b, parent = ints(nodes), ints(nodes), ints(nodes)
-    wp.launch(_karras_nodes, dim=nodes, device=device,
+    launch(_karras_nodes, dim=nodes, device=device,
               inputs=[keys, n, range_a, range_b, parent])  # fmt: skip
     starts = ints(n + 1)
-    wp.launch(_count_starts, dim=nodes, device=device,
+    launch(_count_starts, dim=nodes, device=device,
               inputs=[keys, range_a, range_b, parent, leaf_size, starts])  # fmt: skip
     array_scan(starts, starts, inclusive=False)
     skip, first, count, depth = ints(nodes), ints(nodes), ints(nodes), ints(nodes)
     level_count, max_depth = ints(nodes), ints(1)
     group_roots = ints(max(num_groups, 1), -1)
-    wp.launch(
+    launch(
         _preorder, dim=nodes, device=device,
         inputs=[keys, range_a, range_b, parent, leaf_size, starts, int(groups is not None),
                 skip, first, count, depth, level_count, max_depth, int(device.is_cuda),
@@ -362,11 +367,11 @@ def _device_level_order(first: array, depth: array, level_count: array, max_dept
     counts = level_count[: deepest + 1].numpy().astype(np.int64)
     level_start = np.zeros(deepest + 1, np.int64)  # deepest level first in ``by_level``
     level_start[::-1] = np.concatenate([[0], np.cumsum(counts[::-1])[:-1]])
-    by_level = wp.empty(max(int(counts.sum()), 1), dtype=wp.int32, device=device)
-    wp.launch(
+    by_level = empty(max(int(counts.sum()), 1), dtype=int32, device=device)
+    launch(
         _bucket_levels, dim=first.shape[0], device=device,
-        inputs=[first, depth, array(level_start.astype(np.int32), dtype=wp.int32, device=device),
-                wp.zeros(deepest + 1, dtype=wp.int32, device=device), by_level],
+        inputs=[first, depth, array(level_start.astype(np.int32), dtype=int32, device=device),
+                zeros(deepest + 1, dtype=int32, device=device), by_level],
     )  # fmt: skip
     levels = [(int(level_start[d]), int(counts[d])) for d in range(deepest, -1, -1) if counts[d]]
     return by_level, levels

@@ -31,6 +31,8 @@ __all__ = [
 
 #: What a query tests: its kind.
 AABB, RAY, SPHERE, CAPSULE = 0, 1, 2, 3
+#: Added to RAY or CAPSULE for a direction with a zero component (``_ray_box_parallel``).
+PARALLEL = 4
 
 
 @wp.struct
@@ -80,6 +82,10 @@ def _bvh_query(
     q.a = a
     q.b = b
     q.inv_b = wp.vec3(_safe_inv(b[0]), _safe_inv(b[1]), _safe_inv(b[2]))
+    swept = kind == RAY
+    swept = swept or kind == CAPSULE
+    if swept and (b[0] == 0.0 or b[1] == 0.0 or b[2] == 0.0):
+        q.kind = kind + PARALLEL
     q.radius = radius
     rec = wp.object_record(id, BvhRecord)
     start = root
@@ -96,8 +102,8 @@ def _bvh_query(
 
 @func
 def _safe_inv(x: float) -> float:
-    # A zero direction component gives a slab that is all or nothing; a large finite
-    # value (not inf) keeps 0 * inv at 0 for a ray starting on the slab's face.
+    # A zero direction component: ``_ray_box_parallel`` decides that slab (an infinite
+    # 1 / 0 would give 0 * inf = NaN for a ray starting on a face).
     if x == 0.0:
         return 1.0e30
     return 1.0 / x
@@ -133,13 +139,40 @@ def bvh_query_capsule(
 
 
 @func
-def _ray_box(lo: wp.vec3, hi: wp.vec3, start: wp.vec3, inv: wp.vec3, max_t: float) -> bool:
-    """Whether the ray meets the closed box ``[lo, hi]`` at some ``0 <= t <= max_t``."""
+def _ray_box(
+    lo: wp.vec3, hi: wp.vec3, start: wp.vec3, inv: wp.vec3, max_t: float, closed: bool
+) -> bool:
+    """Whether the ray meets the closed box ``[lo, hi]`` at some ``t >= 0`` with an entry
+    ``t`` below ``max_t`` (at most ``max_t`` when ``closed``: Warp's capsules; its plain
+    rays are half-open)."""
     t0 = wp.cw_mul(lo - start, inv)
     t1 = wp.cw_mul(hi - start, inv)
     tmin = wp.max(wp.max(wp.min(t0[0], t1[0]), wp.min(t0[1], t1[1])), wp.min(t0[2], t1[2]))
     tmax = wp.min(wp.min(wp.max(t0[0], t1[0]), wp.max(t0[1], t1[1])), wp.max(t0[2], t1[2]))
-    return tmin <= tmax and tmax >= 0.0 and tmin <= max_t
+    return tmin <= tmax and tmax >= 0.0 and (tmin < max_t or (closed and tmin == max_t))
+
+
+@func
+def _ray_box_parallel(
+    lo: wp.vec3, hi: wp.vec3, start: wp.vec3, dir: wp.vec3, inv: wp.vec3, max_t: float,
+    closed: bool,
+) -> bool:  # fmt: skip
+    """``_ray_box`` for a direction with zero components: such an axis's slab holds the
+    whole ray when the start is within ``[lo, hi]`` on that axis (faces included), else
+    none of it (Warp's answer: its NaN slab is ignored or its infinite one misses)."""
+    t0 = wp.cw_mul(lo - start, inv)
+    t1 = wp.cw_mul(hi - start, inv)
+    tmin = -1.0e38
+    tmax = 1.0e38
+    inside = True
+    for k in range(3):
+        if dir[k] == 0.0:
+            inside = inside and lo[k] <= start[k] and start[k] <= hi[k]
+        else:
+            tmin = wp.max(tmin, wp.min(t0[k], t1[k]))
+            tmax = wp.min(tmax, wp.max(t0[k], t1[k]))
+    hit = inside and tmin <= tmax and tmax >= 0.0
+    return hit and (tmin < max_t or (closed and tmin == max_t))
 
 
 @func
@@ -161,8 +194,13 @@ def _touches(q: BvhQuery, lo: wp.vec3, hi: wp.vec3, max_dist: float) -> bool:
         return _box_distance_sq(lo, hi, q.a) <= q.radius * q.radius
     if q.kind == CAPSULE:
         r = wp.vec3(q.radius)
-        return _ray_box(lo - r, hi + r, q.a, q.inv_b, max_dist)
-    return _ray_box(lo, hi, q.a, q.inv_b, max_dist)
+        return _ray_box(lo - r, hi + r, q.a, q.inv_b, max_dist, True)
+    if q.kind == RAY:
+        return _ray_box(lo, hi, q.a, q.inv_b, max_dist, False)
+    if q.kind == CAPSULE + PARALLEL:
+        r = wp.vec3(q.radius)
+        return _ray_box_parallel(lo - r, hi + r, q.a, q.b, q.inv_b, max_dist, True)
+    return _ray_box_parallel(lo, hi, q.a, q.b, q.inv_b, max_dist, False)
 
 
 @func
