@@ -50,5 +50,6 @@ from kdsl.stdlib.api import *
 # on the runtime above.
 from kdsl import autograd, utils
 from kdsl.geometry import *
+from kdsl.utils.transforms import transform_expand
 
 __version__ = "0.1.0"

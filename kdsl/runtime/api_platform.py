@@ -34,6 +34,11 @@ from kdsl.runtime.cuda_info import (
     print_diagnostics,
 )
 from kdsl.runtime.memory_tracker import ScopedMemoryTracker, print_memory_report
+from kdsl.types import uint64
+
+#: Warp's type of object handles (Mesh, Volume, BVH ids) in kernel parameters, struct
+#: fields and arrays: Warp's behaves as ``uint64``, and in kdsl it is ``uint64``.
+handle = uint64
 
 __all__ = [
     "Allocator", "CudaManagedAllocator", "DeterministicMode", "DeviceLike",
@@ -41,6 +46,6 @@ __all__ = [
     "ScopedCudaProfiler", "ScopedMemoryTracker", "can_access", "clear_lto_cache",
     "cuda_profiler_start", "cuda_profiler_stop", "get_cuda_driver_version",
     "get_cuda_kernel_properties", "get_cuda_max_cluster_dim", "get_cuda_supported_archs",
-    "get_cuda_toolkit_version", "get_device_allocator", "get_suggested_block_size",
+    "get_cuda_toolkit_version", "get_device_allocator", "get_suggested_block_size", "handle",
     "print_diagnostics", "print_memory_report", "set_cuda_allocator", "set_device_allocator",
 ]  # fmt: skip

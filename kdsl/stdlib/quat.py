@@ -277,6 +277,16 @@ def _quat_functions(S: type) -> dict:
         """The signed twist angle of ``q`` about unit ``axis``: ``2 atan2(q.xyz . axis, w)``."""
         return S(2.0) * wp.atan2(wp.dot(axis, V3(q[0], q[1], q[2])), q[3])
 
+    @func
+    def quat_between_vectors(a: V3, b: V3) -> Q:
+        """The shortest-arc rotation taking the direction of ``a`` onto that of ``b`` (any
+        nonzero lengths). Opposite directions are not handled (as in Warp): use
+        ``quat_from_axis_angle`` with a perpendicular axis and pi there."""
+        an = wp.normalize(a)
+        bn = wp.normalize(b)
+        c = wp.cross(an, bn)
+        return quat_normalize(Q(c[0], c[1], c[2], S(1.0) + wp.dot(an, bn)))
+
     return functions_in(locals())
 
 
