@@ -16,7 +16,17 @@ import numpy as np
 from kdsl.errors import KdslRuntimeError
 from kdsl.ir import semantics as sem
 from kdsl.ir.catalog import CATALOG, PURE, READS, SPECULATABLE, WRITES
-from kdsl.ir.types import I32, ArrayType, ScalarType, StructType, Type, elem_type
+from kdsl.ir.core import Operation
+from kdsl.ir.types import (
+    I32,
+    ArrayType,
+    ScalarType,
+    StructType,
+    Type,
+    elem_type,
+    storage_dtype,
+    value_shape,
+)
 
 ATOMIC_KINDS = ("add", "sub", "min", "max", "and", "or", "xor", "exch")
 
@@ -168,6 +178,27 @@ ARRAY_VIEW = CATALOG.define(
     "array's last ones. The indices must be in range (checked like an access).",
     traits=frozenset({PURE}), type_rule=_view_rule, interp=_view_interp,
     example="%2 = kd.array_view %0, %1 : array<f32, 1>", group="memory",
+)  # fmt: skip
+
+
+def _null_array_interp(ctx, op):
+    t: ArrayType = op.results[0].type
+    if isinstance(t.dtype, StructType):
+        return np.zeros((0,) * t.ndim, dtype=storage_dtype(t.dtype))
+    return np.zeros((0,) * t.ndim + value_shape(t.dtype), dtype=elem_type(t.dtype).np_dtype)
+
+
+def _verify_null_array(op: Operation) -> None:
+    if op.operands or len(op.results) != 1 or not isinstance(op.results[0].type, ArrayType):
+        raise TypeError("kd.null_array takes no operands and gives one array")
+
+
+NULL_ARRAY = CATALOG.define(
+    "kd.null_array",
+    "An array with no elements (null data, every dim 0): what an array field holds in a "
+    "zero adjoint of a struct (adjoints of arrays are never read).",
+    traits=frozenset({PURE, SPECULATABLE}), verifier=_verify_null_array,
+    interp=_null_array_interp, example="%0 = kd.null_array : array<f32, 1>", group="memory",
 )  # fmt: skip
 
 

@@ -39,6 +39,7 @@ from kdsl.ir.catalog import CATALOG
 from kdsl.ir.core import Operation, Value
 from kdsl.ir.types import (
     BOOL,
+    ArrayType,
     MatrixType,
     ScalarType,
     StructType,
@@ -139,6 +140,8 @@ class VjpContext:
         if isinstance(t, StructType):
             fields = [self.const(x if is_differentiable(ft) else 0, ft) for _, ft in t.fields]
             return self.emit_typed("struct.construct", fields, t)
+        if isinstance(t, ArrayType):  # a struct adjoint's array field: never read
+            return self.emit_typed("kd.null_array", [], t)
         raise TypeError(f"no constant of type {t}")
 
     def zeros(self, t: Type) -> Value:

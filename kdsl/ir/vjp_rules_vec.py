@@ -200,3 +200,10 @@ def _struct_insert(ctx: VjpContext, op: Operation, adj: Adj) -> list[Value | Non
             ctx.emit("struct.extract", g, field=name),
         ]
     return [g, None]  # the replaced field was not differentiable: nothing to clear
+
+
+@rule("kd.record")
+def _record(ctx: VjpContext, op: Operation, adj: Adj) -> list[Value | None]:
+    # A runtime object's record is read-only object data named by an integer id: the
+    # adjoint of what is read from it stops here (no gradient into the object).
+    return [None]

@@ -204,11 +204,6 @@ def distance_kernel(mesh: wp.uint64, xs: wp.array(dtype=V3), out: wp.array(dtype
     out[i] = wp.mesh_eval_position(mesh, q.face, q.u, q.v)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="the adjoint of the traversal's while loop asks for a zero of an array type "
-    "(kdsl.passes.adjoint.reverse_loops); the gradient check stays to pin the fix",
-)
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_closest_point_gradient_wrt_query_point(backend):
     # points over the face interior, beyond an edge and beyond a vertex

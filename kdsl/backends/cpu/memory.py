@@ -262,6 +262,10 @@ CPU.register("kd.array_shape", _array_shape)
 CPU.register("kd.load", _load)
 CPU.register("kd.array_view", _array_view)
 CPU.register("kd.record", _record)
+CPU.register(
+    "kd.null_array",
+    lambda em, op: ir.Constant(LT.descriptor_type(op.results[0].type.ndim), None),
+)
 CPU.register("kd.store", _store)
 CPU.register("kd.atomic_rmw", _atomic)
 CPU.register("kd.atomic_cas", _atomic_cas)
