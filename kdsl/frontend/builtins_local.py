@@ -67,7 +67,7 @@ LOCAL_ZEROS = Builtin(
     f"1 to 4 ints) and at most {MAX_LOCAL_BYTES} bytes. It is an ordinary array: index it, "
     "take views, use atomics, pass it to a ``@kdsl.func``. In Python scope ``kdsl.zeros`` "
     "allocates a device array.",
-    (1, 2),
+    (0, 2),
     "memory",
     keywords=("shape", "dtype"),
 )

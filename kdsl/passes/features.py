@@ -18,6 +18,7 @@ intrinsics, ``kd.tid`` dimensionalities, struct and handle names) and, in
 - ``atomics``: any ``kd.atomic_rmw`` or ``kd.atomic_cas``, with one ``atomic.<kind>``
   per kind used (``add sub min max and or xor exch cas``).
 - ``math.<fn>``: each math intrinsic used, by op name (``math.sin``, ``math.erf``...).
+- ``local_arrays``: ``kd.local_array`` (thread-local arrays, ``zeros`` in a kernel).
 - ``print``: ``kd.print`` (the C library's or the device's ``printf``).
 - ``check.bounds``, ``check.finite``: the debug checks ``kd.check_bounds`` and
   ``kd.check_finite`` (inserted by the ``bounds-check`` and ``fp-check`` passes).
@@ -233,6 +234,8 @@ def _names(c: _Collector, module: Module, flags: dict[str, bool]) -> frozenset[s
     names |= {n for n in c.ops if n.startswith("math.")}
     if "kd.print" in c.ops:
         names.add("print")
+    if "kd.local_array" in c.ops:
+        names.add("local_arrays")
     names |= {_CHECKS[n] for n in c.ops if n in _CHECKS}
     names |= {f"tid.{n}d" for n in c.tid if n > 1}
     names |= {f"stdlib.{m}" for m in map(_stdlib_module, c.files) if m is not None}

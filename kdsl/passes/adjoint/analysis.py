@@ -13,6 +13,7 @@ import warnings
 
 from kdsl.errors import KdslError, KdslGradientWarning, render_loc
 from kdsl.ir import Module, Operation, Value
+from kdsl.ir.ops_local import is_local_array
 from kdsl.ir.types import ArrayType, StructType, Type
 from kdsl.ir.vjp import is_differentiable
 
@@ -88,7 +89,11 @@ def check_differentiable(primal: Primal) -> None:
             raise KdslError(
                 f"kdsl cannot differentiate a call to '{op.attrs['callee']}' that was not "
                 "inlined (recursive functions have no adjoint)", op.loc, primal.sym)  # fmt: skip
-        if op.name in ("kd.atomic_rmw", "kd.atomic_cas") and op.results[0].uses:
+        if (
+            op.name in ("kd.atomic_rmw", "kd.atomic_cas")
+            and op.results[0].uses
+            and not _on_local_array(op)  # thread-local: the replay redoes it
+        ):
             kind = op.attrs.get("kind", "cas")
             raise KdslError(
                 f"the value returned by atomic_{kind} is used, and the backward "
@@ -106,6 +111,10 @@ def check_differentiable(primal: Primal) -> None:
                     "replays the read with the written value and may be wrong\n"
                     + render_loc(op.loc, primal.sym), KdslGradientWarning, stacklevel=2)  # fmt: skip
                 written.discard(arr)  # warn once per array
+
+
+def _on_local_array(op: Operation) -> bool:
+    return is_local_array(base_array(op.operands[op.opdef.array_operand]))
 
 
 def has_grad_arrays(t: Type) -> bool:

@@ -13,6 +13,7 @@ from kdsl.ir import Builder, Module, Operation, Value, new_func
 from kdsl.ir.types import I32
 from kdsl.passes.adjoint.analysis import Primal, check_differentiable
 from kdsl.passes.adjoint.counting import build_counter
+from kdsl.passes.adjoint.local_arrays import check_local_reads
 from kdsl.passes.adjoint.replay import Replay
 from kdsl.passes.adjoint.reverse import ReverseSweep
 from kdsl.passes.adjoint.tapes import TapeTable, TapeWriter
@@ -31,6 +32,7 @@ class AdjointBuilder:
         """Add and return the adjoint function."""
         primal = self.primal
         check_differentiable(primal)
+        check_local_reads(primal)
         args = primal.block.args
         types = [a.type for a in args]
         names = [a.name_hint for a in args]
@@ -52,6 +54,7 @@ class AdjointBuilder:
         replay = Replay(primal, b, writer)
         sweep = ReverseSweep(primal, b, replay, writer, grads, body)
         replay.replay(primal.block, vmap, record=True)
+        replay.local_writes = False  # the reverse sweep's replays: see ``local_arrays``
         sweep.reverse_block(primal.block, vmap, {})
         b.create("func.return", loc=primal.func.loc)
         writer.finish(func)

@@ -1,7 +1,8 @@
 """The forward replay: the kernel's values recomputed inside its adjoint.
 
 The adjoint function first clones the kernel's ops, minus the effects the forward
-launch already had (memory writes and output: the outputs hold them). Checks are
+launch already had (memory writes and output: the outputs hold them), except writes
+into thread-local arrays, which it must redo (``local_arrays``). Checks are
 replayed: they only stop a thread, and they guard the replayed reads as they
 guarded the kernel's. Regions are cloned whole, except loops the reverse sweep
 needs: those get an iteration counter and tape their carried values into a
@@ -13,13 +14,16 @@ from __future__ import annotations
 
 from kdsl.ir import Block, Builder, Operation, Region, Value
 from kdsl.ir.catalog import CHECK, WRITES
+from kdsl.ir.ops_local import LOCAL_ARRAY
 from kdsl.ir.types import I32
 from kdsl.passes.adjoint.analysis import Primal
+from kdsl.passes.adjoint.local_arrays import local_base
 from kdsl.passes.adjoint.tapes import TapeSink
 
 
 def replays(op: Operation) -> bool:
-    """Whether the forward replay repeats ``op`` (see the module docstring)."""
+    """Whether the forward replay repeats ``op`` (see the module docstring); writes into
+    local arrays are decided by ``Replay`` (``local_arrays``)."""
     traits = op.opdef.traits
     return WRITES not in traits or CHECK in traits
 
@@ -36,6 +40,11 @@ class Replay:
         self.b = b
         self.sink = sink
         self.trips: dict[Operation, Value] = {}
+        #: Repeat every write into a local array (the forward replay and the counting
+        #: function); once False (the reverse sweep's replays), only writes into local
+        #: arrays the replay itself created (``fresh``), so no array is written twice.
+        self.local_writes = True
+        self.fresh: set[Value] = set()
 
     def replay(self, block: Block, vmap: dict[Value, Value], record: bool) -> list[Value]:
         """Clone ``block``'s ops at the builder (no side effects); give the terminator's operands.
@@ -53,7 +62,11 @@ class Replay:
         """Clone one op (see ``replay``)."""
         name = op.name
         if not replays(op):
-            return
+            base = local_base(op)
+            if base is None or not (self.local_writes or base in self.fresh):
+                return
+        elif op.opdef is LOCAL_ARRAY:
+            self.fresh.add(op.results[0])
         b = self.b
         with b.at(op.loc):
             if name == "scf.if":

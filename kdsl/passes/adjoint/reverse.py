@@ -18,6 +18,7 @@ from kdsl.ir import Block, Builder, Operation, Region, Value
 from kdsl.ir.types import I64, StructType, Type
 from kdsl.ir.vjp import VjpContext, get_rule, is_differentiable
 from kdsl.passes.adjoint.analysis import Primal, base_array, defined_in
+from kdsl.passes.adjoint.local_arrays import check_no_gradient
 from kdsl.passes.adjoint.replay import Replay
 from kdsl.passes.adjoint.reverse_loops import reverse_for, reverse_while
 from kdsl.passes.adjoint.tapes import TapeWriter
@@ -129,6 +130,7 @@ class ReverseSweep:
             return
         grad = self.grad_of(op.operands[0], vmap)
         if grad is None:
+            check_no_gradient(self.primal, op)
             return
         if isinstance(g.type, StructType):
             raise KdslError("kdsl cannot yet differentiate reads of struct arrays",
