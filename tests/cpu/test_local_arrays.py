@@ -26,13 +26,13 @@ def stack_digits(n: wp.array(dtype=int), out: wp.array(dtype=int)):
     # Push the decimal digits of n[i] on a local stack, pop them back into a number.
     i = wp.tid()
     stack = wp.zeros(DEPTH, dtype=int)
-    top = int(0)
+    top = 0
     x = n[i]
     while x > 0:
         stack[top] = x % 10
         top += 1
         x = x // 10
-    r = int(0)
+    r = 0
     while top > 0:
         top -= 1
         r = r * 10 + stack[top]
@@ -70,7 +70,7 @@ def test_histogram(backend):
 @wp.func
 def row_sums(m: wp.array2d(dtype=wp.vec2), r: wp.array(dtype=float)):
     for a in range(m.shape[0]):
-        s = float(0.0)
+        s = 0.0
         for b in range(m.shape[1]):
             s += m[a, b][0] + m[a, b][1]
         r[a] = s
@@ -106,7 +106,7 @@ def test_2d_views_and_func(backend):
 def fresh_zeros(out: wp.array(dtype=float)):
     # Each run of zeros() gives zeros again, also in a loop that wrote the last one.
     i = wp.tid()
-    total = float(0.0)
+    total = 0.0
     for k in range(3):
         a = wp.zeros(2, dtype=float)
         total += a[0] + a[1]
@@ -160,12 +160,12 @@ def scaled_by_count(x: wp.array(dtype=float), y: wp.array(dtype=float)):
     # The local int stack takes no gradient; the gradient of x flows around it.
     i = wp.tid()
     s = wp.zeros(4, dtype=int)
-    n = int(0)
+    n = 0
     for k in range(4):
         if k <= i:
             s[n] = k
             n += 1
-    c = int(0)
+    c = 0
     while n > 0:
         n -= 1
         c += s[n]

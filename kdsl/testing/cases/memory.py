@@ -259,3 +259,53 @@ CASES = [
          lambda rng: {"a": uniform(rng, (20, 3), -5, 5), "out": _zeros((20, 3))},
          lambda ins: {"out": f64(ins["a"])[::-1] + 0.5 * f64(ins["a"])}, ("out",)),
 ]  # fmt: skip
+
+
+# --- thread-local arrays (``zeros`` in a kernel) -------------------------------------------
+
+
+@wp.kernel
+def local_arrays(a: wp.array2d(dtype=float), out: wp.array2d(dtype=float)):
+    # A stack (push every positive value, pop them back in reverse), a 2-d local array of
+    # vectors indexed at run time, and a histogram updated atomically.
+    i = wp.tid()
+    stack = wp.zeros(8, dtype=float)
+    grid = wp.zeros((2, 4), dtype=wp.vec2)
+    hist = wp.zeros(shape=3, dtype=int)
+    top = 0
+    for j in range(8):
+        x = a[i, j]
+        if x > 0.0:
+            stack[top] = x
+            top += 1
+        grid[j % 2, j // 2] = wp.vec2(x, float(j))
+        wp.atomic_add(hist, wp.clamp(int((x + 1.0) * 1.5), 0, 2), 1)
+    r = 0.0
+    k = 1.0
+    while top > 0:
+        top -= 1
+        r += stack[top] * k
+        k += 1.0
+    out[i, 0] = r
+    out[i, 1] = grid[1, 3][0] - grid[0, 1][0] + grid[1, 2][1]
+    out[i, 2] = float(hist[0] * 100 + hist[1] * 10 + hist[2])
+
+
+def _local_arrays_ref(ins):
+    a = f64(ins["a"]).astype(np.float32)
+    out = np.zeros((len(a), 3))
+    for i, row in enumerate(a):
+        pos = [float(x) for x in row if x > 0][::-1]
+        out[i, 0] = sum(x * (k + 1) for k, x in enumerate(pos))
+        out[i, 1] = float(row[7]) - float(row[2]) + 5.0
+        bins = np.clip(((row + np.float32(1.0)) * np.float32(1.5)).astype(np.int32), 0, 2)
+        h = np.bincount(bins, minlength=3)
+        out[i, 2] = h[0] * 100 + h[1] * 10 + h[2]
+    return {"out": out}
+
+
+CASES.append(
+    Case("local_arrays", local_arrays, 24,
+         lambda rng: {"a": uniform(rng, (24, 8), -1, 1), "out": _zeros((24, 3))},
+         _local_arrays_ref, ("out",), requires=("atomics",))
+)  # fmt: skip
