@@ -156,13 +156,13 @@ def clear_lto_cache() -> None:
 
 def print_diagnostics() -> dict:
     """Print and return what kdsl sees: versions, backends, devices, CUDA."""
+    from importlib import metadata
+
     import llvmlite
     import numpy
 
-    import kdsl
-
     info: dict[str, Any] = {
-        "kdsl_version": kdsl.__version__,
+        "kdsl_version": metadata.version("kdsl"),
         "python": sys.version.split()[0],
         "platform": platform.platform(),
         "numpy": numpy.__version__,

@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 
 from kdsl.errors import KdslTypeError, KdslValueError
+from kdsl.frontend.api import tid
 from kdsl.frontend.builtins_base import Builtin
 from kdsl.frontend.compiler import FunctionCompiler, ModuleCompiler
 from kdsl.frontend.kernel import CompileTarget, Function, func, kernel
@@ -169,18 +170,16 @@ def _build_kernel(fn: Any, inputs: list[Any], anns: list[Any], out_types: list[A
     nd = len(shape)
     params = [f"x{k}" for k in range(len(inputs))]
     outs = [f"o{k}" for k in range(len(out_types))]
-    tid = ", ".join(f"i{d}" for d in range(nd))
+    tid_vars = ", ".join(f"i{d}" for d in range(nd))
     args = [f"x{k}[{_index(nd, tuple(x.shape), shape)}]" if isinstance(x, array | indexedarray)
             else f"x{k}" for k, x in enumerate(inputs)]  # fmt: skip
     results = ", ".join(f"r{k}" for k in range(len(outs)))
-    stores = "".join(f"    o{k}[{tid}] = r{k}\n" for k in range(len(outs)))
+    stores = "".join(f"    o{k}[{tid_vars}] = r{k}\n" for k in range(len(outs)))
     sig = ", ".join(f"{p}: __ann_{p}" for p in params + outs)
     name = f"map_kernel_{next(_counter)}"
-    source = (f"def {name}({sig}):\n    {tid} = wp.tid()\n"
+    source = (f"def {name}({sig}):\n    {tid_vars} = tid()\n"
               f"    {results} = f({', '.join(args)})\n{stores}")  # fmt: skip
-    import kdsl as wp
-
-    scope: dict[str, Any] = {"f": fn, "wp": wp, "__name__": "kdsl.utils.map"}
+    scope: dict[str, Any] = {"f": fn, "tid": tid, "__name__": "kdsl.utils.map"}
     scope.update({f"__ann_{p}": a for p, a in zip(params, anns)})
     scope.update({f"__ann_{o}": array(dtype=class_of(t), ndim=nd)
                   for o, t in zip(outs, out_types)})  # fmt: skip
