@@ -11,14 +11,14 @@ from typing import Any
 import numpy as np
 
 from kdsl.errors import KdslError, KdslTypeError
-from kdsl.geometry.device_tree import DeviceTree, refit, upload_tree
+from kdsl.geometry.device_tree import DeviceTree, pack_nodes, refit, upload_tree
 from kdsl.geometry.lbvh import build_lbvh
 from kdsl.geometry.median import build_median
 from kdsl.ir import types as T
 from kdsl.runtime.alloc import empty
 from kdsl.runtime.array import array
 from kdsl.runtime.objects import ObjectRecord
-from kdsl.stdlib.bvh import BvhRecord
+from kdsl.stdlib.bvh import BvhNode, BvhRecord
 from kdsl.types import type_of
 
 VEC3 = T.VectorType(3, T.F32)
@@ -119,17 +119,27 @@ class Bvh:
         build = CONSTRUCTORS[self.constructor]
         tree = build(self.lowers, self.uppers, self.leaf_size, self.groups, self._num_groups)
         self._tree = tree
-        self._bounds = [empty(tree.num_nodes, dtype=VEC3, device=self.device) for _ in range(2)]
+        self._nodes = empty(tree.num_nodes, dtype=BvhNode, device=self.device)
+        self._bounds = [self._node_field(0, VEC3), self._node_field(16, VEC3)]
+        pack_nodes(tree, self._nodes, self._node_field(12, T.I32))
         self.refit()
         self._record.write(
             {
                 "lowers": self._bounds[0], "uppers": self._bounds[1],
-                "skip": tree.skip, "first": tree.first, "count": tree.count,
+                "skip": tree.skip, "first": self._node_field(12, T.I32), "count": tree.count,
                 "items": tree.items, "group_roots": tree.group_roots,
                 "item_lowers": self.lowers, "item_uppers": self.uppers,
-                "root": 0 if tree.num_nodes else -1,
+                "root": 0 if tree.num_nodes else -1, "nodes": self._nodes,
             }
         )  # fmt: skip
+
+    def _node_field(self, offset: int, dtype) -> array:
+        """A strided view of one field of every packed node (``BvhNode``)."""
+        n = self._nodes
+        if n.shape[0] == 0:
+            return empty(0, dtype=dtype, device=self.device)
+        return array(ptr=n.ptr + offset, dtype=dtype, shape=n.shape, strides=n.strides,
+                     device=self.device)  # fmt: skip
 
     def refit(self) -> None:
         """Recompute the node bounds from the current boxes (the tree keeps its shape), with

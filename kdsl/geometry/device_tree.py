@@ -103,6 +103,31 @@ def _refit_level(
     uppers[n] = vmax(uppers[a], uppers[b])
 
 
+@kernel
+def _pack_links(
+    first: array(dtype=int32), count: array(dtype=int32), skip: array(dtype=int32),
+    packed_first: array(dtype=int32), packed_next: array(dtype=int32),
+):  # fmt: skip
+    n = tid()
+    f = first[n]
+    packed_first[n] = f
+    if f >= 0:
+        packed_next[n] = count[n]
+    else:
+        packed_next[n] = skip[n]
+
+
+def pack_nodes(tree: DeviceTree, nodes: array, packed_first: array) -> None:
+    """Write the links of the packed nodes (``kdsl.stdlib.bvh.BvhNode``): ``first``, and
+    ``next``, an inner node's ``skip`` or a leaf's count; ``refit`` writes the bounds."""
+    if tree.num_nodes == 0:
+        return
+    packed_next = array(ptr=nodes.ptr + 28, dtype=int32, shape=nodes.shape,
+                        strides=nodes.strides, device=nodes.device)  # fmt: skip
+    launch(_pack_links, dim=tree.num_nodes, device=nodes.device,
+           inputs=[tree.first, tree.count, tree.skip, packed_first, packed_next])  # fmt: skip
+
+
 def refit(tree: DeviceTree, item_lowers: array, item_uppers: array, lowers: array,
           uppers: array) -> None:  # fmt: skip
     """Write the node bounds of ``tree`` over the item boxes into ``lowers``/``uppers``."""

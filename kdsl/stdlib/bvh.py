@@ -8,7 +8,12 @@ Kernels reach it through its record (``BvhRecord``, read with ``object_record``)
   ``items[first[n] : first[n] + count[n]]``, an inner node (``first[n] < 0``) has its
   left child at ``n + 1``;
 - ``item_lowers`` / ``item_uppers`` are the boxes the BVH was built over (the user's
-  arrays), ``group_roots[g]`` is the root node of group ``g``'s subtree.
+  arrays), ``group_roots[g]`` is the root node of group ``g``'s subtree;
+- ``nodes`` packs each node's bounds, ``first`` and ``skip`` (or a leaf's count) in 32
+  bytes (``BvhNode``), which the traversal reads; ``lowers``, ``uppers`` and ``first``
+  are views of it. A leaf's bounds are exactly its items' union (``refit``), so a
+  leaf of one item that the query's shape touches is reported without testing the
+  item's box again.
 
 A query is a ``BvhQuery`` value; ``bvh_query_next`` advances it (an in-out argument,
 as Warp's) and gives the next item whose box the query's shape touches. Traversal is
@@ -36,6 +41,19 @@ PARALLEL = 4
 
 
 @wp.struct
+class BvhNode:
+    """A node packed for traversal (32 bytes, one load): its bounds, ``first`` (a leaf's
+    first position in ``items``, -1 for an inner node) and ``next`` (an inner node's
+    ``skip``, a leaf's item count). ``BvhRecord``'s ``lowers``, ``uppers`` and ``first``
+    are strided views of these fields."""
+
+    lower: wp.vec3
+    first: wp.int32
+    upper: wp.vec3
+    next: wp.int32
+
+
+@wp.struct
 class BvhRecord:
     """The record of a ``kdsl.Bvh`` (see the module docstring)."""
 
@@ -50,6 +68,7 @@ class BvhRecord:
     item_uppers: wp.array(dtype=wp.vec3)
     group_roots: wp.array(dtype=wp.int32)
     root: wp.int32
+    nodes: wp.array(dtype=BvhNode)
 
 
 @wp.struct
@@ -139,6 +158,19 @@ def bvh_query_capsule(
 
 
 @func
+def _lesser(a: float, b: float) -> float:
+    # One compare and select (minss on x86); wp.min is IEEE minimumNum, which also
+    # orders -0 below +0 and costs several instructions on a CPU. NaN boxes are kept
+    # out by ``_no_nan`` where an item is reported, not here.
+    return wp.where(a < b, a, b)
+
+
+@func
+def _greater(a: float, b: float) -> float:
+    return wp.where(a > b, a, b)
+
+
+@func
 def _ray_box(
     lo: wp.vec3, hi: wp.vec3, start: wp.vec3, inv: wp.vec3, max_t: float, closed: bool
 ) -> bool:
@@ -147,8 +179,8 @@ def _ray_box(
     rays are half-open)."""
     t0 = wp.cw_mul(lo - start, inv)
     t1 = wp.cw_mul(hi - start, inv)
-    tmin = wp.max(wp.max(wp.min(t0[0], t1[0]), wp.min(t0[1], t1[1])), wp.min(t0[2], t1[2]))
-    tmax = wp.min(wp.min(wp.max(t0[0], t1[0]), wp.max(t0[1], t1[1])), wp.max(t0[2], t1[2]))
+    tmin = _greater(_greater(_lesser(t0[0], t1[0]), _lesser(t0[1], t1[1])), _lesser(t0[2], t1[2]))
+    tmax = _lesser(_lesser(_greater(t0[0], t1[0]), _greater(t0[1], t1[1])), _greater(t0[2], t1[2]))
     return tmin <= tmax and tmax >= 0.0 and (tmin < max_t or (closed and tmin == max_t))
 
 
@@ -169,8 +201,8 @@ def _ray_box_parallel(
         if dir[k] == 0.0:
             inside = inside and lo[k] <= start[k] and start[k] <= hi[k]
         else:
-            tmin = wp.max(tmin, wp.min(t0[k], t1[k]))
-            tmax = wp.min(tmax, wp.max(t0[k], t1[k]))
+            tmin = _greater(tmin, _lesser(t0[k], t1[k]))
+            tmax = _lesser(tmax, _greater(t0[k], t1[k]))
     hit = inside and tmin <= tmax and tmax >= 0.0
     return hit and (tmin < max_t or (closed and tmin == max_t))
 
@@ -178,8 +210,20 @@ def _ray_box_parallel(
 @func
 def _box_distance_sq(lo: wp.vec3, hi: wp.vec3, p: wp.vec3) -> float:
     """Squared distance from ``p`` to the closed box ``[lo, hi]`` (0 inside)."""
-    d = wp.max(wp.max(lo - p, p - hi), wp.vec3(0.0))
-    return wp.dot(d, d)
+    total = 0.0
+    for k in range(3):
+        d = _greater(_greater(lo[k] - p[k], p[k] - hi[k]), 0.0)
+        total = total + d * d
+    return total
+
+
+@func
+def _no_nan(lo: wp.vec3, hi: wp.vec3) -> bool:
+    """Whether a box has no NaN coordinate (an item with one is never reported)."""
+    return (
+        lo[0] == lo[0] and lo[1] == lo[1] and lo[2] == lo[2]
+        and hi[0] == hi[0] and hi[1] == hi[1] and hi[2] == hi[2]
+    )  # fmt: skip
 
 
 @func
@@ -217,21 +261,30 @@ def bvh_query_next(
         if query.leaf_pos < query.leaf_end:
             item = rec.items[query.leaf_pos]
             query.leaf_pos = query.leaf_pos + 1
-            if _touches(query, rec.item_lowers[item], rec.item_uppers[item], max_dist):
-                index = item  # noqa: F841 - an in-out parameter: the caller sees it
+            lo = rec.item_lowers[item]
+            hi = rec.item_uppers[item]
+            if _touches(query, lo, hi, max_dist) and _no_nan(lo, hi):
+                index = item
                 found = True
         elif query.node >= query.stop:
             break
         else:
             node = query.node
-            if _touches(query, rec.lowers[node], rec.uppers[node], max_dist):
-                first = rec.first[node]
-                if first >= 0:
-                    query.leaf_pos = first
-                    query.leaf_end = first + rec.count[node]
+            nd = rec.nodes[node]  # bounds and links in one 32-byte load
+            if nd.first >= 0:  # a leaf
+                query.node = node + 1
+                if _touches(query, nd.lower, nd.upper, max_dist):
+                    if nd.next == 1:  # its box is its one item's: report it untested
+                        if _no_nan(nd.lower, nd.upper):
+                            index = rec.items[nd.first]  # noqa: F841 - in-out: the caller sees it
+                            found = True
+                    else:
+                        query.leaf_pos = nd.first
+                        query.leaf_end = nd.first + nd.next
+            elif _touches(query, nd.lower, nd.upper, max_dist):
                 query.node = node + 1
             else:
-                query.node = rec.skip[node]
+                query.node = nd.next
     return found
 
 

@@ -229,16 +229,26 @@ def test_adversarial_boxes(backend, constructor):
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
-def test_nan_boxes_are_never_reported(backend):
+@pytest.mark.parametrize("constructor", CONSTRUCTORS)
+@pytest.mark.parametrize("leaf_size", [1, 4])
+def test_nan_boxes_are_never_reported(backend, constructor, leaf_size):
     lo, hi = random_boxes(40, seed=3)
     lo[5] = np.nan
     hi[9, 1] = np.nan
-    bvh = make_bvh(lo, hi, "lbvh")
+    bvh = make_bvh(lo, hi, constructor, leaf_size)
     assert sorted(bvh._tree.items.numpy().tolist()) == list(range(40))
+    rest = set(range(40)) - {5, 9}
     big = wp.array([[-10, -10, -10]], dtype=wp.vec3)
     got = run_query(aabb_hits, 1, [bvh.id, big, wp.array([[10, 10, 10]], dtype=wp.vec3), -1],
                     backend)  # fmt: skip
-    assert got == [set(range(40)) - {5, 9}]
+    assert got == [rest]
+    centre = wp.array([[0.5, 0.5, 0.5]], dtype=wp.vec3)
+    assert run_query(sphere_hits, 1, [bvh.id, centre, 10.0], backend) == [rest]
+    d = wp.array([[0.3, 0.2, 1.0]], dtype=wp.vec3)
+    assert run_query(capsule_hits, 1, [bvh.id, centre, d, 10.0, 1.0], backend) == [rest]
+    got = run_query(ray_hits, 1, [bvh.id, wp.array([[0.5, 0.5, -1]], dtype=wp.vec3), d, 1e30],
+                    backend)  # fmt: skip
+    assert 5 not in got[0] and 9 not in got[0]
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
