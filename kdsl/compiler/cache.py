@@ -32,10 +32,13 @@ import struct
 import tempfile
 import threading
 import warnings
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
+from contextvars import ContextVar
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, TypeVar
+
+from kdsl.errors import KdslError
 
 #: Bump when the entry layout or the key recipe changes.
 FORMAT_VERSION = 1
@@ -275,12 +278,51 @@ _disabled: dict[Path, str] = {}
 _state_lock = threading.Lock()
 
 
+# --------------------------------------------------------------------------- ahead of time
+
+
+class KernelNotCompiledError(KdslError, FileNotFoundError):
+    """``load_aot_module`` found no compiled entry for a kernel in its directory."""
+
+
+@dataclass(frozen=True)
+class _AotScope:
+    directory: Path
+    build: bool
+
+
+_aot: ContextVar[_AotScope | None] = ContextVar("kdsl_aot_directory", default=None)
+
+
+@contextlib.contextmanager
+def aot_directory(directory: Path, build: bool) -> Iterator[None]:
+    """Inside the block the disk layer is ``directory`` (whatever ``KDSL_CACHE`` says).
+
+    ``build=True`` (``compile_aot_module``): every kernel looked up gets its entry there,
+    even one this process had already loaded. ``build=False`` (``load_aot_module``): a
+    kernel must come from memory or from ``directory``; a miss raises
+    ``KernelNotCompiledError`` instead of compiling.
+    """
+    problem = check_directory(directory, create=build)
+    if problem is not None:
+        raise KdslError(f"ahead-of-time module directory: {problem}")
+    token = _aot.set(_AotScope(directory, build))
+    try:
+        yield
+    finally:
+        _aot.reset(token)
+
+
 def default_cache() -> DiskCache | None:
     """The disk cache of the current environment, or None when it is off or unsafe.
 
     An unsafe directory (not ours, group/world-writable, not creatable) disables the
-    disk layer for this process with one ``CacheWarning``.
+    disk layer for this process with one ``CacheWarning``. Inside ``aot_directory`` it
+    is that directory.
     """
+    aot = _aot.get()
+    if aot is not None:
+        return DiskCache(aot.directory)
     if not disk_cache_enabled():
         return None
     directory = cache_dir()
@@ -355,8 +397,14 @@ def get_or_build(key: str, build: Callable[[], bytes], load: Callable[[bytes], T
     rejects by raising is discarded and rebuilt.
     """
     value = MEMORY.get(key)
-    if value is not None:
+    aot = _aot.get()
+    if value is not None and (aot is None or not aot.build):
         STATS.memory_hits += 1
+        return value
+    if value is not None:  # compile_aot_module: loaded here, but the directory needs it
+        disk = DiskCache(aot.directory)  # type: ignore[union-attr]
+        if disk.load(key) is None and not disk.store(key, build()):
+            raise KdslError(f"compile_aot_module: could not write to {disk.directory}")
         return value
     with MEMORY.lock(key):
         value = MEMORY.get(key)
@@ -373,6 +421,12 @@ def get_or_build(key: str, build: Callable[[], bytes], load: Callable[[bytes], T
                 STATS.discarded += 1
                 disk.discard(key)  # type: ignore[union-attr]
                 value = None
+        if value is None and aot is not None and not aot.build:
+            raise KernelNotCompiledError(
+                f"no ahead-of-time compiled entry {key[:16]}... in {aot.directory}: this kernel "
+                f"(with these options, on this target) was not compiled there by "
+                f"compile_aot_module; compile it first, or launch it normally to compile now"
+            )
         if value is None:
             payload = build()
             STATS.builds += 1

@@ -14,6 +14,7 @@ from kdsl.runtime.allocators import (
     set_cuda_allocator,
     set_device_allocator,
 )
+from kdsl.runtime.aot import compile_aot_module, get_cpu_kernel_cache_key, load_aot_module
 from kdsl.runtime.build_options import (
     DeterministicMode,
     DeviceLike,
@@ -44,6 +45,7 @@ __all__ = [
     "Allocator", "CudaManagedAllocator", "DeterministicMode", "DeviceLike",
     "JaxModulePreloadMode", "MemoryKind", "ModuleBuildOptions", "ScopedAllocator",
     "ScopedCudaProfiler", "ScopedMemoryTracker", "can_access", "clear_lto_cache",
+    "compile_aot_module", "get_cpu_kernel_cache_key", "load_aot_module",
     "cuda_profiler_start", "cuda_profiler_stop", "get_cuda_driver_version",
     "get_cuda_kernel_properties", "get_cuda_max_cluster_dim", "get_cuda_supported_archs",
     "get_cuda_toolkit_version", "get_device_allocator", "get_suggested_block_size", "handle",
