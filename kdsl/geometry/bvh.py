@@ -14,6 +14,7 @@ from kdsl.errors import KdslError, KdslTypeError
 from kdsl.geometry.device_tree import DeviceTree, pack_nodes, refit, upload_tree
 from kdsl.geometry.lbvh import build_lbvh
 from kdsl.geometry.median import build_median
+from kdsl.geometry.sah import build_sah
 from kdsl.ir import types as T
 from kdsl.runtime.alloc import empty
 from kdsl.runtime.array import array
@@ -40,7 +41,11 @@ def _host_build(build):
 
 
 #: The constructors by name: each builds a ``DeviceTree`` from the boxes.
-CONSTRUCTORS = {"median": _host_build(build_median), "lbvh": build_lbvh}
+CONSTRUCTORS = {
+    "lbvh": build_lbvh,
+    "median": _host_build(build_median),
+    "sah": _host_build(build_sah),
+}
 
 
 def _check_boxes(lowers: Any, uppers: Any) -> None:

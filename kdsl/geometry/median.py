@@ -79,6 +79,19 @@ def build_median(
 ) -> Tree:  # fmt: skip
     """Build a tree over the boxes ``lowers[i], uppers[i]`` (``(n, 3)`` arrays); with
     ``groups`` (ids >= 0), ``num_groups`` (default: the largest id + 1) group roots."""
+    return build_top_down(lowers, uppers, leaf_size, groups, num_groups, split_median)
+
+
+def split_median(centers, lowers, uppers, group_of, order, starts, counts, leaf_size):
+    """The median splitter of ``build_top_down`` (see ``_split_points``)."""
+    return _split_points(centers, group_of, order, starts, counts, leaf_size)
+
+
+def build_top_down(lowers, uppers, leaf_size, groups, num_groups, splitter) -> Tree:
+    """Build a tree level by level: ``splitter(centers, lowers, uppers, group_of, order,
+    starts, counts, leaf_size)`` reorders each segment ``order[starts:starts+counts]``
+    in place and gives where it splits (0: a leaf); a segment of several groups must
+    split at a group boundary."""
     n = len(lowers)
     leaf_size = max(1, int(leaf_size))
     centers = 0.5 * (lowers.astype(np.float64) + uppers.astype(np.float64))
@@ -101,7 +114,7 @@ def build_median(
         level[nodes] = depth
         if group_of is not None:
             _note_group_roots(group_of, order, starts, counts, nodes, group_roots)
-        split = _split_points(centers, group_of, order, starts, counts, leaf_size)
+        split = splitter(centers, lowers, uppers, group_of, order, starts, counts, leaf_size)
         leaf = split == 0
         left[nodes[leaf]] = -(starts[leaf] + 1)
         right[nodes[leaf]] = counts[leaf]

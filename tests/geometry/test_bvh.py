@@ -10,7 +10,7 @@ import pytest
 import kdsl as wp
 
 BACKENDS = ["interp", "cpu"]
-CONSTRUCTORS = ["lbvh", "median"]
+CONSTRUCTORS = ["lbvh", "median", "sah"]
 #: Most hits a query records (the count is exact beyond it).
 MAX_HITS = 64
 cuda = pytest.mark.skipif(not wp.is_cuda_available(), reason="no GPU")
@@ -335,3 +335,16 @@ def test_cuda_matches_cpu(constructor, leaf_size):
         assert got == want
         bvh.refit()
         assert run_query(aabb_hits, m, [bvh.id, *args], "cuda", "cuda:0") == want
+
+
+def test_sah_splits_between_clusters():
+    # 100 boxes near the origin, 300 near (10, 0, 0): the SAH plane separates the clusters
+    # (the median centre would cut the larger one).
+    rng = np.random.default_rng(0)
+    c = np.concatenate([rng.random((100, 3)), rng.random((300, 3)) + [10, 0, 0]])
+    lo, hi = (c - 0.01).astype(np.float32), (c + 0.01).astype(np.float32)
+    for constructor, want in (("sah", 100), ("median", 200)):
+        t = make_bvh(lo, hi, constructor)._tree
+        left_end = t.skip.numpy()[1]  # the root's left subtree: nodes 1 .. left_end - 1
+        left_items = (t.first.numpy()[1:left_end] >= 0).sum()  # one item per leaf
+        assert left_items in (want, 400 - want), constructor

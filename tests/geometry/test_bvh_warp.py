@@ -95,7 +95,7 @@ def kv(a: np.ndarray):
     return wp.array(a, dtype=wp.vec3)
 
 
-@pytest.mark.parametrize("constructor", ["lbvh", "median"])
+@pytest.mark.parametrize("constructor", ["lbvh", "median", "sah"])
 def test_same_items_as_warp(constructor):
     n, m = 300, 48
     lo, hi = random_boxes(n, seed=21)
