@@ -23,6 +23,11 @@ SCENES = {
     "chain": "kdsl.scenes.chain:Chain",
     "heat": "kdsl.scenes.heat:Heat",
     "wave": "kdsl.scenes.wave:Wave",
+    "stiff_odes": "kdsl.scenes.stiff_odes:StiffOdes",
+    "cloth": "kdsl.scenes.cloth:Cloth",
+    "nbody": "kdsl.scenes.nbody:NBody",
+    "ocean": "kdsl.scenes.ocean:Ocean",
+    "throw": "kdsl.scenes.throw:Throw",
 }
 
 

@@ -1,4 +1,4 @@
-"""``kdsl scene list | run | stability | info`` (wired into ``kdsl.cli``; docs/scenes.md).
+"""``kdsl scene list | run | stability | info | sweep | extremes`` (wired into ``kdsl.cli``; docs/scenes.md).
 
 Bad input (an unknown scene, integrator, precision or backend, a dt that is not a
 finite positive number) raises ``SceneError``, which ``kdsl.cli`` prints as
@@ -31,6 +31,7 @@ def write_json(path: str, data: Any) -> None:
         with os.fdopen(fd, "w") as f:
             json.dump(data, f, indent=2, default=_jsonable)
             f.write("\n")
+        os.chmod(tmp, 0o644)  # mkstemp's 0600 would outlive the rename
         os.replace(tmp, target)
     except BaseException:
         os.unlink(tmp)
@@ -104,6 +105,8 @@ def cmd_run(args: argparse.Namespace) -> int:
         print(f"pde error  {r.pde_error:.3e}  (against the continuous PDE: time and grid)")
     if r.energy_drift is not None:
         print(f"energy     {r.energy_drift:+.3e}  (relative change over the run)")
+    for what, value in r.extra.items():
+        print(f"{what:10s} {value:.3e}")
     if args.json:
         write_json(args.json, r.as_dict())
     return 0
@@ -180,6 +183,93 @@ def cmd_info(args: argparse.Namespace) -> int:
     return 0
 
 
+def _list_arg(value: str | None, default: list[str], what: str, choices: Any) -> list[str]:
+    items = value.split(",") if value else default
+    for item in items:
+        check_choice(what, item, list(choices))
+    return items
+
+
+def cmd_sweep(args: argparse.Namespace) -> int:
+    """``kdsl scene sweep``: dt x precision x integrator x backend, table, JSON, plot."""
+    from kdsl.scenes import sweep as sw
+    from kdsl.scenes.measure import available_backends
+
+    cls = scene_class(args.name)
+    integrators = _list_arg(args.integrator, list(cls.integrators), f"integrator for scene "
+                            f"{args.name!r}", cls.integrators)  # fmt: skip
+    precisions = _list_arg(args.precision, ["f32", "f64"], "precision", PRECISIONS)
+    backends = _list_arg(args.backend, ["cpu"], "backend", ["cpu", "interp", "cuda"])
+    if args.dt:
+        dts = [check_dt(float(x)) for x in _floats(args.dt)]
+    else:
+        dts = sw.default_dts(cls.default_dt, args.dts)
+    t_end = args.t_end if args.t_end is not None else cls.default_dt * cls.default_steps
+    t_end = check_dt(t_end)  # a finite time > 0, like a dt
+    if args.plot:
+        sw.require_matplotlib()  # before any work: say which extra to install
+        if not Path(args.plot).parent.is_dir():
+            raise SceneError(f"cannot write {args.plot}: no directory {Path(args.plot).parent}")
+    if args.json and not Path(args.json).parent.is_dir():
+        raise SceneError(f"cannot write {args.json}: no directory {Path(args.json).parent}")
+    for b in backends:
+        if b == "cuda" and "cuda" not in available_backends():
+            raise SceneError(f"backend 'cuda' is not available here (available: "
+                             f"{', '.join(available_backends())})")  # fmt: skip
+    configs = [sw.Config(b, p, i) for b in backends for p in precisions for i in integrators]
+    runs = len(configs) * len(dts)
+    seconds, scenes = sw.estimate(args.name, configs, dts, t_end, _params(args.param))
+    print(f"sweep {args.name}: {runs} runs ({len(configs)} configurations x {len(dts)} dts) "
+          f"to t={t_end:g}; estimated {seconds:.1f} s")  # fmt: skip
+    if seconds > args.max_seconds and not args.yes:
+        raise SceneError(f"the sweep would take about {seconds:.0f} s (over --max-seconds "
+                         f"{args.max_seconds:g}); pass --yes to run it, or fewer dts, "
+                         f"integrators or precisions")  # fmt: skip
+    bar = sw.progress(runs)
+    try:
+        results = sw.sweep(scenes, dts, t_end, bar.set_description, bar.update)
+    finally:
+        bar.close()
+    print(f"{'integrator':18s}{'prec':6s}{'backend':8s}{'dt':>10s}{'steps':>7s}{'run s':>10s}"
+          f"{'us/step':>10s}{'error':>11s}")  # fmt: skip
+    for r in results:
+        err = f"{r.error:.3e}" if math.isfinite(r.error) else "blow-up"
+        print(f"{r.integrator:18s}{r.precision:6s}{r.backend:8s}{r.dt:>10.3g}{r.steps:>7d}"
+              f"{r.wall_s:>10.4f}{r.step_us:>10.1f}{err:>11s}")  # fmt: skip
+    print(f"(error: {results[0].error_what}; 'blow-up': the state went non-finite)")
+    if args.json:
+        write_json(args.json, {"scene": args.name, "t_end": t_end, "dts": dts,
+                               "estimate_s": seconds, "runs": [r.as_dict() for r in results]})  # fmt: skip
+    if args.plot:
+        params = ", ".join(f"{k}={v}" for k, v in _params(args.param).items())
+        sw.plot(results, args.plot, f"{args.name}: error against run time to t={t_end:g}"
+                + (f" ({params})" if params else ""))  # fmt: skip
+        print(f"plot: {args.plot}")
+    return 0
+
+
+def _floats(text: str) -> list[str]:
+    return [x for x in text.split(",") if x.strip()]
+
+
+def cmd_extremes(args: argparse.Namespace) -> int:
+    """``kdsl scene extremes``: the scene's stiff and extreme cases, per precision."""
+    from kdsl.scenes.extremes import run_extremes
+
+    scene_class(args.name)
+    precisions = _list_arg(args.precision, ["f16", "f32", "f64"], "precision", PRECISIONS)
+    results = run_extremes(args.name, precisions, args.backend)
+    print(f"scene {args.name}: extreme cases (error against the float64 reference)")
+    print(f"{'case':32s}{'integrator':18s}{'prec':6s}{'dt':>9s}{'error':>11s}  notes")
+    for r in results:
+        err = "-" if r.error is None else f"{r.error:.3e}"
+        notes = r.blowup or ", ".join(f"{k} {v:.2e}" for k, v in r.extra.items())
+        print(f"{r.case:32s}{r.integrator:18s}{r.precision:6s}{r.dt:>9.3g}{err:>11s}  {notes}")
+    if args.json:
+        write_json(args.json, [r.as_dict() for r in results])
+    return 0
+
+
 def add_scene_parser(sub: Any) -> None:
     """Add ``scene`` and its subcommands to the ``kdsl`` parser's subparsers ``sub``."""
     p = sub.add_parser("scene", help="run, measure and inspect simulation scenes")
@@ -210,3 +300,29 @@ def add_scene_parser(sub: Any) -> None:
         if name == "run":
             q.add_argument("--steps", type=int, help="steps (default: the scene's)")
         q.set_defaults(run=fn)
+    q = ssub.add_parser("sweep", help="error against run time over dt x precision x "
+                        "integrator x backend, with a work-precision plot")  # fmt: skip
+    q.add_argument("name", metavar="NAME", help="a scene (see `kdsl scene list`)")
+    q.add_argument("--backend", help="comma-separated (default: cpu)")
+    q.add_argument("--integrator", help="comma-separated (default: all of the scene's)")
+    q.add_argument("--precision", help="comma-separated (default: f32,f64)")
+    q.add_argument("--dt", help="comma-separated time steps (default: --dts halvings of "
+                   "the scene's dt)")  # fmt: skip
+    q.add_argument("--dts", type=int, default=4, help="how many halvings (default 4)")
+    q.add_argument("--t-end", type=float, help="every run's end time (default: the "
+                   "scene's dt x steps)")  # fmt: skip
+    q.add_argument("--param", action="append", metavar="NAME=VALUE",
+                   help="a scene parameter (repeatable)")  # fmt: skip
+    q.add_argument("--json", metavar="OUT.json", help="write every run as JSON")
+    q.add_argument("--plot", metavar="OUT.png", help="write the work-precision plot "
+                   "(needs matplotlib: the scenes extra)")  # fmt: skip
+    q.add_argument("--max-seconds", type=float, default=120.0,
+                   help="estimated time above which --yes is required (default 120)")  # fmt: skip
+    q.add_argument("--yes", action="store_true", help="run even above --max-seconds")
+    q.set_defaults(run=cmd_sweep)
+    q = ssub.add_parser("extremes", help="stiff and extreme cases per precision, blow-ups named")
+    q.add_argument("name", metavar="NAME", help="a scene (see `kdsl scene list`)")
+    q.add_argument("--backend", default="cpu", help="cpu (default), cuda or interp")
+    q.add_argument("--precision", help="comma-separated (default: f16,f32,f64)")
+    q.add_argument("--json", metavar="OUT.json", help="also write the results as JSON")
+    q.set_defaults(run=cmd_extremes)

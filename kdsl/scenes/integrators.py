@@ -9,6 +9,8 @@ launches ``f``/``a`` (``Scene.rhs``) and this module combines the results:
   velocity, the end acceleration is taken at a predicted end velocity, which keeps
   the method second order;
 - ``rk4``: the classic four-stage Runge-Kutta method;
+- ``analytic``: no integration: the scene evaluates its closed form at ``t + h``
+  (``Scene.evaluate``; the ocean surface);
 - ``backward_euler``: one Newton step of backward Euler (exact for linear forces),
   its linear system ``(I - h^2 J_x - h J_v) dv = h a(x + h v, v)`` (order 1:
   ``(I - h J) dy = h f(y)``) solved by ``jacobi_iters`` Jacobi iterations (a scene
@@ -158,6 +160,9 @@ class Stepper:
         self._axpy(b, self._zeros(), h, b)  # b = h f(y)
         dy = self._jacobi(s.x, None, b, h, 0.0)
         self._axpy(s.x, s.x, 1.0, dy)
+
+    def _analytic_1(self, h: float) -> None:
+        self.scene.evaluate(self.scene.t + h)
 
     # ------------------------------------------------------------------ the solve
 

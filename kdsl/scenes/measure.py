@@ -88,14 +88,20 @@ class RunResult:
     pde_error: float | None = None
     kernels_compiled: int = 0
     params: dict[str, Any] = field(default_factory=dict)
+    #: A scene's further errors (``Scene.extra_errors``: nbody's momentum, throw's miss).
+    extra: dict[str, float] = field(default_factory=dict)
 
     def as_dict(self) -> dict[str, Any]:
         """The result as JSON-ready data."""
         return asdict(self)
 
 
-def run_scene(scene: Any, dt: float, steps: int, backend: str = "cpu") -> RunResult:
-    """Time ``steps`` steps of ``dt`` (after one untimed compile step) and measure the error."""
+def run_scene(scene: Any, dt: float, steps: int, backend: str = "cpu",
+              measure_error: bool = True) -> RunResult:  # fmt: skip
+    """Time ``steps`` steps of ``dt`` (after one untimed compile step) and measure the error.
+
+    ``measure_error=False`` skips the reference (the error is NaN): for timing probes.
+    """
     dt = check_dt(dt)
     if steps < 1:
         raise SceneError(f"steps must be >= 1, not {steps}")
@@ -123,10 +129,14 @@ def run_scene(scene: Any, dt: float, steps: int, backend: str = "cpu") -> RunRes
     wall = time.perf_counter() - start
     e1 = scene.energy(*scene.state())
     drift = None if e0 is None or e1 is None else (e1 - e0) / max(abs(e0), 1e-300)
-    pde = scene.pde_error() if hasattr(scene, "pde_error") else None
+    error, pde, extra = math.nan, None, {}
+    if measure_error:
+        error = scene.error()
+        pde = scene.pde_error() if hasattr(scene, "pde_error") else None
+        extra = scene.extra_errors() if hasattr(scene, "extra_errors") else {}
     return RunResult(scene.name, backend, scene.precision, scene.integrator, dt, steps, scene.t,
-                     compile_s, wall, 1e6 * wall / steps, scene.error(), scene.error_what, drift,
-                     pde, compiled, dict(scene.params))  # fmt: skip
+                     compile_s, wall, 1e6 * wall / steps, error, scene.error_what, drift,
+                     pde, compiled, dict(scene.params), extra)  # fmt: skip
 
 
 # --------------------------------------------------------------------------- stability
