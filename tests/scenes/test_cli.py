@@ -16,7 +16,8 @@ def _run(capsys, *argv):
 def test_list_names_every_scene(capsys):
     code, out, _ = _run(capsys, "list")
     assert code == 0
-    for name in ("particles", "chain", "heat", "wave"):
+    for name in ("particles", "chain", "heat", "wave", "nbody", "cloth", "stiff_odes", "ocean",
+                 "throw"):  # fmt: skip
         assert name in out
 
 

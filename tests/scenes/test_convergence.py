@@ -13,6 +13,8 @@ CASES = {
     "chain": ({"count": 4, "damping": 0.5}, 0.004, 0.4),
     "heat": ({"grid": 8}, 4e-4, 0.02),
     "wave": ({"grid": 8}, 8e-3, 0.4),
+    "nbody": ({"count": 8}, 8e-3, 0.16),  # the energy error
+    "cloth": ({"grid": 3, "gap": 1.0}, 4e-4, 0.02),  # no contact: smooth forces
 }
 
 

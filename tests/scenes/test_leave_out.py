@@ -34,3 +34,11 @@ def test_info_reports_ops_size_and_time():
     assert k.compile_s > 0
     assert "vectors" in k.features and "f64" in k.features and "f16" not in k.features
     assert run_scene(scene, 1e-2, 3).kernels_compiled == 0  # compiled already
+
+
+def test_differentiable_scene_builds_adjoints_only_for_the_taped_kernels():
+    scene = make_scene("throw", "f32", "rk4", count=2)
+    infos = compile_info(scene, 0.25)
+    adjoint = {k.kernel.split("__")[0].rsplit("_", 1)[0] for k in infos if k.adjoint}
+    assert adjoint == {"throw_step", "miss_loss"}  # not the descent's update kernel
+    assert any(k.kernel.startswith("descend") and not k.adjoint for k in infos)
