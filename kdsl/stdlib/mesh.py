@@ -3,9 +3,13 @@
 A ``kdsl.Mesh`` is reached from a kernel through its record (``MeshRecord``): its
 points, velocities (empty when it has none) and flat triangle indices, and the id of
 the ``kdsl.Bvh`` over its triangles' boxes, whose layout ``kdsl.stdlib.bvh`` documents.
-Every query walks that BVH stacklessly (a box the query cannot use is jumped over
-with ``skip``), so its state is a few integers and floats: no stack in GPU local
-memory and no dynamically indexed vector on the CPU.
+The queries walk that BVH's packed nodes (``BvhNode``) stacklessly (a box the query
+cannot use is jumped over with ``skip``), so their state is a few integers and floats,
+with two exceptions where the visiting order pays: the closest point starts with a
+bound from a descent into the nearer child at each level (``_closest_face``), and the
+closest ray hit visits the nearer child first, the other waiting on a stack of
+``RAY_STACK`` entries (a thread-local array; deeper trees fall back to a stackless
+pass). Neither order changes an answer.
 
 Semantics are Warp 1.19's (signs, barycentric ``(u, v)`` weighing a face's first and
 second vertices, strict ``max_dist``/``max_t`` bounds). Where Warp's answer depends on
@@ -24,6 +28,7 @@ import kdsl as wp
 from kdsl.frontend.inout import inout
 from kdsl.frontend.kernel import func
 from kdsl.stdlib.bvh import (
+    BvhNode,
     BvhQuery,
     BvhRecord,
     bvh_get_group_root,
@@ -32,12 +37,14 @@ from kdsl.stdlib.bvh import (
     bvh_query_sphere,
 )
 from kdsl.stdlib.mesh_primitives import (
+    RayShear,
     box_distance_sq,
     box_furthest_distance_sq,
     closest_point_to_triangle,
     furthest_point_to_triangle,
     intersect_ray_triangle,
     is_sliver,
+    ray_box_enter,
     ray_box_entry,
     ray_shear,
     safe_inverse,
@@ -63,6 +70,9 @@ __all__ = [
 AABB, SPHERE = 0, 1
 #: The largest finite float32 (Warp's FLT_MAX), the bound of an unbounded ray.
 FLT_MAX = 3.402823466e38
+#: Nodes a ray's front-to-back walk keeps waiting (``_ray_closest``): deeper trees fall
+#: back to a stackless pass.
+RAY_STACK = 48
 #: 1 / (4 pi): solid angle to winding number.
 INV_4PI = 0.07957747154594767
 
@@ -162,39 +172,93 @@ def _root_range(bvh: BvhRecord, root: int) -> wp.vec2i:
     return wp.vec2i(start, bvh.skip[start])
 
 
+@func
+def _skip(nd: BvhNode, node: int) -> int:
+    """The node after the subtree of ``node`` (packed as ``nd``): an inner node's
+    ``skip``, a leaf's successor."""
+    if nd.first < 0:
+        return nd.next
+    return node + 1
+
+
 # -- closest and furthest points -----------------------------------------------------
+
+
+@wp.struct
+class _Closest:
+    """The best face found so far by a closest-point search and its squared distance."""
+
+    dist_sq: wp.float32
+    face: wp.int32
+
+
+@func
+def _closest_in_leaf(
+    rec: MeshRecord, bvh: BvhRecord, leaf: BvhNode, point: wp.vec3, best: _Closest
+) -> _Closest:
+    """``best`` updated with the faces of ``leaf``: a face replaces it when strictly
+    closer, or as close with a lower index; slivers are left out."""
+    out = best
+    for k in range(leaf.first, leaf.first + leaf.next):
+        f = bvh.items[k]
+        a = _vertex(rec, f, 0)
+        b = _vertex(rec, f, 1)
+        c = _vertex(rec, f, 2)
+        uv = closest_point_to_triangle(a, b, c, point)
+        q = a * uv[0] + b * uv[1] + c * (1.0 - uv[0] - uv[1])
+        d = wp.length_sq(q - point)
+        if d < out.dist_sq or (d == out.dist_sq and out.face >= 0 and f < out.face):  # noqa: SIM102
+            # The sliver test (a square root and a division) only for a face that wins.
+            if not is_sliver(a, b, c):
+                out.dist_sq = d
+                out.face = f
+    return out
 
 
 @func
 def _closest_face(id: wp.uint64, point: wp.vec3, max_dist: float) -> int:
     """The face closest to ``point`` at a distance strictly below ``max_dist`` (lowest
-    index among ties; slivers left out), or -1."""
+    index among ties; slivers left out), or -1.
+
+    A stackless walk cannot visit the nearer child first, so the walk starts with a
+    bound: a descent from the root into the nearer child at each level reaches a leaf
+    near ``point`` and its faces give a distance that prunes most of the tree. The
+    answer is the same as without it (every face below the bound is still tested), the
+    leaf is not tested twice."""
     rec = wp.object_record(id, MeshRecord)
     bvh = wp.object_record(rec.bvh, BvhRecord)
-    best = max_dist * max_dist
-    best_face = -1
+    best = _Closest()
+    best.dist_sq = max_dist * max_dist
+    best.face = -1
     span = _root_range(bvh, -1)
+    seed = -1
+    if span[0] < span[1]:
+        nd = bvh.nodes[span[0]]
+        if box_distance_sq(nd.lower, nd.upper, point) <= best.dist_sq:
+            seed = span[0]
+            while nd.first < 0:
+                left = seed + 1
+                ln = bvh.nodes[left]
+                right = _skip(ln, left)
+                rn = bvh.nodes[right]
+                seed = left
+                nd = ln
+                if box_distance_sq(rn.lower, rn.upper, point) < box_distance_sq(
+                    ln.lower, ln.upper, point
+                ):
+                    seed = right
+                    nd = rn
+            best = _closest_in_leaf(rec, bvh, nd, point, best)
     node = span[0]
     while node < span[1]:
-        if box_distance_sq(bvh.lowers[node], bvh.uppers[node], point) <= best:
-            first = bvh.first[node]
-            if first >= 0:
-                for k in range(first, first + bvh.count[node]):
-                    f = bvh.items[k]
-                    a = _vertex(rec, f, 0)
-                    b = _vertex(rec, f, 1)
-                    c = _vertex(rec, f, 2)
-                    if not is_sliver(a, b, c):
-                        uv = closest_point_to_triangle(a, b, c, point)
-                        q = a * uv[0] + b * uv[1] + c * (1.0 - uv[0] - uv[1])
-                        d = wp.length_sq(q - point)
-                        if d < best or (d == best and best_face >= 0 and f < best_face):
-                            best = d
-                            best_face = f
+        nd = bvh.nodes[node]
+        if box_distance_sq(nd.lower, nd.upper, point) <= best.dist_sq:
+            if nd.first >= 0 and node != seed:
+                best = _closest_in_leaf(rec, bvh, nd, point, best)
             node = node + 1
         else:
-            node = bvh.skip[node]
-    return best_face
+            node = _skip(nd, node)
+    return best.face
 
 
 @func
@@ -329,10 +393,40 @@ def _point_answer_far(id: wp.uint64, point: wp.vec3, face: int) -> MeshQueryPoin
 
 
 @func
+def _ray_leaf(
+    rec: MeshRecord, bvh: BvhRecord, leaf: BvhNode, shear: RayShear, start: wp.vec3,
+    best: MeshQueryRay,
+) -> MeshQueryRay:  # fmt: skip
+    """``best`` updated with the hits of the faces of ``leaf``: a hit at ``t >= 0``
+    replaces it when nearer, or as near on a lower face."""
+    hit = best
+    for k in range(leaf.first, leaf.first + leaf.next):
+        f = bvh.items[k]
+        h = intersect_ray_triangle(
+            shear, start, _vertex(rec, f, 0), _vertex(rec, f, 1), _vertex(rec, f, 2)
+        )
+        t = h[0]
+        if t >= 0.0 and (t < hit.t or (t == hit.t and hit.result and f < hit.face)):
+            hit.result = True
+            hit.t = t
+            hit.face = f
+            hit.u = h[1]
+            hit.v = h[2]
+            hit.sign = h[3]
+    return hit
+
+
+@func
 def _ray_closest(
     id: wp.uint64, start: wp.vec3, dir: wp.vec3, max_t: float, root: int
 ) -> MeshQueryRay:
-    """The first hit along the ray at ``0 <= t < max_t`` (lowest face among equal ``t``)."""
+    """The first hit along the ray at ``0 <= t < max_t`` (lowest face among equal ``t``).
+
+    Front to back: at an inner node the child the ray enters first is visited first
+    and the other waits on a small stack with its entry ``t``, dropped when a hit
+    nearer than that is found meanwhile. A tree deeper than the stack (``RAY_STACK``)
+    overflows into a stackless pass over the whole range, bounded by the hit found so
+    far: the answer never depends on the order."""
     rec = wp.object_record(id, MeshRecord)
     bvh = wp.object_record(rec.bvh, BvhRecord)
     shear = ray_shear(dir)
@@ -346,27 +440,62 @@ def _ray_closest(
     hit.v = 0.0
     hit.normal = wp.vec3(0.0)
     span = _root_range(bvh, root)
-    node = span[0]
-    while node < span[1]:
-        if ray_box_entry(bvh.lowers[node], bvh.uppers[node], start, inv, hit.t):
-            first = bvh.first[node]
-            if first >= 0:
-                for k in range(first, first + bvh.count[node]):
-                    f = bvh.items[k]
-                    h = intersect_ray_triangle(
-                        shear, start, _vertex(rec, f, 0), _vertex(rec, f, 1), _vertex(rec, f, 2)
-                    )
-                    t = h[0]
-                    if t >= 0.0 and (t < hit.t or (t == hit.t and hit.result and f < hit.face)):
-                        hit.result = True
-                        hit.t = t
-                        hit.face = f
-                        hit.u = h[1]
-                        hit.v = h[2]
-                        hit.sign = h[3]
-            node = node + 1
-        else:
-            node = bvh.skip[node]
+    nodes = wp.zeros(RAY_STACK, dtype=wp.int32)
+    enters = wp.zeros(RAY_STACK, dtype=wp.float32)
+    count = 0
+    overflow = False
+    if span[0] < span[1]:
+        nd = bvh.nodes[span[0]]
+        t_root = ray_box_enter(nd.lower, nd.upper, start, inv)
+        if t_root <= hit.t:
+            nodes[0] = span[0]
+            enters[0] = t_root
+            count = 1
+    while count > 0:
+        count = count - 1
+        node = nodes[count]
+        if enters[count] <= hit.t:
+            nd = bvh.nodes[node]
+            if nd.first >= 0:
+                hit = _ray_leaf(rec, bvh, nd, shear, start, hit)
+            else:
+                near = node + 1
+                near_nd = bvh.nodes[near]
+                far = _skip(near_nd, near)
+                far_nd = bvh.nodes[far]
+                t_near = ray_box_enter(near_nd.lower, near_nd.upper, start, inv)
+                t_far = ray_box_enter(far_nd.lower, far_nd.upper, start, inv)
+                if t_far < t_near:
+                    tmp = near
+                    near = far
+                    far = tmp
+                    tmp_t = t_near
+                    t_near = t_far
+                    t_far = tmp_t
+                if t_far <= hit.t:
+                    if count < RAY_STACK:
+                        nodes[count] = far
+                        enters[count] = t_far
+                        count = count + 1
+                    else:
+                        overflow = True
+                if t_near <= hit.t:
+                    if count < RAY_STACK:
+                        nodes[count] = near
+                        enters[count] = t_near
+                        count = count + 1
+                    else:
+                        overflow = True
+    if overflow:
+        node = span[0]
+        while node < span[1]:
+            nd = bvh.nodes[node]
+            if ray_box_entry(nd.lower, nd.upper, start, inv, hit.t):
+                if nd.first >= 0:
+                    hit = _ray_leaf(rec, bvh, nd, shear, start, hit)
+                node = node + 1
+            else:
+                node = _skip(nd, node)
     if hit.result:
         hit.normal = mesh_eval_face_normal(id, hit.face)
     else:
@@ -426,10 +555,10 @@ def mesh_query_ray_anyhit(
     span = _root_range(bvh, root)
     node = span[0]
     while node < span[1] and not found:
-        if ray_box_entry(bvh.lowers[node], bvh.uppers[node], start, inv, max_t):
-            first = bvh.first[node]
-            if first >= 0:
-                for k in range(first, first + bvh.count[node]):
+        nd = bvh.nodes[node]
+        if ray_box_entry(nd.lower, nd.upper, start, inv, max_t):
+            if nd.first >= 0:
+                for k in range(nd.first, nd.first + nd.next):
                     f = bvh.items[k]
                     h = intersect_ray_triangle(
                         shear, start, _vertex(rec, f, 0), _vertex(rec, f, 1), _vertex(rec, f, 2)
@@ -438,7 +567,7 @@ def mesh_query_ray_anyhit(
                         found = True
             node = node + 1
         else:
-            node = bvh.skip[node]
+            node = _skip(nd, node)
     return found
 
 
@@ -455,10 +584,10 @@ def mesh_query_ray_count_intersections(
     span = _root_range(bvh, root)
     node = span[0]
     while node < span[1]:
-        if ray_box_entry(bvh.lowers[node], bvh.uppers[node], start, inv, FLT_MAX):
-            first = bvh.first[node]
-            if first >= 0:
-                for k in range(first, first + bvh.count[node]):
+        nd = bvh.nodes[node]
+        if ray_box_entry(nd.lower, nd.upper, start, inv, FLT_MAX):
+            if nd.first >= 0:
+                for k in range(nd.first, nd.first + nd.next):
                     f = bvh.items[k]
                     h = intersect_ray_triangle(
                         shear, start, _vertex(rec, f, 0), _vertex(rec, f, 1), _vertex(rec, f, 2)
@@ -467,7 +596,7 @@ def mesh_query_ray_count_intersections(
                         n = n + 1
             node = node + 1
         else:
-            node = bvh.skip[node]
+            node = _skip(nd, node)
     return n
 
 

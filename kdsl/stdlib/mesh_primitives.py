@@ -109,9 +109,26 @@ def triangle_solid_angle(a: wp.vec3, b: wp.vec3, c: wp.vec3, p: wp.vec3) -> floa
 
 @func
 def box_distance_sq(lo: wp.vec3, hi: wp.vec3, p: wp.vec3) -> float:
-    """Squared distance from ``p`` to the closed box ``[lo, hi]`` (0 inside)."""
-    d = wp.max(wp.max(lo - p, p - hi), wp.vec3(0.0))
-    return wp.dot(d, d)
+    """Squared distance from ``p`` to the closed box ``[lo, hi]`` (0 inside; NaN for a
+    NaN ``p``, so a NaN query prunes every box).
+
+    Written with comparisons rather than ``wp.max``: ``max`` must return the number of
+    a number and a NaN (IEEE ``maximumNumber``), which x86 has no instruction for, and
+    this test runs at every node a point query visits; ``a if a > b else b`` is one
+    ``maxss``."""
+    dx = _axis_gap(lo[0], hi[0], p[0])
+    dy = _axis_gap(lo[1], hi[1], p[1])
+    dz = _axis_gap(lo[2], hi[2], p[2])
+    return dx * dx + dy * dy + dz * dz
+
+
+@func
+def _axis_gap(lo: float, hi: float, x: float) -> float:
+    """How far ``x`` lies outside ``[lo, hi]`` (0 inside, NaN for a NaN ``x``)."""
+    below = lo - x
+    above = x - hi
+    gap = below if below > above else above
+    return gap if gap > 0.0 or gap != gap else 0.0
 
 
 @func
@@ -131,20 +148,43 @@ def safe_inverse(x: float) -> float:
 
 
 @func
-def ray_box_entry(lo: wp.vec3, hi: wp.vec3, start: wp.vec3, inv: wp.vec3, max_t: float) -> bool:
-    """Whether the ray ``start + t dir`` (``inv`` = componentwise ``1 / dir``) meets the
-    closed box ``[lo, hi]`` at some ``0 <= t <= max_t``.
+def _lesser(a: float, b: float) -> float:
+    # ``a < b ? a : b`` (one minss), not ``wp.min``: see ``box_distance_sq``.
+    return a if a < b else b
+
+
+@func
+def _greater(a: float, b: float) -> float:
+    return a if a > b else b
+
+
+@func
+def ray_box_enter(lo: wp.vec3, hi: wp.vec3, start: wp.vec3, inv: wp.vec3) -> float:
+    """Where the ray ``start + t dir`` (``inv`` = componentwise ``1 / dir``, finite)
+    enters the closed box ``[lo, hi]``: its entry ``t`` (negative when ``start`` is
+    inside), or NaN when it misses the box at every ``t >= 0``. The value orders boxes
+    front to back; ``ray_box_entry`` compares it with ``max_t``.
 
     The box grows by a relative ``BOX_PAD``: a ray with a zero direction component
     (``inv`` = 1e30) that lies exactly in one of the box's face planes would otherwise
-    see that slab as a point (``0 * inv = 0`` on both sides) and miss the box."""
+    see that slab as a point (``0 * inv = 0`` on both sides) and miss the box. A NaN in
+    ``start`` may let the ray enter boxes; the triangle test then finds no hit."""
     pad = (wp.abs(lo) + wp.abs(hi)) * BOX_PAD + wp.vec3(1.0e-20)
     t0 = wp.cw_mul(lo - pad - start, inv)
     t1 = wp.cw_mul(hi + pad - start, inv)
-    tmin = wp.max(wp.max(wp.min(t0[0], t1[0]), wp.min(t0[1], t1[1])), wp.min(t0[2], t1[2]))
-    tmax = wp.min(wp.min(wp.max(t0[0], t1[0]), wp.max(t0[1], t1[1])), wp.max(t0[2], t1[2]))
-    tmax = tmax * BOX_EXIT_SLACK
-    return tmin <= tmax and tmax >= 0.0 and tmin <= max_t
+    near = _greater(_greater(_lesser(t0[0], t1[0]), _lesser(t0[1], t1[1])), _lesser(t0[2], t1[2]))
+    far = _lesser(_lesser(_greater(t0[0], t1[0]), _greater(t0[1], t1[1])), _greater(t0[2], t1[2]))
+    far = far * BOX_EXIT_SLACK
+    if near <= far and far >= 0.0:
+        return near
+    return wp.nan
+
+
+@func
+def ray_box_entry(lo: wp.vec3, hi: wp.vec3, start: wp.vec3, inv: wp.vec3, max_t: float) -> bool:
+    """Whether the ray ``start + t dir`` meets the closed box ``[lo, hi]`` at some
+    ``0 <= t <= max_t`` (see ``ray_box_enter``)."""
+    return ray_box_enter(lo, hi, start, inv) <= max_t
 
 
 @wp.struct
