@@ -533,7 +533,7 @@ class Gen:
         return floats, ints
 
     def struct_local(self) -> Any:
-        """``s = Params()`` then field stores, as one ``If(True)``-free block of lines."""
+        """``s = Params()`` then stores to some of its fields (nested ones too), as one ``Seq``."""
         self.uses.add("Params")
         name = self.fresh("s")
         lines = [Assign(name, "Params()")]

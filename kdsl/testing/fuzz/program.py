@@ -14,7 +14,7 @@ renders the same program with ``F = wp.float64``.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 #: Launch dimension of every fuzzed kernel, and the length of its array inputs.
 N = 6
@@ -137,7 +137,6 @@ class Inputs:
     pn: int = 3
     pw: float = -0.75
     pk: int = 2
-    seed: int = 0
 
 
 @dataclass(frozen=True)
@@ -155,7 +154,6 @@ class Program:
     invalid: str | None = None
     #: Extra lines after the kernel (an invalid program's bad launch).
     launch_override: str | None = None
-    extra: tuple[str, ...] = field(default=())
 
     def prelude(self) -> list[str]:
         """The prelude pieces the program uses, with what they need, in definition order."""
@@ -167,7 +165,7 @@ class Program:
                 for dep in PRELUDE[name][0]:
                     add(dep)
 
-        for name in self.uses:
+        for name in self.uses | {"Params"}:  # the kernel always takes a Params
             add(name)
         return [PRELUDE[name][1] for name in PRELUDE if name in need]
 
@@ -201,12 +199,8 @@ class Program:
             "TF = wp.transformation(F)",
             "",
         ]
-        pieces = [*self.prelude()]
-        if "Params" not in self.uses:
-            # The kernel signature always takes a Params; define it when the body does not.
-            pieces = [PRELUDE["Inner"][1], PRELUDE["Params"][1], *pieces]
         parts = [*head]
-        for piece in dict.fromkeys(pieces):
+        for piece in self.prelude():
             parts += ["", piece]
         parts += ["", *self.kernel_lines(), "", "", *self.runner_lines()]
         return "\n".join(parts) + "\n"
