@@ -47,13 +47,13 @@ def _check(program):
             raise
 
 
-@budget(100)
+@budget(80)
 @given(programs(max_depth=2, max_stmts=4))
 def test_valid_programs_compile_roundtrip_agree_and_differentiate(program):
     _check(program)
 
 
-@budget(60)
+@budget(50)
 @given(invalid_programs())
 def test_invalid_programs_give_located_errors(program):
     _check(program)
