@@ -1,7 +1,7 @@
-"""Geometry queries, kdsl beside Warp: BVH builds and queries (and, later, meshes).
+"""Geometry queries, kdsl beside Warp: BVH builds and queries, triangle meshes.
 
-    python benchmarks/bench_geometry.py [--section bvh] [--boxes 200000] [--queries 1000000]
-        [--reps 3] [--device cpu|cuda:0] [--json PATH]
+    python benchmarks/bench_geometry.py [--section bvh|mesh] [--boxes 200000]
+        [--tris 200000] [--queries 1000000] [--reps 3] [--device cpu|cuda:0] [--json PATH]
 
 Each section is a function returning rows; ``main`` runs the sections asked for, prints
 one table per section and writes every row to benchmarks/results/geometry.json.
@@ -13,6 +13,10 @@ and ``"median"``; on a GPU ``"lbvh"``), then ``--queries`` box queries (half siz
 counting the items each meets. Times are medians of ``--reps`` runs after a warm-up
 (compiles excluded). Every kdsl tree must give exactly Warp's total hit count; a
 mismatch exits 1 with the reason.
+
+Mesh section (``bench_geometry_mesh.py``, which also runs alone): the bumpy
+cube-sphere of about ``--tris`` triangles, ``--queries`` closest points and rays
+(closest and any hit), a move-and-refit; kdsl beside Warp, and Embree for rays.
 """
 
 from __future__ import annotations
@@ -28,6 +32,10 @@ from pathlib import Path
 import numpy as np
 
 import kdsl as wp
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from bench_geometry_mesh import mesh_section, print_mesh
 
 RESULTS = Path(__file__).resolve().parent / "results" / "geometry.json"
 
@@ -181,13 +189,14 @@ def _print_bvh(rows: list[dict]) -> None:
               f"{1e3 * r['refit_s']:9.2f} {r['aabb_s'] * scale:11.1f} {r['ray_s'] * scale:10.1f}")  # fmt: skip
 
 
-SECTIONS = {"bvh": (bvh_section, _print_bvh)}
+SECTIONS = {"bvh": (bvh_section, _print_bvh), "mesh": (mesh_section, print_mesh)}
 
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     p.add_argument("--section", action="append", choices=sorted(SECTIONS))
     p.add_argument("--boxes", type=int, default=200_000)
+    p.add_argument("--tris", type=int, default=200_000, help="the mesh section's triangles")
     p.add_argument("--queries", type=int, default=1_000_000)
     p.add_argument("--constructors", default="lbvh,median,sah")
     p.add_argument("--reps", type=int, default=3)
