@@ -16,6 +16,7 @@ import numpy as np
 
 from kdsl.errors import KdslTypeError
 from kdsl.geometry.bvh import Bvh
+from kdsl.geometry.mesh_refit import face_boxes, first_non_finite
 from kdsl.ir import types as T
 from kdsl.runtime.array import array
 from kdsl.runtime.objects import ObjectRecord
@@ -112,9 +113,9 @@ class Mesh:
             raise KdslTypeError("Mesh groups must be an int32 array with one entry per face")
         self._points, self.indices, self.velocities = pts, idx, vel
         self.support_winding_number = bool(support_winding_number)
-        self._faces = host_idx.reshape(-1, 3).astype(np.int64)
+        self._num_tris = len(host_idx) // 3
         self._check_points()
-        n = len(self._faces)
+        n = self._num_tris
         self._lowers = array(np.zeros((n, 3), np.float32), dtype=VEC3, device=self.device)
         self._uppers = array(np.zeros((n, 3), np.float32), dtype=VEC3, device=self.device)
         self._no_velocities = array(np.zeros((0, 3), np.float32), dtype=VEC3, device=self.device)
@@ -156,31 +157,25 @@ class Mesh:
         self._write_record()
 
     def _check_points(self) -> None:
-        host = self._points.numpy()
-        if not np.all(np.isfinite(host)):
-            bad = int(np.flatnonzero(~np.isfinite(host).all(axis=1))[0])
-            raise KdslTypeError(f"Mesh point {bad} is not finite: {host[bad].tolist()}")
-        self._host_points = host
+        bad = first_non_finite(self._points)
+        if bad >= 0:
+            value = self._points[bad : bad + 1].numpy()[0].tolist()
+            raise KdslTypeError(f"Mesh point {bad} is not finite: {value}")
 
     def _write_boxes(self) -> None:
-        tri = self._host_points[self._faces]  # (faces, 3 corners, 3)
-        self._lowers.assign(tri.min(axis=1) if len(tri) else np.zeros((0, 3), np.float32))
-        self._uppers.assign(tri.max(axis=1) if len(tri) else np.zeros((0, 3), np.float32))
+        """The faces' boxes (the BVH's items) and the average edge length, by kernels on
+        the mesh's device."""
+        self._mean_edge = face_boxes(self._points, self.indices, self._lowers, self._uppers)
 
     def _write_record(self) -> None:
-        tri = self._host_points[self._faces]
-        edges = np.concatenate(
-            [tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 1], tri[:, 0] - tri[:, 2]]
-        )
-        mean_edge = float(np.linalg.norm(edges, axis=1).mean()) if len(edges) else 0.0
         self._record.write(
             {
                 "points": self._points,
                 "velocities": self.velocities if self.velocities is not None
                 else self._no_velocities,
                 "indices": self.indices, "bvh": self.bvh.id,
-                "num_points": self._points.shape[0], "num_tris": len(self._faces),
-                "average_edge_length": mean_edge,
+                "num_points": self._points.shape[0], "num_tris": self._num_tris,
+                "average_edge_length": self._mean_edge,
                 "support_winding_number": int(self.support_winding_number),
             }
         )  # fmt: skip

@@ -417,10 +417,9 @@ def _ray_leaf(
 
 
 @func
-def _ray_closest(
-    id: wp.uint64, start: wp.vec3, dir: wp.vec3, max_t: float, root: int
-) -> MeshQueryRay:
-    """The first hit along the ray at ``0 <= t < max_t`` (lowest face among equal ``t``).
+def _ray_closest_face(id: wp.uint64, start: wp.vec3, dir: wp.vec3, max_t: float, root: int) -> int:
+    """The face of the first hit along the ray at ``0 <= t < max_t`` (lowest face among
+    equal ``t``), or -1.
 
     Front to back: at an inner node the child the ray enters first is visited first
     and the other waits on a small stack with its entry ``t``, dropped when a hit
@@ -497,10 +496,49 @@ def _ray_closest(
             else:
                 node = _skip(nd, node)
     if hit.result:
-        hit.normal = mesh_eval_face_normal(id, hit.face)
-    else:
-        hit.face = 0
-        hit.t = 0.0
+        return hit.face
+    return -1
+
+
+@wp.func_grad(_ray_closest_face)
+def _adj_ray_closest_face(
+    id: wp.uint64, start: wp.vec3, dir: wp.vec3, max_t: float, root: int, adj_ret: int
+):  # fmt: skip
+    """No gradient: the face found is piecewise constant in the ray. (The backward pass
+    then replays the search whole rather than differentiating its loop, which reads a
+    thread-local stack.)"""
+    pass
+
+
+@func
+def _ray_closest(
+    id: wp.uint64, start: wp.vec3, dir: wp.vec3, max_t: float, root: int
+) -> MeshQueryRay:
+    """The first hit along the ray at ``0 <= t < max_t`` (lowest face among equal ``t``).
+    Its ``t``, barycentrics and sign are recomputed here, outside the search (the same
+    test, so the same values), so gradients reach ``start`` and ``dir`` through them."""
+    face = _ray_closest_face(id, start, dir, max_t, root)
+    hit = MeshQueryRay()
+    hit.result = False
+    hit.sign = 0.0
+    hit.face = 0
+    hit.t = 0.0
+    hit.u = 0.0
+    hit.v = 0.0
+    hit.normal = wp.vec3(0.0)
+    if face >= 0:
+        rec = wp.object_record(id, MeshRecord)
+        h = intersect_ray_triangle(
+            ray_shear(dir), start, _vertex(rec, face, 0), _vertex(rec, face, 1),
+            _vertex(rec, face, 2),
+        )  # fmt: skip
+        hit.result = True
+        hit.face = face
+        hit.t = h[0]
+        hit.u = h[1]
+        hit.v = h[2]
+        hit.sign = h[3]
+        hit.normal = mesh_eval_face_normal(id, face)
     return hit
 
 
