@@ -90,6 +90,11 @@ def cmd_run(args: argparse.Namespace) -> int:
     """``kdsl scene run``: wall time (compile apart), time per step, error."""
     from kdsl.scenes.measure import run_scene
 
+    pictures = args.render is not None or args.usd is not None
+    if pictures:  # before any work: bad paths and missing extras exit 2
+        from kdsl.scenes import render
+
+        render.check_outputs(args.render, args.usd, args.frames)
     scene = _scene(args)
     dt = check_dt(args.dt if args.dt is not None else scene.default_dt)
     steps = args.steps if args.steps is not None else scene.default_steps
@@ -109,6 +114,16 @@ def cmd_run(args: argparse.Namespace) -> int:
         print(f"{what:10s} {value:.3e}")
     if args.json:
         write_json(args.json, r.as_dict())
+    if pictures:  # a second, untimed run from the start, keeping --frames states
+        animated = args.usd or Path(args.render).suffix.lower() == ".gif"
+        frames = render.record(scene, dt, steps, args.frames if animated else 1)
+        if args.render:
+            render.write_image(args.render, frames)
+            print(f"picture    {args.render}  ({render.IMAGE_SUFFIXES[Path(args.render).suffix.lower()]}"
+                  f", {len(frames)} frames recorded)")  # fmt: skip
+        if args.usd:
+            render.write_usd(args.usd, frames)
+            print(f"usd        {args.usd}  ({len(frames)} frames)")
     return 0
 
 
@@ -260,11 +275,12 @@ def cmd_extremes(args: argparse.Namespace) -> int:
     precisions = _list_arg(args.precision, ["f16", "f32", "f64"], "precision", PRECISIONS)
     results = run_extremes(args.name, precisions, args.backend)
     print(f"scene {args.name}: extreme cases (error against the float64 reference)")
-    print(f"{'case':32s}{'integrator':18s}{'prec':6s}{'dt':>9s}{'error':>11s}  notes")
+    width = max(len(r.case) for r in results) + 2
+    print(f"{'case':{width}s}{'integrator':18s}{'prec':6s}{'dt':>9s}{'error':>11s}  notes")
     for r in results:
         err = "-" if r.error is None else f"{r.error:.3e}"
         notes = r.blowup or ", ".join(f"{k} {v:.2e}" for k, v in r.extra.items())
-        print(f"{r.case:32s}{r.integrator:18s}{r.precision:6s}{r.dt:>9.3g}{err:>11s}  {notes}")
+        print(f"{r.case:{width}s}{r.integrator:18s}{r.precision:6s}{r.dt:>9.3g}{err:>11s}  {notes}")
     if args.json:
         write_json(args.json, [r.as_dict() for r in results])
     return 0
@@ -299,6 +315,13 @@ def add_scene_parser(sub: Any) -> None:
             q.add_argument("--precision", default="f32", help="f16, f32 (default) or f64")
         if name == "run":
             q.add_argument("--steps", type=int, help="steps (default: the scene's)")
+            q.add_argument("--render", metavar="OUT.gif|OUT.png", help="draw the run: an "
+                           "animated GIF, or a PNG of the last frame (needs Pillow: the "
+                           "scenes extra)")  # fmt: skip
+            q.add_argument("--usd", metavar="OUT.usda", help="write the run as a USD "
+                           "animation (needs usd-core: the usd extra)")  # fmt: skip
+            q.add_argument("--frames", type=int, default=40,
+                           help="frames recorded for --render/--usd (default 40)")  # fmt: skip
         q.set_defaults(run=fn)
     q = ssub.add_parser("sweep", help="error against run time over dt x precision x "
                         "integrator x backend, with a work-precision plot")  # fmt: skip
