@@ -150,6 +150,16 @@ class Scene:
         """The largest stable dt by theory (math.inf: unconditionally stable; None: unknown)."""
         return None
 
+    def picture(self, x: np.ndarray) -> Any:
+        """What ``kdsl scene run --render/--usd`` draws for state ``x`` (a float64 copy).
+
+        A ``kdsl.scenes.render.Picture``. Default: 3-vector dofs as points; scalar dofs
+        as a graph (index across, value up). Scenes with a surface or obstacles override it.
+        """
+        from kdsl.scenes import render
+
+        return render.Picture(x) if x.ndim == 2 else render.graph(x, render.height_scale(self))
+
     # ------------------------------------------------------------------ for everyone
 
     def launch(self, kernel: Any, dim: Any, inputs: list[Any]) -> None:

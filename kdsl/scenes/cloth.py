@@ -245,6 +245,13 @@ class Cloth(Scene):
         p = self.params
         return math.sqrt((SLOTS * 2.0 * p["stiffness"] + p["contact"]) / float(np.min(self.m)))
 
+    def picture(self, x: np.ndarray) -> Any:
+        """The cloth as a shaded surface over the sphere (``kdsl scene run --render``)."""
+        from kdsl.scenes import render
+
+        return render.Picture(x, triangles=render.grid_triangles(self.grid_n),
+                              spheres=[(self.center, self.radius)], show_points=False)  # fmt: skip
+
     def reference(self, t: float) -> np.ndarray:
         return small_step_reference(self, t, getattr(self, "last_dt", self.default_dt))
 

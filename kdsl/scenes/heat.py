@@ -59,6 +59,12 @@ class Heat(Scene):
         return sum(a * np.exp(d * eigenvalue(kx, ky) * t) * grid.mode(n, kx, ky)
                    for kx, ky, a in grid.MODES)  # fmt: skip
 
+    def picture(self, x: np.ndarray) -> Any:
+        """The temperature as a colored height field (``kdsl scene run --render``)."""
+        from kdsl.scenes import render
+
+        return render.height_field(x, render.height_scale(self))
+
     def reference(self, t: float) -> np.ndarray:
         return self._solution(t, lambda kx, ky: grid.discrete_eigenvalue(self.grid_n, kx, ky))
 

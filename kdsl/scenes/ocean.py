@@ -129,6 +129,14 @@ class Ocean(Scene):
         self.launch(self.k.gerstner, self.n,
                     [self.rest_arr, *self.waves, self.phase_arr, self.real(tau), self.x])  # fmt: skip
 
+    def picture(self, x: np.ndarray) -> Any:
+        """The surface, colored by height (``kdsl scene run --render``)."""
+        from kdsl.scenes import render
+
+        n = int(self.params["grid"])
+        return render.Picture(x, triangles=render.grid_triangles(n), values=x[:, 1],
+                              show_points=False)  # fmt: skip
+
     def reference(self, t: float) -> np.ndarray:
         return self.surface(t)
 

@@ -61,6 +61,12 @@ class Wave(Scene):
         return sum(a * math.cos(c * math.sqrt(-eigenvalue(kx, ky)) * t) * grid.mode(n, kx, ky)
                    for kx, ky, a in grid.MODES)  # fmt: skip
 
+    def picture(self, x: np.ndarray) -> Any:
+        """The displacement as a colored height field (``kdsl scene run --render``)."""
+        from kdsl.scenes import render
+
+        return render.height_field(x, render.height_scale(self))
+
     def reference(self, t: float) -> np.ndarray:
         return self._solution(t, lambda kx, ky: grid.discrete_eigenvalue(self.grid_n, kx, ky))
 
