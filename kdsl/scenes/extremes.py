@@ -152,10 +152,10 @@ def run_extremes(name: str, precisions: list[str], backend: str = "cpu",
         for prec in precisions:
             if on_run:
                 on_run(f"{case.label} {case.integrator} {prec}")
-            scene = make_scene(name, prec, case.integrator, backend, **case.params)
             # Overflow in float16 is what these cases probe: report it, don't warn about it.
             with np.errstate(all="ignore"), warnings.catch_warnings():
                 warnings.simplefilter("ignore", RuntimeWarning)
+                scene = make_scene(name, prec, case.integrator, backend, **case.params)
                 r = run_scene(scene, case.dt, case.steps, backend)
                 x, v = scene.state()
                 finite = bool(np.all(np.isfinite(x)) and (v is None or np.all(np.isfinite(v))))

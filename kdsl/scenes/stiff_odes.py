@@ -197,7 +197,7 @@ class StiffOdes(Scene):
     summary = "Van der Pol (mu=1e3) and Robertson kinetics, one stiff system per thread"
     order = 1
     integrators = ("backward_euler", "explicit_euler", "rk4")
-    defaults = {"count": 256, "mu": 1000.0, "newton_iters": 6}
+    defaults = {"count": 64, "mu": 1000.0, "newton_iters": 6}
     default_dt = 1e-3
     default_steps = 400
     error_what = "max over (system kind, component) of max |y - y_ref| / max |y_ref|"
