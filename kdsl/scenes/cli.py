@@ -217,8 +217,12 @@ def cmd_sweep(args: argparse.Namespace) -> int:
     backends = _list_arg(args.backend, ["cpu"], "backend", ["cpu", "interp", "cuda"])
     if args.dt:
         dts = [check_dt(float(x)) for x in _floats(args.dt)]
+    elif args.dts < 1:
+        raise SceneError(f"--dts must be >= 1, not {args.dts}")
     else:
         dts = sw.default_dts(cls.default_dt, args.dts)
+    if not dts:
+        raise SceneError("--dt lists no time step")
     t_end = args.t_end if args.t_end is not None else cls.default_dt * cls.default_steps
     t_end = check_dt(t_end)  # a finite time > 0, like a dt
     if args.plot:

@@ -74,6 +74,8 @@ def test_sweep_without_matplotlib_names_the_extra(capsys, tmp_path, monkeypatch)
         (["sweep", "heat", "--precision", "f32,f8"], "choices: f16, f32, f64"),
         (["sweep", "heat", "--dt", "1e-4,0"], "dt must be a finite number > 0"),
         (["sweep", "heat", "--t-end", "nan"], "must be a finite number > 0"),
+        (["sweep", "heat", "--dts", "0"], "--dts must be >= 1"),
+        (["sweep", "heat", "--dt", ","], "--dt lists no time step"),
         (["sweep", "heat", "--backend", "cpu,tpu"], "choices: cpu, interp, cuda"),
         (["extremes", "heat", "--precision", "f9"], "choices: f16, f32, f64"),
         (["extremes", "nope"], "unknown scene 'nope'"),
