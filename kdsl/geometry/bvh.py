@@ -119,6 +119,7 @@ class Bvh:
         """Build the tree again from the current boxes (optionally with another constructor)."""
         if constructor is not None:
             self.constructor = _constructor(constructor, self.device)
+        self._check_current_boxes()
         if self.groups is not None:
             self._num_groups = _check_groups(self.groups, self.lowers)
         build = CONSTRUCTORS[self.constructor]
@@ -127,7 +128,20 @@ class Bvh:
         self._nodes = empty(tree.num_nodes, dtype=BvhNode, device=self.device)
         self._bounds = [self._node_field(0, VEC3), self._node_field(16, VEC3)]
         pack_nodes(tree, self._nodes, self._node_field(12, T.I32))
-        self.refit()
+        refit(self._tree, self.lowers, self.uppers, self._bounds[0], self._bounds[1])
+        self._write_record()
+
+    def _check_current_boxes(self) -> None:
+        """Check ``lowers``/``uppers`` again: a user may have assigned new arrays."""
+        _check_boxes(self.lowers, self.uppers)
+        if self.lowers.device != self.device:
+            raise KdslTypeError(
+                f"Bvh boxes moved to {self.lowers.device}; the BVH lives on {self.device}"
+            )
+
+    def _write_record(self) -> None:
+        tree = self._tree
+        self._recorded = (self.lowers, self.uppers)
         self._record.write(
             {
                 "lowers": self._bounds[0], "uppers": self._bounds[1],
@@ -149,6 +163,14 @@ class Bvh:
     def refit(self) -> None:
         """Recompute the node bounds from the current boxes (the tree keeps its shape), with
         kernels on the BVH's device."""
+        if self._recorded[0] is not self.lowers or self._recorded[1] is not self.uppers:
+            self._check_current_boxes()  # new box arrays: same count, then a new record
+            if self.lowers.shape[0] != self._recorded[0].shape[0]:
+                raise BvhError(
+                    f"refit needs as many boxes as the BVH was built over "
+                    f"({self._recorded[0].shape[0]}, now {self.lowers.shape[0]}); call rebuild()"
+                )
+            self._write_record()
         refit(self._tree, self.lowers, self.uppers, self._bounds[0], self._bounds[1])
 
 

@@ -8,6 +8,8 @@ import numpy as np
 import pytest
 
 import kdsl as wp
+from kdsl.errors import KdslTypeError
+from kdsl.geometry.bvh import BvhError
 
 BACKENDS = ["interp", "cpu"]
 CONSTRUCTORS = ["lbvh", "median", "sah"]
@@ -348,3 +350,20 @@ def test_sah_splits_between_clusters():
         left_end = t.skip.numpy()[1]  # the root's left subtree: nodes 1 .. left_end - 1
         left_items = (t.first.numpy()[1:left_end] >= 0).sum()  # one item per leaf
         assert left_items in (want, 400 - want), constructor
+
+
+def test_refit_follows_new_box_arrays():
+    lo, hi = random_boxes(50, seed=8)
+    bvh = make_bvh(lo, hi, "lbvh")
+    bvh.lowers, bvh.uppers = wp.array(lo + 5, dtype=wp.vec3), wp.array(hi + 5, dtype=wp.vec3)
+    bvh.refit()  # new arrays of the same count: the record follows them
+    every = [wp.array([[4, 4, 4]], dtype=wp.vec3), wp.array([[7, 7, 7]], dtype=wp.vec3), -1]
+    assert run_query(aabb_hits, 1, [bvh.id, *every], "cpu") == [set(range(50))]
+    bvh.lowers = wp.array(lo[:10], dtype=wp.vec3)
+    with pytest.raises(KdslTypeError, match="differ in length"):
+        bvh.refit()
+    bvh.uppers = wp.array(hi[:10], dtype=wp.vec3)
+    with pytest.raises(BvhError, match=r"as many boxes .* call rebuild\(\)"):
+        bvh.refit()
+    bvh.rebuild()
+    check_tree(bvh, 10, 1)
