@@ -2,14 +2,16 @@
 
 Every constructor ends in a ``DeviceTree``: the preorder topology ``kdsl.stdlib.bvh``
 documents (``skip``, ``first``, ``count``, ``items``, ``group_roots``) on the boxes'
-device, plus what a refit needs: ``by_level``, the inner nodes ordered deepest level
+device, plus what a GPU refit needs: ``by_level``, the inner nodes ordered deepest level
 first, and ``levels``, the ``(start, count)`` of each level in it (on the host, so a
-refit reads nothing back from a GPU). An inner node ``n``'s children are ``n + 1`` and
+refit reads nothing back from a GPU; both empty on a CPU). An inner node ``n``'s children are ``n + 1`` and
 ``skip[n + 1]``, so the tree needs no child arrays.
 
-``refit`` runs as kdsl kernels on the device: one launch for the leaves (the union of
-their items' boxes), then one per level of inner nodes, deepest first, each the union
-of its two children (a level's nodes are independent, so no atomics or fences).
+``refit`` runs as kdsl kernels on the device: on a GPU one launch for the leaves (the
+union of their items' boxes), then one per level of inner nodes, deepest first, each
+the union of its two children (a level's nodes are independent, so no atomics or
+fences); on a CPU, after the leaves, one thread walks the inner nodes in reverse
+preorder (children before parents), which costs less than a launch per level.
 """
 
 from __future__ import annotations
@@ -62,7 +64,10 @@ def level_order(first: np.ndarray, depth: np.ndarray, device) -> tuple[array, li
 
 def upload_tree(tree: Tree, device) -> DeviceTree:
     """A host-built ``Tree`` copied to ``device``."""
-    by_level, levels = level_order(tree.first, tree.level, device)
+    if device.is_cpu:  # a CPU refit needs no levels (``refit``)
+        by_level, levels = _device_ints(np.zeros(0), device), []
+    else:
+        by_level, levels = level_order(tree.first, tree.level, device)
     return DeviceTree(
         _device_ints(tree.skip, device), _device_ints(tree.first, device),
         _device_ints(tree.count, device), _device_ints(tree.items, device),
@@ -128,6 +133,21 @@ def pack_nodes(tree: DeviceTree, nodes: array, packed_first: array) -> None:
            inputs=[tree.first, tree.count, tree.skip, packed_first, packed_next])  # fmt: skip
 
 
+@kernel
+def _refit_inner_reverse_preorder(
+    num_nodes: int32, first: array(dtype=int32), skip: array(dtype=int32),
+    lowers: array(dtype=vec3), uppers: array(dtype=vec3),
+):  # fmt: skip
+    # One thread: in reverse preorder every node comes after its children.
+    for k in range(num_nodes):
+        n = num_nodes - 1 - k
+        if first[n] < 0:
+            a = n + 1
+            b = skip[a]
+            lowers[n] = vmin(lowers[a], lowers[b])
+            uppers[n] = vmax(uppers[a], uppers[b])
+
+
 def refit(tree: DeviceTree, item_lowers: array, item_uppers: array, lowers: array,
           uppers: array) -> None:  # fmt: skip
     """Write the node bounds of ``tree`` over the item boxes into ``lowers``/``uppers``."""
@@ -138,6 +158,10 @@ def refit(tree: DeviceTree, item_lowers: array, item_uppers: array, lowers: arra
         _refit_leaves, dim=tree.num_nodes, device=device,
         inputs=[tree.first, tree.count, tree.items, item_lowers, item_uppers, lowers, uppers],
     )  # fmt: skip
+    if device.is_cpu:  # one sequential pass beats a launch per level on a CPU
+        launch(_refit_inner_reverse_preorder, dim=1, device=device,
+               inputs=[tree.num_nodes, tree.first, tree.skip, lowers, uppers])  # fmt: skip
+        return
     for start, count in tree.levels:
         launch(
             _refit_level, dim=count, device=device,

@@ -28,7 +28,7 @@ import numpy as np
 from kdsl.frontend.api import atomic_add, atomic_max, func, kernel, tid
 from kdsl.frontend.api import max as vmax
 from kdsl.frontend.api import min as vmin
-from kdsl.geometry.device_tree import DeviceTree, level_order
+from kdsl.geometry.device_tree import DeviceTree
 from kdsl.runtime.alloc import empty, full, zeros
 from kdsl.runtime.array import array
 from kdsl.runtime.launch import launch
@@ -350,8 +350,8 @@ def build_lbvh(lowers: array, uppers: array, leaf_size: int, groups: array | Non
         count[:num_nodes],
         depth[:num_nodes],
     )
-    if device.is_cpu:  # NumPy's radix sort of small ints beats contended atomics on a CPU
-        by_level, levels = level_order(first.numpy(), depth.numpy(), device)
+    if device.is_cpu:  # a CPU refit needs no levels (``device_tree.refit``)
+        by_level, levels = ints(0), []
     else:
         by_level, levels = _device_level_order(first, depth, level_count, max_depth)
     if num_groups == 0:
