@@ -297,6 +297,7 @@ def test_cuda_capture_on_a_private_stream_and_host_copies_refused():
                 wp.zeros(2, dtype=wp.vec3, device="cuda:0").fill_(wp.vec3(1.0, 2.0, 3.0))
         assert not s.is_capturing
         wp.capture_launch(capture.graph, stream=s)
+    wp.synchronize_stream(s)  # ScopedStream does not sync on exit (as in Warp)
     np.testing.assert_array_equal(a.numpy(), 1.0)
 
 

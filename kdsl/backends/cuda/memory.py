@@ -227,6 +227,55 @@ def cas_helper(src: Source, et: T.ScalarType) -> str:
     return name
 
 
+def _may_be_local(em: FuncEmitter) -> bool:
+    """Whether an atomic's address may be thread-local memory: the module makes local
+    arrays (``kd.local_array``), and CUDA atomics on local memory are illegal."""
+    return "local_arrays" in em.src.features.names
+
+
+def _local_or_atomic(em: FuncEmitter, et: T.ScalarType, p: str, atomic: str, update) -> str:
+    """The old value at ``p`` after ``atomic`` (an expression giving it), or, where ``p``
+    is thread-local memory (``__isLocal``), after a plain read-modify-write (no other
+    thread sees that memory): ``update(old)`` emits the plain write."""
+    old = em.declare(et)
+    em.open(f"if (__isLocal({p})) {{")
+    em.line(f"{old} = *{p};")
+    update(old)
+    em.close()
+    em.open("else {")
+    em.line(f"{old} = {atomic};")
+    em.close()
+    return old
+
+
+def _lanes(em: FuncEmitter, t: T.Type, p: str, values: list[str]) -> list[tuple[str, list[str]]]:
+    """(address, operand lanes) of each scalar lane of an atomic on a ``t`` at ``p``."""
+    ec = em.ctype(T.elem_type(t))
+    base = em.fresh()
+    em.line(f"{ec} *{base} = ({ec} *){p};")
+    if isinstance(t, T.ScalarType):
+        return [(base, values)]
+    return [(f"({base} + {j})", [f"{v}.c[{j}]" for v in values]) for j in range(CT.count(t))]
+
+
+def _gather(em: FuncEmitter, t: T.Type, olds: list[str]) -> str:
+    if isinstance(t, T.ScalarType):
+        return olds[0]
+    r = em.declare(t)
+    for j, old in enumerate(olds):
+        em.line(f"{r}.c[{j}] = {old};")
+    return r
+
+
+def _same_bits(et: T.ScalarType, a: str, b: str) -> str:
+    if et.is_float:
+        if et.bits not in (32, 64):
+            raise KdslCapabilityError(f"atomic_cas of {et} on a thread-local array on cuda")
+        to_bits, _ = _bits(et)
+        return f"{to_bits.format(a)} == {to_bits.format(b)}"
+    return f"{a} == {b}"
+
+
 def _atomic_cas(em: FuncEmitter, op: Operation) -> str:
     t = op.operands[1].type
     et = T.elem_type(t)
@@ -234,14 +283,20 @@ def _atomic_cas(em: FuncEmitter, op: Operation) -> str:
     cmp, v = em.get(op.operands[0]), em.get(op.operands[1])
     fn = cas_helper(em.src, et)
     ec = em.ctype(et)
-    if isinstance(t, T.ScalarType):
+    if isinstance(t, T.ScalarType) and not _may_be_local(em):
         return f"{fn}(({ec} *){p}, {cmp}, {v})"
-    base = em.fresh()
-    em.line(f"{ec} *{base} = ({ec} *){p};")
-    r = em.declare(t)
-    for j in range(CT.count(t)):
-        em.line(f"{r}.c[{j}] = {fn}({base} + {j}, {cmp}.c[{j}], {v}.c[{j}]);")
-    return r
+    olds = []
+    for pj, (cj, vj) in _lanes(em, t, p, [cmp, v]):
+        atomic = f"{fn}({pj}, {cj}, {vj})"
+        if _may_be_local(em):
+
+            def update(old, pj=pj, cj=cj, vj=vj):
+                em.line(f"if ({_same_bits(et, old, cj)}) *{pj} = {vj};")
+
+            olds.append(_local_or_atomic(em, et, pj, atomic, update))
+        else:
+            olds.append(atomic)
+    return _gather(em, t, olds)
 
 
 def _atomic(em: FuncEmitter, op: Operation) -> str:
@@ -252,15 +307,20 @@ def _atomic(em: FuncEmitter, op: Operation) -> str:
     v = em.get(op.operands[0])
     fn = atomic_helper(em.src, kind, et)
     ec = em.ctype(et)
-    if isinstance(t, T.ScalarType):
+    if isinstance(t, T.ScalarType) and not _may_be_local(em):
         return f"{fn}(({ec} *){p}, {v})"
-    base = em.fresh()
-    em.line(f"{ec} *{base} = ({ec} *){p};")
-    lanes = [f"{fn}({base} + {j}, {v}.c[{j}])" for j in range(CT.count(t))]
-    r = em.declare(t)
-    for j, lane in enumerate(lanes):
-        em.line(f"{r}.c[{j}] = {lane};")
-    return r
+    olds = []
+    for pj, (vj,) in _lanes(em, t, p, [v]):
+        atomic = f"{fn}({pj}, {vj})"
+        if _may_be_local(em):
+
+            def update(old, pj=pj, vj=vj):
+                em.line(f"*{pj} = {_combine(em.src, kind, et, old, vj)};")
+
+            olds.append(_local_or_atomic(em, et, pj, atomic, update))
+        else:
+            olds.append(atomic)
+    return _gather(em, t, olds)
 
 
 CUDA.register("kd.tid", _tid)
