@@ -3,6 +3,7 @@
 from kdsl.stdlib.algorithms import *  # noqa: F403
 from kdsl.stdlib.bvh import *  # noqa: F403
 from kdsl.stdlib.dense import *  # noqa: F403
+from kdsl.stdlib.hash_grid import *  # noqa: F403
 from kdsl.stdlib.linalg import *  # noqa: F403
 from kdsl.stdlib.mesh import *  # noqa: F403
 from kdsl.stdlib.noise import *  # noqa: F403

@@ -1,0 +1,177 @@
+"""kdsl standard library: hash grid queries (Warp's ``hash_grid_query*``), in kdsl.
+
+A ``kdsl.HashGrid`` buckets points into cubic cells of width ``radius`` (the build's
+radius): point ``p`` lies in cell ``floor(p / radius)`` per axis, and the cell
+coordinates wrap into the grid's ``dim_x * dim_y * dim_z`` cells (so far-apart
+cells share a bucket, as in any spatial hash). Kernels reach a grid through its
+record (``HashGridRecord``, read with ``object_record``):
+
+- ``point_ids[k]`` is the original index of the ``k``-th point in cell order (points
+  sorted by bucket, stably, so a bucket's points keep their original order);
+- bucket ``c``'s points are ``point_ids[cell_starts[c] : cell_ends[c]]`` (both 0 for
+  an empty bucket);
+- ``num_points`` is 0 until the grid is built.
+
+A query visits the buckets of the cells the box ``[point - max_dist, point +
+max_dist]`` overlaps (27 cells when ``max_dist`` is the build's radius, at most the
+grid's dims per axis, so no bucket is visited twice along an axis), x fastest, then
+y, then z, and reports *every* point in them: neighbours are candidates, not
+filtered by distance (Warp's contract: the caller tests the distance).
+"""
+
+import kdsl as wp
+from kdsl.frontend.inout import inout
+from kdsl.frontend.kernel import func
+
+__kdsl_group__ = "geometry"
+
+__all__ = ["HashGridQuery", "hash_grid_point_id", "hash_grid_query", "hash_grid_query_next"]
+
+#: Cell coordinates are clamped to int32 as Warp's are: above to ``INT_MAX - 1`` (so a
+#: query's ``x + 1`` cannot overflow), below to ``INT_MIN``.
+_COORD_MAX = 2147483646
+_COORD_MIN = -2147483648
+
+
+@wp.struct
+class HashGridRecord:
+    """The record of a ``kdsl.HashGrid`` (see the module docstring)."""
+
+    tag: wp.uint64
+    point_ids: wp.array(dtype=wp.int32)
+    cell_starts: wp.array(dtype=wp.int32)
+    cell_ends: wp.array(dtype=wp.int32)
+    dim_x: wp.int32
+    dim_y: wp.int32
+    dim_z: wp.int32
+    num_points: wp.int32
+    cell_width_inv: wp.float32
+
+
+@wp.struct
+class HashGridQuery:
+    """A query in progress against a ``kdsl.HashGrid`` (Warp's ``hash_grid_query_t``):
+    the cell box ``[start, end]`` per axis, the cell being visited and the range of
+    ``point_ids`` still to report from its bucket."""
+
+    grid: wp.uint64
+    x_start: wp.int32
+    y_start: wp.int32
+    z_start: wp.int32
+    x_end: wp.int32
+    y_end: wp.int32
+    z_end: wp.int32
+    x: wp.int32
+    y: wp.int32
+    z: wp.int32
+    cell_index: wp.int32
+    cell_end: wp.int32
+
+
+@func
+def hash_grid_cell_coord(v: float) -> int:
+    """The cell coordinate of ``v`` (a position times the inverse cell width): its floor,
+    clamped to int32 (NaN gives 0). The build and the queries share it."""
+    c = wp.floor(v)
+    if c >= 2147483648.0:
+        return _COORD_MAX
+    if c >= -2147483648.0:
+        return int(c)
+    if c < -2147483648.0:
+        return _COORD_MIN
+    return 0
+
+
+@func
+def _wrap(c: int, dim: int) -> int:
+    # Whatever sign convention ``%`` has, the result lands in [0, dim).
+    w = c % dim
+    if w < 0:
+        w = w + dim
+    return w
+
+
+@func
+def hash_grid_cell(x: int, y: int, z: int, dim_x: int, dim_y: int, dim_z: int) -> int:
+    """The bucket of cell ``(x, y, z)``: each coordinate wrapped into its dim, x fastest."""
+    return (_wrap(z, dim_z) * dim_y + _wrap(y, dim_y)) * dim_x + _wrap(x, dim_x)
+
+
+@func
+def _query_end(start: int, end: int, dim: int) -> int:
+    """The last cell visited on an axis: ``end``, or ``start + dim - 1`` when the range
+    spans the whole axis (its buckets would repeat)."""
+    if wp.int64(end) - wp.int64(start) >= wp.int64(dim):
+        return start + (dim - 1)
+    return end
+
+
+@func
+def _enter_cell(query: inout(HashGridQuery), rec: HashGridRecord):
+    """Point ``query`` at the bucket of its current cell."""
+    c = hash_grid_cell(query.x, query.y, query.z, rec.dim_x, rec.dim_y, rec.dim_z)
+    query.cell_index = rec.cell_starts[c]
+    query.cell_end = rec.cell_ends[c]
+
+
+@func
+def hash_grid_query(id: wp.uint64, point: wp.vec3, max_dist: float) -> HashGridQuery:
+    """A query for the candidate neighbours of ``point``: every point in the cells the box
+    ``[point - max_dist, point + max_dist]`` overlaps (not filtered by distance: test it
+    yourself). Advance it with ``hash_grid_query_next``."""
+    rec = wp.object_record(id, HashGridRecord)
+    inv = rec.cell_width_inv
+    q = HashGridQuery()
+    q.grid = id
+    q.x_start = hash_grid_cell_coord((point[0] - max_dist) * inv)
+    q.y_start = hash_grid_cell_coord((point[1] - max_dist) * inv)
+    q.z_start = hash_grid_cell_coord((point[2] - max_dist) * inv)
+    q.x_end = _query_end(q.x_start, hash_grid_cell_coord((point[0] + max_dist) * inv), rec.dim_x)
+    q.y_end = _query_end(q.y_start, hash_grid_cell_coord((point[1] + max_dist) * inv), rec.dim_y)
+    q.z_end = _query_end(q.z_start, hash_grid_cell_coord((point[2] + max_dist) * inv), rec.dim_z)
+    q.x = q.x_start
+    q.y = q.y_start
+    q.z = q.z_start
+    q.cell_index = 0
+    q.cell_end = 0
+    if rec.num_points > 0:
+        _enter_cell(q, rec)
+    return q
+
+
+@func
+def hash_grid_query_next(query: inout(HashGridQuery), index: inout(wp.int32)) -> bool:
+    """Advance ``query`` to its next candidate: writes the point's original index to
+    ``index`` and gives True, or gives False (``index`` unchanged) when none is left, or
+    when the grid has not been built."""
+    rec = wp.object_record(query.grid, HashGridRecord)
+    found = False
+    if rec.num_points > 0:
+        while not found:
+            if query.cell_index < query.cell_end:
+                index = rec.point_ids[query.cell_index]  # noqa: F841 - in-out
+                query.cell_index = query.cell_index + 1
+                found = True
+            else:
+                query.x = query.x + 1
+                if query.x > query.x_end:
+                    query.x = query.x_start
+                    query.y = query.y + 1
+                if query.y > query.y_end:
+                    query.y = query.y_start
+                    query.z = query.z + 1
+                if query.z > query.z_end:
+                    break
+                _enter_cell(query, rec)
+    return found
+
+
+@func
+def hash_grid_point_id(id: wp.uint64, index: int) -> int:
+    """The original index of the point at position ``index`` of the grid's cell-sorted
+    order (launch over the points and read them in this order for locality), or -1 when
+    the grid has not been built or ``index`` is outside ``[0, number of points)``."""
+    rec = wp.object_record(id, HashGridRecord)
+    if index < 0 or index >= rec.num_points:
+        return -1
+    return rec.point_ids[index]
