@@ -85,6 +85,16 @@ from kdsl.runtime.modules import (
     load_module,
     set_module_options,
 )
+from kdsl.runtime.peer import (
+    ScopedMempoolAccess,
+    ScopedPeerAccess,
+    is_mempool_access_enabled,
+    is_mempool_access_supported,
+    is_peer_access_enabled,
+    is_peer_access_supported,
+    set_mempool_access_enabled,
+    set_peer_access_enabled,
+)
 from kdsl.runtime.stream import (
     Event,
     ScopedStream,
@@ -140,6 +150,10 @@ __all__ = [
     "CaptureMode", "Graph", "ScopedCapture", "capture_begin", "capture_end", "capture_if",
     "capture_launch", "capture_load", "capture_load_from_bytes", "capture_save", "capture_while",
     "is_conditional_graph_supported",
+    # several GPUs in one process (issue 19, item 1)
+    "ScopedMempoolAccess", "ScopedPeerAccess", "is_mempool_access_enabled",
+    "is_mempool_access_supported", "is_peer_access_enabled", "is_peer_access_supported",
+    "set_mempool_access_enabled", "set_peer_access_enabled",
     # thread-local arrays in kernels (issue 14)
     "fixedarray",
 ]  # fmt: skip
