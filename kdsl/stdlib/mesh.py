@@ -299,21 +299,40 @@ def _furthest_face(id: wp.uint64, point: wp.vec3, min_dist: float) -> int:
 def _point_answer(id: wp.uint64, point: wp.vec3, face: int, sign: float) -> MeshQueryPoint:
     """A ``MeshQueryPoint`` for ``face`` (-1: no result). The barycentrics are computed
     here, outside the search, so gradients reach ``point`` through them alone."""
-    q = MeshQueryPoint()
-    q.result = False
-    q.sign = 0.0
-    q.face = 0
-    q.u = 0.0
-    q.v = 0.0
+    q = _point_found(False, 0.0, 0, wp.vec2(0.0))
     if face >= 0:
         rec = wp.object_record(id, MeshRecord)
-        uv = _face_bary(rec, face, point)
-        q.result = True
-        q.sign = sign
-        q.face = face
-        q.u = uv[0]
-        q.v = uv[1]
+        q = _point_found(True, sign, face, _face_bary(rec, face, point))
     return q
+
+
+@func
+def _point_found(result: bool, sign: float, face: int, uv: wp.vec2) -> MeshQueryPoint:
+    q = MeshQueryPoint()
+    q.result = result
+    q.sign = sign
+    q.face = face
+    q.u = uv[0]
+    q.v = uv[1]
+    return q
+
+
+@func
+def _write_point(
+    q: MeshQueryPoint,
+    inside: inout(wp.float32),
+    face: inout(wp.int32),
+    bary_u: inout(wp.float32),
+    bary_v: inout(wp.float32),
+) -> bool:
+    """The out-argument forms' common tail: writes ``q``'s fields to the caller's
+    variables when ``q`` holds a result (they are left alone otherwise)."""
+    if q.result:
+        inside = q.sign  # noqa: F841 - in-out parameters: the caller sees them
+        face = q.face  # noqa: F841
+        bary_u = q.u  # noqa: F841
+        bary_v = q.v  # noqa: F841
+    return q.result
 
 
 @func
@@ -335,11 +354,8 @@ def mesh_query_point_no_sign(  # noqa: F811 - the out-argument form
     """Out-argument form: writes ``face``, ``bary_u``, ``bary_v`` and gives True when a
     face closer than ``max_dist`` exists (the outputs are left alone otherwise)."""
     q = mesh_query_point_no_sign(id, point, max_dist)
-    if q.result:
-        face = q.face  # noqa: F841 - in-out parameters: the caller sees them
-        bary_u = q.u  # noqa: F841
-        bary_v = q.v  # noqa: F841
-    return q.result
+    sign = 0.0  # not an output of the no-sign forms
+    return _write_point(q, sign, face, bary_u, bary_v)
 
 
 @func
@@ -362,30 +378,19 @@ def mesh_query_furthest_point_no_sign(  # noqa: F811 - the out-argument form
 ) -> bool:
     """Out-argument form of ``mesh_query_furthest_point_no_sign``."""
     q = mesh_query_furthest_point_no_sign(id, point, min_dist)
-    if q.result:
-        face = q.face  # noqa: F841
-        bary_u = q.u  # noqa: F841
-        bary_v = q.v  # noqa: F841
-    return q.result
+    sign = 0.0  # not an output of the no-sign forms
+    return _write_point(q, sign, face, bary_u, bary_v)
 
 
 @func
 def _point_answer_far(id: wp.uint64, point: wp.vec3, face: int) -> MeshQueryPoint:
-    q = MeshQueryPoint()
-    q.result = False
-    q.sign = 0.0
-    q.face = 0
-    q.u = 0.0
-    q.v = 0.0
+    q = _point_found(False, 0.0, 0, wp.vec2(0.0))
     if face >= 0:
         rec = wp.object_record(id, MeshRecord)
         uv = furthest_point_to_triangle(
             _vertex(rec, face, 0), _vertex(rec, face, 1), _vertex(rec, face, 2), point
         )
-        q.result = True
-        q.face = face
-        q.u = uv[0]
-        q.v = uv[1]
+        q = _point_found(True, 0.0, face, uv)
     return q
 
 
@@ -716,12 +721,7 @@ def mesh_query_point(  # noqa: F811 - the out-argument form
     """Out-argument form of ``mesh_query_point``: writes ``inside`` (< 0 inside),
     ``face``, ``bary_u``, ``bary_v`` when a face closer than ``max_dist`` exists."""
     q = mesh_query_point(id, point, max_dist)
-    if q.result:
-        inside = q.sign  # noqa: F841 - in-out parameters: the caller sees them
-        face = q.face  # noqa: F841
-        bary_u = q.u  # noqa: F841
-        bary_v = q.v  # noqa: F841
-    return q.result
+    return _write_point(q, inside, face, bary_u, bary_v)
 
 
 @func
@@ -756,12 +756,7 @@ def mesh_query_point_sign_parity(  # noqa: F811 - the out-argument form
 ) -> bool:
     """Out-argument form of ``mesh_query_point_sign_parity``."""
     q = mesh_query_point_sign_parity(id, point, max_dist, n_sample, perturbation_scale)
-    if q.result:
-        inside = q.sign  # noqa: F841
-        face = q.face  # noqa: F841
-        bary_u = q.u  # noqa: F841
-        bary_v = q.v  # noqa: F841
-    return q.result
+    return _write_point(q, inside, face, bary_u, bary_v)
 
 
 @func
@@ -803,12 +798,7 @@ def mesh_query_point_sign_winding_number(  # noqa: F811 - the out-argument form
 ) -> bool:
     """Out-argument form of ``mesh_query_point_sign_winding_number``."""
     q = mesh_query_point_sign_winding_number(id, point, max_dist, accuracy, threshold)
-    if q.result:
-        inside = q.sign  # noqa: F841
-        face = q.face  # noqa: F841
-        bary_u = q.u  # noqa: F841
-        bary_v = q.v  # noqa: F841
-    return q.result
+    return _write_point(q, inside, face, bary_u, bary_v)
 
 
 @func
@@ -916,12 +906,7 @@ def mesh_query_point_sign_normal(  # noqa: F811 - the out-argument form
 ) -> bool:
     """Out-argument form of ``mesh_query_point_sign_normal``."""
     q = mesh_query_point_sign_normal(id, point, max_dist, epsilon)
-    if q.result:
-        inside = q.sign  # noqa: F841
-        face = q.face  # noqa: F841
-        bary_u = q.u  # noqa: F841
-        bary_v = q.v  # noqa: F841
-    return q.result
+    return _write_point(q, inside, face, bary_u, bary_v)
 
 
 # -- box and sphere queries --------------------------------------------------------------
