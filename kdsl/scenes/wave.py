@@ -10,16 +10,13 @@ Euler always. The energy is ``1/2 sum (v^2 + c^2 |grad u|^2) h^2``.
 """
 
 import math
-from types import ModuleType, SimpleNamespace
-from typing import Any
 
 import numpy as np
 
 from kdsl.scenes import grid
-from kdsl.scenes.base import Scene
 
 
-class Wave(Scene):
+class Wave(grid.GridScene):
     """2D wave equation against its analytic solution (see the module docstring)."""
 
     name = "wave"
@@ -31,50 +28,15 @@ class Wave(Scene):
     default_dt = 5e-3
     default_steps = 200
 
-    def setup(self) -> None:
-        self.grid_n = int(self.params["grid"])
-        self.h = 1.0 / (self.grid_n + 1)
+    def coefficient(self) -> float:
+        return self.params["speed"] ** 2
 
-    def make_kernels(self, wp: ModuleType, real: Any) -> SimpleNamespace:
-        return grid.make_grid_kernels(wp, real)
+    def mode_factor(self, eigenvalue: float, t: float) -> float:
+        return math.cos(self.params["speed"] * math.sqrt(-eigenvalue) * t)
 
     def initial_state(self) -> tuple[np.ndarray, np.ndarray]:
-        u0 = sum(a * grid.mode(self.grid_n, kx, ky) for kx, ky, a in grid.MODES)
+        u0 = self.initial_modes()
         return u0, np.zeros_like(u0)
-
-    def _lap(self, u: Any, s: float, out: Any) -> None:
-        n = self.grid_n
-        self.launch(self.k.laplacian, (n, n), [u, n, self.real(s / self.h**2), out])
-
-    def rhs(self, x: Any, v: Any, out: Any) -> None:
-        self._lap(x, self.params["speed"] ** 2, out)
-
-    def jvp(self, x: Any, v: Any, z: Any, cx: float, cv: float, out: Any) -> None:
-        self._lap(z, cx * self.params["speed"] ** 2, out)
-
-    def jacobian_diag(self, x: Any, v: Any, cx: float, cv: float, out: Any) -> None:
-        value = -4.0 * cx * self.params["speed"] ** 2 / self.h**2
-        self.launch(self.k.fill, self.n, [self.real(value), out])
-
-    def _solution(self, t: float, eigenvalue: Any) -> np.ndarray:
-        c, n = self.params["speed"], self.grid_n
-        return sum(a * math.cos(c * math.sqrt(-eigenvalue(kx, ky)) * t) * grid.mode(n, kx, ky)
-                   for kx, ky, a in grid.MODES)  # fmt: skip
-
-    def picture(self, x: np.ndarray) -> Any:
-        """The displacement as a colored height field (``kdsl scene run --render``)."""
-        from kdsl.scenes import render
-
-        return render.height_field(x, render.height_scale(self))
-
-    def reference(self, t: float) -> np.ndarray:
-        return self._solution(t, lambda kx, ky: grid.discrete_eigenvalue(self.grid_n, kx, ky))
-
-    def pde_error(self) -> float:
-        """The error against the continuous PDE's solution (time and grid together)."""
-        x, _ = self.state()
-        ref = self._solution(self.t, grid.continuum_eigenvalue)
-        return float(np.max(np.abs(x - ref)) / max(np.max(np.abs(ref)), 1e-300))
 
     def energy(self, x: np.ndarray, v: np.ndarray | None) -> float:
         assert v is not None
