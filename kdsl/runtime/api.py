@@ -54,6 +54,7 @@ from kdsl.runtime.indexed import (
     indexedarray3d,
     indexedarray4d,
 )
+from kdsl.runtime.ipc import event_from_ipc_handle, from_ipc_handle
 from kdsl.runtime.launch import Launch, default_backend_for, launch
 from kdsl.runtime.logger import (
     LOG_DEBUG,
@@ -153,7 +154,8 @@ __all__ = [
     # several GPUs in one process (issue 19, item 1)
     "ScopedMempoolAccess", "ScopedPeerAccess", "is_mempool_access_enabled",
     "is_mempool_access_supported", "is_peer_access_enabled", "is_peer_access_supported",
-    "set_mempool_access_enabled", "set_peer_access_enabled",
+    "set_mempool_access_enabled", "set_peer_access_enabled", "event_from_ipc_handle",
+    "from_ipc_handle",
     # thread-local arrays in kernels (issue 14)
     "fixedarray",
 ]  # fmt: skip

@@ -180,6 +180,13 @@ class array:
     def device(self) -> Device:
         return self._device
 
+    def ipc_handle(self) -> bytes:
+        """The CUDA IPC handle of this array's allocation, for ``from_ipc_handle`` in
+        another process (see ``kdsl.runtime.ipc`` for which arrays qualify)."""
+        from kdsl.runtime.ipc import array_ipc_handle  # ipc builds arrays: imported late
+
+        return array_ipc_handle(self)
+
     @property
     def ptr(self) -> int:
         """Address of the first element (a device address for CUDA arrays)."""

@@ -177,6 +177,14 @@ class Event(_CudaWork):
             self.cupy = cp.cuda.Event(disable_timing=not enable_timing, interprocess=interprocess)
         self.device = dev
         self.enable_timing = enable_timing
+        self.interprocess = interprocess
+
+    def ipc_handle(self) -> bytes:
+        """The CUDA IPC handle of an ``Event(interprocess=True)``, for
+        ``event_from_ipc_handle`` in another process."""
+        from kdsl.runtime.ipc import event_ipc_handle  # ipc wraps events: imported late
+
+        return event_ipc_handle(self)
 
     @property
     def cuda_event(self) -> int:
