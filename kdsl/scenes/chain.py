@@ -28,17 +28,19 @@ from kdsl.scenes.base import Scene
 @cache
 def make_kernels(wp: ModuleType, real: Any) -> SimpleNamespace:
     """The chain kernels for float type ``real``."""
+    # Array annotations by element type, named once so the kernel signatures stay short.
+    RealArray = wp.array(dtype=real)
 
     @wp.kernel(module="unique")
     def spring_jvp(
-        u: wp.array(dtype=real),
-        v: wp.array(dtype=real),
-        inv_m: wp.array(dtype=real),
+        u: RealArray,
+        v: RealArray,
+        inv_m: RealArray,
         k: real,
         c: real,
         cx: real,
         cv: real,
-        out: wp.array(dtype=real),
+        out: RealArray,
     ):
         # out = cx * (M^-1 K-form applied to u) - cv * c * v: the spring forces are
         # linear, so the acceleration and its Jacobian product are one kernel.
@@ -53,8 +55,7 @@ def make_kernels(wp: ModuleType, real: Any) -> SimpleNamespace:
         out[i] = cx * k * inv_m[i] * (left - real(2.0) * u[i] + right) - cv * c * v[i]
 
     @wp.kernel(module="unique")
-    def spring_diag(inv_m: wp.array(dtype=real), k: real, c: real, cx: real, cv: real,
-                    out: wp.array(dtype=real)):  # fmt: skip
+    def spring_diag(inv_m: RealArray, k: real, c: real, cx: real, cv: real, out: RealArray):
         i = wp.tid()
         out[i] = -cx * real(2.0) * k * inv_m[i] - cv * c
 

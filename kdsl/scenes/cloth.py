@@ -49,21 +49,25 @@ SLOTS = len(OFFSETS)
 def make_kernels(wp: ModuleType, real: Any) -> SimpleNamespace:
     """The cloth kernels for float type ``real``."""
     vec3 = wp.types.vector(3, real)
+    # Array annotations by element type, named once so the kernel signatures stay short.
+    Vec3Array = wp.array(dtype=vec3)
+    RealArray = wp.array(dtype=real)
+    IntArray = wp.array(dtype=int)
 
     @wp.kernel(module="unique")
     def cloth_accel(
-        x: wp.array(dtype=vec3),
-        v: wp.array(dtype=vec3),
-        nbr: wp.array(dtype=int),
-        rest: wp.array(dtype=real),
-        inv_m: wp.array(dtype=real),
+        x: Vec3Array,
+        v: Vec3Array,
+        nbr: IntArray,
+        rest: RealArray,
+        inv_m: RealArray,
         k: real,
         kd: real,
         gravity: vec3,
         center: vec3,
         radius: real,
         kc: real,
-        out: wp.array(dtype=vec3),
+        out: Vec3Array,
     ):
         p = wp.tid()
         xp = x[p]
@@ -88,11 +92,11 @@ def make_kernels(wp: ModuleType, real: Any) -> SimpleNamespace:
 
     @wp.kernel(module="unique")
     def cloth_jvp(
-        x: wp.array(dtype=vec3),
-        z: wp.array(dtype=vec3),
-        nbr: wp.array(dtype=int),
-        rest: wp.array(dtype=real),
-        inv_m: wp.array(dtype=real),
+        x: Vec3Array,
+        z: Vec3Array,
+        nbr: IntArray,
+        rest: RealArray,
+        inv_m: RealArray,
         k: real,
         kd: real,
         center: vec3,
@@ -100,7 +104,7 @@ def make_kernels(wp: ModuleType, real: Any) -> SimpleNamespace:
         kc: real,
         cx: real,
         cv: real,
-        out: wp.array(dtype=vec3),
+        out: Vec3Array,
     ):
         # out_p = (1/m) [cx sum K_s (z_q - z_p) + cv sum kd u u^T (z_q - z_p) - cx kc n n^T z_p]
         # with K_s = k [max(0, 1 - rest/l) (I - u u^T) + u u^T].
@@ -128,9 +132,9 @@ def make_kernels(wp: ModuleType, real: Any) -> SimpleNamespace:
 
     @wp.kernel(module="unique")
     def cloth_diag(
-        x: wp.array(dtype=vec3),
-        nbr: wp.array(dtype=int),
-        inv_m: wp.array(dtype=real),
+        x: Vec3Array,
+        nbr: IntArray,
+        inv_m: RealArray,
         k: real,
         kd: real,
         center: vec3,
@@ -138,7 +142,7 @@ def make_kernels(wp: ModuleType, real: Any) -> SimpleNamespace:
         kc: real,
         cx: real,
         cv: real,
-        out: wp.array(dtype=real),
+        out: RealArray,
     ):
         # Gershgorin-safe: each spring block's norm is at most k (kd), so -(cx k + cv kd)
         # per spring bounds the diagonal of cx J_x + cv J_v from below.

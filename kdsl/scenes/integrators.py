@@ -34,33 +34,24 @@ JACOBI_ITERS = 40
 @cache
 def make_integrator_kernels(wp: ModuleType, dof: Any, real: Any) -> SimpleNamespace:
     """The update kernels for dof type ``dof`` (a float or vector of ``real``)."""
+    # Array annotations by element type, named once so the kernel signatures stay short.
+    RealArray = wp.array(dtype=real)
+    DofArray = wp.array(dtype=dof)
 
     @wp.kernel(module="unique")
-    def axpy(out: wp.array(dtype=dof), x: wp.array(dtype=dof), a: real, y: wp.array(dtype=dof)):
+    def axpy(out: DofArray, x: DofArray, a: real, y: DofArray):
         i = wp.tid()
         out[i] = x[i] + a * y[i]
 
     @wp.kernel(module="unique")
     def rk4_combine(
-        out: wp.array(dtype=dof),
-        x: wp.array(dtype=dof),
-        h6: real,
-        k1: wp.array(dtype=dof),
-        k2: wp.array(dtype=dof),
-        k3: wp.array(dtype=dof),
-        k4: wp.array(dtype=dof),
+        out: DofArray, x: DofArray, h6: real, k1: DofArray, k2: DofArray, k3: DofArray, k4: DofArray
     ):
         i = wp.tid()
         out[i] = x[i] + h6 * (k1[i] + real(2.0) * (k2[i] + k3[i]) + k4[i])
 
     @wp.kernel(module="unique")
-    def jacobi_update(
-        out: wp.array(dtype=dof),
-        z: wp.array(dtype=dof),
-        b: wp.array(dtype=dof),
-        jz: wp.array(dtype=dof),
-        diag: wp.array(dtype=real),
-    ):
+    def jacobi_update(out: DofArray, z: DofArray, b: DofArray, jz: DofArray, diag: RealArray):
         # (I - C) z = b with C = cx J_x + cv J_v: z += (b - z + C z) / (1 - diag(C))
         i = wp.tid()
         out[i] = z[i] + (b[i] - z[i] + jz[i]) / (real(1.0) - diag[i])

@@ -34,15 +34,12 @@ from kdsl.scenes.reference import small_step_reference
 def make_kernels(wp: ModuleType, real: Any) -> SimpleNamespace:
     """The n-body kernels for float type ``real``."""
     vec3 = wp.types.vector(3, real)
+    # Array annotations by element type, named once so the kernel signatures stay short.
+    Vec3Array = wp.array(dtype=vec3)
+    RealArray = wp.array(dtype=real)
 
     @wp.kernel(module="unique")
-    def gravity_accel(
-        x: wp.array(dtype=vec3),
-        m: wp.array(dtype=real),
-        g: real,
-        eps2: real,
-        out: wp.array(dtype=vec3),
-    ):
+    def gravity_accel(x: Vec3Array, m: RealArray, g: real, eps2: real, out: Vec3Array):
         i = wp.tid()
         xi = x[i]
         a = vec3(real(0.0), real(0.0), real(0.0))
@@ -55,13 +52,7 @@ def make_kernels(wp: ModuleType, real: Any) -> SimpleNamespace:
 
     @wp.kernel(module="unique")
     def gravity_jvp(
-        x: wp.array(dtype=vec3),
-        z: wp.array(dtype=vec3),
-        m: wp.array(dtype=real),
-        g: real,
-        eps2: real,
-        cx: real,
-        out: wp.array(dtype=vec3),
+        x: Vec3Array, z: Vec3Array, m: RealArray, g: real, eps2: real, cx: real, out: Vec3Array
     ):
         # d a_i / d x_j = G m_j (I / r^3 - 3 d d^T / r^5): out_i = cx sum_j T_ij (z_j - z_i).
         i = wp.tid()
@@ -80,14 +71,7 @@ def make_kernels(wp: ModuleType, real: Any) -> SimpleNamespace:
         out[i] = total * cx
 
     @wp.kernel(module="unique")
-    def gravity_diag(
-        x: wp.array(dtype=vec3),
-        m: wp.array(dtype=real),
-        g: real,
-        eps2: real,
-        cx: real,
-        out: wp.array(dtype=real),
-    ):
+    def gravity_diag(x: Vec3Array, m: RealArray, g: real, eps2: real, cx: real, out: RealArray):
         # Gershgorin-safe: each tidal block's norm is at most 2 G m_j / r^3.
         i = wp.tid()
         xi = x[i]

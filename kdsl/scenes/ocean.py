@@ -34,19 +34,22 @@ GRAVITY = 9.81
 def make_kernels(wp: ModuleType, real: Any) -> SimpleNamespace:
     """The ocean kernel for float type ``real``."""
     vec3 = wp.types.vector(3, real)
+    # Array annotations by element type, named once so the kernel signatures stay short.
+    Vec3Array = wp.array(dtype=vec3)
+    RealArray = wp.array(dtype=real)
 
     @wp.kernel(module="unique")
     def gerstner(
-        rest: wp.array(dtype=vec3),
-        dir_x: wp.array(dtype=real),
-        dir_z: wp.array(dtype=real),
-        wavenumber: wp.array(dtype=real),
-        omega: wp.array(dtype=real),
-        amplitude: wp.array(dtype=real),
-        steep: wp.array(dtype=real),
-        phase: wp.array(dtype=real),
+        rest: Vec3Array,
+        dir_x: RealArray,
+        dir_z: RealArray,
+        wavenumber: RealArray,
+        omega: RealArray,
+        amplitude: RealArray,
+        steep: RealArray,
+        phase: RealArray,
         t: real,
-        out: wp.array(dtype=vec3),
+        out: Vec3Array,
     ):
         i = wp.tid()
         a = rest[i]

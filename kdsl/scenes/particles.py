@@ -31,16 +31,13 @@ RK4_REAL_LIMIT = 2.785293563
 def make_kernels(wp: ModuleType, real: Any) -> SimpleNamespace:
     """The particle kernels for float type ``real``."""
     vec3 = wp.types.vector(3, real)
+    # Array annotations by element type, named once so the kernel signatures stay short.
+    Vec3Array = wp.array(dtype=vec3)
+    RealArray = wp.array(dtype=real)
 
     @wp.kernel(module="unique")
     def integrate(
-        x: wp.array(dtype=vec3),
-        v: wp.array(dtype=vec3),
-        f: wp.array(dtype=vec3),
-        w: wp.array(dtype=real),
-        gravity: vec3,
-        drag: real,
-        dt: real,
+        x: Vec3Array, v: Vec3Array, f: Vec3Array, w: RealArray, gravity: vec3, drag: real, dt: real
     ):
         # The seeds' semi-implicit Euler step, with linear drag added.
         tid = wp.tid()
@@ -54,17 +51,17 @@ def make_kernels(wp: ModuleType, real: Any) -> SimpleNamespace:
         v[tid] = v1
 
     @wp.kernel(module="unique")
-    def accel(v: wp.array(dtype=vec3), gravity: vec3, drag: real, a: wp.array(dtype=vec3)):
+    def accel(v: Vec3Array, gravity: vec3, drag: real, a: Vec3Array):
         tid = wp.tid()
         a[tid] = gravity - v[tid] * drag
 
     @wp.kernel(module="unique")
-    def drag_jvp(z: wp.array(dtype=vec3), cv: real, drag: real, out: wp.array(dtype=vec3)):
+    def drag_jvp(z: Vec3Array, cv: real, drag: real, out: Vec3Array):
         tid = wp.tid()
         out[tid] = z[tid] * (-cv * drag)
 
     @wp.kernel(module="unique")
-    def drag_diag(cv: real, drag: real, out: wp.array(dtype=real)):
+    def drag_diag(cv: real, drag: real, out: RealArray):
         out[wp.tid()] = -cv * drag
 
     return SimpleNamespace(integrate=integrate, accel=accel, drag_jvp=drag_jvp,

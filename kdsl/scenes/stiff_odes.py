@@ -51,15 +51,13 @@ RK4_REAL_LIMIT = 2.785293563
 def make_kernels(wp: ModuleType, real: Any) -> SimpleNamespace:
     """The stiff ODE kernels for float type ``real``."""
     vec3 = wp.types.vector(3, real)
+    # Array annotations by element type, named once so the kernel signatures stay short.
+    Vec3Array = wp.array(dtype=vec3)
+    RealArray = wp.array(dtype=real)
+    IntArray = wp.array(dtype=int)
 
     @wp.kernel(module="unique")
-    def stiff_rhs(
-        y: wp.array(dtype=vec3),
-        kind: wp.array(dtype=int),
-        k1: wp.array(dtype=real),
-        inv_eps: real,
-        out: wp.array(dtype=vec3),
-    ):
+    def stiff_rhs(y: Vec3Array, kind: IntArray, k1: RealArray, inv_eps: real, out: Vec3Array):
         i = wp.tid()
         s = y[i]
         f = vec3(real(0.0), real(0.0), real(0.0))
@@ -74,12 +72,7 @@ def make_kernels(wp: ModuleType, real: Any) -> SimpleNamespace:
 
     @wp.kernel(module="unique")
     def stiff_backward_euler(
-        y: wp.array(dtype=vec3),
-        kind: wp.array(dtype=int),
-        k1: wp.array(dtype=real),
-        inv_eps: real,
-        h: real,
-        newton_iters: int,
+        y: Vec3Array, kind: IntArray, k1: RealArray, inv_eps: real, h: real, newton_iters: int
     ):
         # Solve z - y - h f(z) = 0 by Newton from z = y; each iteration solves
         # (I - h J(z)) dz = -(z - y - h f(z)) by Cramer's rule with the columns of I - hJ.

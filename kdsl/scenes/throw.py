@@ -38,17 +38,20 @@ FD_STEP = 1e-5
 def make_kernels(wp: ModuleType, real: Any) -> SimpleNamespace:
     """The throw kernels for float type ``real``."""
     vec3 = wp.types.vector(3, real)
+    # Array annotations by element type, named once so the kernel signatures stay short.
+    Vec3Array = wp.array(dtype=vec3)
+    RealArray = wp.array(dtype=real)
 
     @wp.kernel(module="unique")
     def throw_step(
-        x: wp.array(dtype=vec3),
-        v: wp.array(dtype=vec3),
+        x: Vec3Array,
+        v: Vec3Array,
         g: vec3,
         c: real,
         h: real,
         method: int,
-        x1: wp.array(dtype=vec3),
-        v1: wp.array(dtype=vec3),
+        x1: Vec3Array,
+        v1: Vec3Array,
     ):
         # One flight step with a = g - c v, writing new arrays (the tape replays it).
         i = wp.tid()
@@ -85,15 +88,13 @@ def make_kernels(wp: ModuleType, real: Any) -> SimpleNamespace:
         v1[i] = vn
 
     @wp.kernel(module="unique")
-    def miss_loss(
-        x: wp.array(dtype=vec3), target: wp.array(dtype=vec3), loss: wp.array(dtype=real)
-    ):
+    def miss_loss(x: Vec3Array, target: Vec3Array, loss: RealArray):
         i = wp.tid()
         d = x[i] - target[i]
         wp.atomic_add(loss, 0, wp.dot(d, d))
 
     @wp.kernel(module="unique")
-    def descend(v: wp.array(dtype=vec3), grad: wp.array(dtype=vec3), rate: real):
+    def descend(v: Vec3Array, grad: Vec3Array, rate: real):
         i = wp.tid()
         v[i] = v[i] - grad[i] * rate
 
