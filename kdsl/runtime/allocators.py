@@ -264,5 +264,9 @@ def can_access(device: Any, resource: Any) -> bool:
         return True
     if dev.is_cpu:
         return False
-    # Another GPU's memory: kdsl enables no peer access (the multi-GPU API is apart).
-    return False
+    # Another GPU's memory (cudaMalloc blocks, pooled or not): reachable through peer
+    # access, which set_peer_access_enabled or set_mempool_access_enabled switch on.
+    from kdsl.runtime.peer import is_mempool_access_enabled, is_peer_access_enabled
+
+    owner = resource.device
+    return is_peer_access_enabled(owner, dev) or is_mempool_access_enabled(owner, dev)

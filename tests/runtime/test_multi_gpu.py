@@ -262,3 +262,16 @@ def test_an_array_and_an_event_shared_with_another_process(tmp_path):
 def _double_vec2(a: wp.array(dtype=wp.vec2)):
     i = wp.tid()
     a[i] = a[i] * 2.0
+
+
+@two_gpus
+def test_can_access_follows_peer_access():
+    _peers_or_skip()
+    a0 = wp.zeros(4, device="cuda:0")
+    with wp.ScopedPeerAccess("cuda:0", "cuda:1", False):
+        assert not wp.can_access("cuda:1", a0)
+        with wp.ScopedPeerAccess("cuda:0", "cuda:1", True):
+            assert wp.can_access("cuda:1", a0)
+        with wp.ScopedMempoolAccess("cuda:0", "cuda:1", True):
+            assert wp.can_access("cuda:1", a0)
+    assert wp.can_access("cuda:0", a0) and not wp.can_access("cpu", a0)
