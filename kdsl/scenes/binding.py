@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import importlib
 from types import ModuleType
+from typing import Any, NamedTuple
 
 from kdsl.errors import KdslError
 
@@ -39,3 +40,19 @@ def bind(name: str = "kdsl") -> ModuleType:
 def is_kdsl(wp: ModuleType) -> bool:
     """True when ``wp`` is kdsl (kdsl-only extras, such as ``backend=``, apply)."""
     return wp.__name__ == "kdsl"
+
+
+class KernelTypes(NamedTuple):
+    """The types scene kernels annotate with, for one ``wp`` and float type ``real``."""
+
+    vec3: Any
+    Vec3Array: Any
+    RealArray: Any
+    IntArray: Any
+
+
+def kernel_types(wp: ModuleType, real: Any) -> KernelTypes:
+    """``vec3`` of ``real`` and the arrays of ``vec3``, ``real`` and ``int`` under ``wp``:
+    named once, so that kernel signatures stay short (``x: Vec3Array``)."""
+    vec3 = wp.types.vector(3, real)
+    return KernelTypes(vec3, wp.array(dtype=vec3), wp.array(dtype=real), wp.array(dtype=int))

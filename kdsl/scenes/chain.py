@@ -23,13 +23,13 @@ from typing import Any
 import numpy as np
 
 from kdsl.scenes.base import Scene
+from kdsl.scenes.binding import kernel_types
 
 
 @cache
 def make_kernels(wp: ModuleType, real: Any) -> SimpleNamespace:
     """The chain kernels for float type ``real``."""
-    # Array annotations by element type, named once so the kernel signatures stay short.
-    RealArray = wp.array(dtype=real)
+    RealArray = kernel_types(wp, real).RealArray
 
     @wp.kernel(module="unique")
     def spring_jvp(

@@ -38,6 +38,7 @@ from typing import Any
 import numpy as np
 
 from kdsl.scenes.base import Scene
+from kdsl.scenes.binding import kernel_types
 from kdsl.scenes.reference import small_step_reference
 
 #: Neighbour offsets (di, dj): structural then shear springs.
@@ -48,11 +49,7 @@ SLOTS = len(OFFSETS)
 @cache
 def make_kernels(wp: ModuleType, real: Any) -> SimpleNamespace:
     """The cloth kernels for float type ``real``."""
-    vec3 = wp.types.vector(3, real)
-    # Array annotations by element type, named once so the kernel signatures stay short.
-    Vec3Array = wp.array(dtype=vec3)
-    RealArray = wp.array(dtype=real)
-    IntArray = wp.array(dtype=int)
+    vec3, Vec3Array, RealArray, IntArray = kernel_types(wp, real)
 
     @wp.kernel(module="unique")
     def cloth_accel(

@@ -27,16 +27,14 @@ from typing import Any
 import numpy as np
 
 from kdsl.scenes.base import Scene
+from kdsl.scenes.binding import kernel_types
 from kdsl.scenes.reference import small_step_reference
 
 
 @cache
 def make_kernels(wp: ModuleType, real: Any) -> SimpleNamespace:
     """The n-body kernels for float type ``real``."""
-    vec3 = wp.types.vector(3, real)
-    # Array annotations by element type, named once so the kernel signatures stay short.
-    Vec3Array = wp.array(dtype=vec3)
-    RealArray = wp.array(dtype=real)
+    vec3, Vec3Array, RealArray, _ = kernel_types(wp, real)
 
     @wp.kernel(module="unique")
     def gravity_accel(x: Vec3Array, m: RealArray, g: real, eps2: real, out: Vec3Array):

@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from kdsl.scenes.base import Scene
+from kdsl.scenes.binding import kernel_types
 
 GRAVITY = 9.81
 
@@ -33,10 +34,7 @@ GRAVITY = 9.81
 @cache
 def make_kernels(wp: ModuleType, real: Any) -> SimpleNamespace:
     """The ocean kernel for float type ``real``."""
-    vec3 = wp.types.vector(3, real)
-    # Array annotations by element type, named once so the kernel signatures stay short.
-    Vec3Array = wp.array(dtype=vec3)
-    RealArray = wp.array(dtype=real)
+    vec3, Vec3Array, RealArray, _ = kernel_types(wp, real)
 
     @wp.kernel(module="unique")
     def gerstner(

@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from kdsl.scenes.base import Scene
+from kdsl.scenes.binding import kernel_types
 
 #: RK4's stability interval on the negative real axis.
 RK4_REAL_LIMIT = 2.785293563
@@ -30,10 +31,7 @@ RK4_REAL_LIMIT = 2.785293563
 @cache
 def make_kernels(wp: ModuleType, real: Any) -> SimpleNamespace:
     """The particle kernels for float type ``real``."""
-    vec3 = wp.types.vector(3, real)
-    # Array annotations by element type, named once so the kernel signatures stay short.
-    Vec3Array = wp.array(dtype=vec3)
-    RealArray = wp.array(dtype=real)
+    vec3, Vec3Array, RealArray, _ = kernel_types(wp, real)
 
     @wp.kernel(module="unique")
     def integrate(

@@ -36,6 +36,7 @@ from typing import Any
 import numpy as np
 
 from kdsl.scenes.base import FIRST_ORDER_INTEGRATORS, Scene
+from kdsl.scenes.binding import kernel_types
 
 #: Robertson's fast rate constants.
 K2, K3 = 3.0e7, 1.0e4
@@ -50,11 +51,7 @@ RK4_REAL_LIMIT = 2.785293563
 @cache
 def make_kernels(wp: ModuleType, real: Any) -> SimpleNamespace:
     """The stiff ODE kernels for float type ``real``."""
-    vec3 = wp.types.vector(3, real)
-    # Array annotations by element type, named once so the kernel signatures stay short.
-    Vec3Array = wp.array(dtype=vec3)
-    RealArray = wp.array(dtype=real)
-    IntArray = wp.array(dtype=int)
+    vec3, Vec3Array, RealArray, IntArray = kernel_types(wp, real)
 
     @wp.kernel(module="unique")
     def stiff_rhs(y: Vec3Array, kind: IntArray, k1: RealArray, inv_eps: real, out: Vec3Array):

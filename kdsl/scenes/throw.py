@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from kdsl.scenes.base import Scene
+from kdsl.scenes.binding import kernel_types
 
 #: Integrator name -> the ``method`` switch of ``throw_step``.
 METHODS = {"symplectic_euler": 0, "explicit_euler": 1, "velocity_verlet": 2, "rk4": 3,
@@ -37,10 +38,7 @@ FD_STEP = 1e-5
 @cache
 def make_kernels(wp: ModuleType, real: Any) -> SimpleNamespace:
     """The throw kernels for float type ``real``."""
-    vec3 = wp.types.vector(3, real)
-    # Array annotations by element type, named once so the kernel signatures stay short.
-    Vec3Array = wp.array(dtype=vec3)
-    RealArray = wp.array(dtype=real)
+    vec3, Vec3Array, RealArray, _ = kernel_types(wp, real)
 
     @wp.kernel(module="unique")
     def throw_step(
