@@ -113,6 +113,15 @@ class Scene:
     def setup(self) -> None:
         """Derive host-side constants from ``self.params`` (before the kernels)."""
 
+    def int_param(self, name: str, minimum: int, why: str = "") -> int:
+        """Parameter ``name`` as an int, a ``SceneError`` when it is below ``minimum``
+        (``why``, if given, says why in the message)."""
+        n = int(self.params[name])
+        if n < minimum:
+            reason = f" ({why})" if why else ""
+            raise SceneError(f"{self.name} needs {name} >= {minimum}{reason}, not {n}")
+        return n
+
     def make_kernels(self, wp: ModuleType, real: Any) -> Any:
         """The scene's kernels for ``wp`` and float type ``real`` (a namespace)."""
         raise NotImplementedError

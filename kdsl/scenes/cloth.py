@@ -174,11 +174,7 @@ class Cloth(Scene):
 
     def setup(self) -> None:
         p = self.params
-        n = int(p["grid"])
-        if n < 2:
-            from kdsl.scenes.binding import SceneError
-
-            raise SceneError(f"cloth needs grid >= 2, not {n}")
+        n = self.int_param("grid", 2)
         self.grid_n, L = n, float(p["scale"])
         self.velocity_dependent = p["damping"] != 0.0
         s = np.linspace(-0.5, 0.5, n) * p["size"]

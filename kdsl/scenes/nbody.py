@@ -102,11 +102,7 @@ class NBody(Scene):
 
     def setup(self) -> None:
         p = self.params
-        n = int(p["count"])
-        if n < 2:
-            from kdsl.scenes.binding import SceneError
-
-            raise SceneError(f"nbody needs count >= 2, not {n}")
+        n = self.int_param("count", 2)
         L = float(p["scale"])
         rng = np.random.default_rng(int(p["seed"]))
         m = np.where(np.arange(n) % 2 == 0, 1.0, float(p["mass_ratio"]))

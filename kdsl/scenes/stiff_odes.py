@@ -194,11 +194,7 @@ class StiffOdes(Scene):
     assert set(integrators) == set(FIRST_ORDER_INTEGRATORS)
 
     def setup(self) -> None:
-        n = int(self.params["count"])
-        if n < 2:
-            from kdsl.scenes.binding import SceneError
-
-            raise SceneError(f"stiff_odes needs count >= 2 (one of each system), not {n}")
+        n = self.int_param("count", 2, "one of each system")
         i = np.arange(n)
         self.kind = (i % 2).astype(np.int32)
         frac = (i // 2) / max(1, (n - 1) // 2)

@@ -49,6 +49,16 @@ def test_stiff_odes_needs_both_systems():
         make_scene("stiff_odes", "f64", count=1)
 
 
+@pytest.mark.parametrize(("name", "params", "message"),
+                         [("cloth", {"grid": 1}, "cloth needs grid >= 2, not 1"),
+                          ("nbody", {"count": 1}, "nbody needs count >= 2, not 1")])  # fmt: skip
+def test_scene_size_below_its_minimum_is_a_scene_error(name, params, message):
+    from kdsl.scenes import SceneError
+
+    with pytest.raises(SceneError, match=message):
+        make_scene(name, "f64", **params)
+
+
 # --------------------------------------------------------------------------- throw
 
 
