@@ -36,6 +36,11 @@ def make_kernels(wp: ModuleType, real: Any) -> SimpleNamespace:
     """The n-body kernels for float type ``real``."""
     vec3, Vec3Array, RealArray, _ = kernel_types(wp, real)
 
+    @wp.func
+    def softened_inv_r(d: vec3, eps2: real) -> real:
+        # 1 / sqrt(|d|^2 + eps2): the softening keeps close encounters finite.
+        return real(1.0) / wp.sqrt(wp.dot(d, d) + eps2)
+
     @wp.kernel(module="unique")
     def gravity_accel(x: Vec3Array, m: RealArray, g: real, eps2: real, out: Vec3Array):
         i = wp.tid()
@@ -43,8 +48,7 @@ def make_kernels(wp: ModuleType, real: Any) -> SimpleNamespace:
         a = vec3(real(0.0), real(0.0), real(0.0))
         for j in range(x.shape[0]):
             d = x[j] - xi
-            r2 = wp.dot(d, d) + eps2
-            inv_r = real(1.0) / wp.sqrt(r2)
+            inv_r = softened_inv_r(d, eps2)
             a = a + d * (g * m[j] * inv_r * inv_r * inv_r)
         out[i] = a
 
@@ -59,8 +63,7 @@ def make_kernels(wp: ModuleType, real: Any) -> SimpleNamespace:
         total = vec3(real(0.0), real(0.0), real(0.0))
         for j in range(x.shape[0]):
             d = x[j] - xi
-            r2 = wp.dot(d, d) + eps2
-            inv_r = real(1.0) / wp.sqrt(r2)
+            inv_r = softened_inv_r(d, eps2)
             inv_r3 = inv_r * inv_r * inv_r
             dz = z[j] - zi
             total = total + (dz - d * (real(3.0) * wp.dot(d, dz) * inv_r * inv_r)) * (
@@ -75,9 +78,7 @@ def make_kernels(wp: ModuleType, real: Any) -> SimpleNamespace:
         xi = x[i]
         total = real(0.0)
         for j in range(x.shape[0]):
-            d = x[j] - xi
-            r2 = wp.dot(d, d) + eps2
-            inv_r = real(1.0) / wp.sqrt(r2)
+            inv_r = softened_inv_r(x[j] - xi, eps2)
             if j != i:
                 total = total + real(2.0) * g * m[j] * inv_r * inv_r * inv_r
         out[i] = -cx * total
