@@ -57,7 +57,7 @@ def point_ids(grid: wp.uint64, out: wp.array(dtype=int)):
 def brute_sums(p: np.ndarray, radius: float) -> np.ndarray:
     p64 = p.astype(np.float64)
     near = np.linalg.norm(p64[:, None] - p64[None], axis=2) < radius
-    return near @ p64
+    return near @ np.nan_to_num(p64)  # a NaN point is no one's neighbour (not even its own)
 
 
 def run_sum(grid, pts, radius, backend, device="cpu"):
@@ -115,10 +115,12 @@ def model_candidates(p, dims, radius, centres, max_dist):
 
 
 def scene(rng, n):
-    """Points in a unit box, a few far outside it (their cells wrap) and some coincident."""
+    """Points in a unit box, a few far outside it (their cells wrap), some coincident, one
+    with a NaN coordinate (cell 0 on that axis) and two beyond int32 cells (clamped)."""
     p = rng.random((n, 3)).astype(np.float32)
     p[: n // 10] = rng.uniform(-3.0, 4.0, (n // 10, 3))
     p[-3:] = p[-4]
+    p[n // 10 : n // 10 + 3] = [[np.nan, 0.5, 0.5], [1e30, 0.2, 0.3], [0.4, -1e30, 0.6]]
     return p
 
 
