@@ -86,3 +86,14 @@ def compile_options(options: Mapping[str, Any]) -> dict[str, Any]:
     if fp:
         out["verify_fp"] = True
     return out
+
+
+def package_version() -> str:
+    """kdsl's version as installed, or ``"source"`` when it runs from a checkout that was
+    never installed (``PYTHONPATH`` pointing at the source tree)."""
+    from importlib import metadata
+
+    try:
+        return metadata.version("kdsl")
+    except metadata.PackageNotFoundError:
+        return "source"

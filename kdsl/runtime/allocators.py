@@ -98,7 +98,9 @@ class CudaManagedAllocator:
     def allocate(self, size_in_bytes: int) -> int:
         """``size_in_bytes`` of managed memory; the pointer."""
         rt = cupy().cuda.runtime
-        return int(rt.mallocManaged(max(int(size_in_bytes), 1), rt.memAttachGlobal))
+        # CuPy names the flag cudaMemAttachGlobal (1 in the CUDA headers).
+        flag = getattr(rt, "cudaMemAttachGlobal", 1)
+        return int(rt.mallocManaged(max(int(size_in_bytes), 1), flag))
 
     def deallocate(self, ptr: int, size_in_bytes: int) -> None:
         """``cudaFree`` the block at ``ptr``."""

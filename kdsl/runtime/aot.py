@@ -21,11 +21,11 @@ from __future__ import annotations
 import hashlib
 import os
 import platform
-from importlib import metadata
 from pathlib import Path
 from typing import Any
 
 from kdsl.compiler.cache import KernelNotCompiledError, aot_directory, cache_dir
+from kdsl.config import package_version
 from kdsl.errors import KdslCapabilityError, KdslTypeError, KdslValueError, api_boundary
 from kdsl.runtime.device import Device, get_device
 from kdsl.runtime.modules import Module, forget_compiled, get_module
@@ -137,4 +137,4 @@ def get_cpu_kernel_cache_key(*, cpu_compiler_flags: str | None = None) -> str:
     cpu = get_backend("cpu")
     target = cpu.cache_target(jit.target_id())
     digest = hashlib.sha256(f"{cpu.code_version()}\0{target}".encode()).hexdigest()[:8]
-    return f"{metadata.version('kdsl')}-{platform.system()}-{platform.machine()}-{digest}"
+    return f"{package_version()}-{platform.system()}-{platform.machine()}-{digest}"

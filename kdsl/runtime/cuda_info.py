@@ -14,6 +14,7 @@ import platform
 import sys
 from typing import Any
 
+from kdsl.config import package_version
 from kdsl.errors import KdslError, KdslTypeError, KdslValueError
 from kdsl.runtime.device import Device, cupy, get_device, get_devices, is_cuda_available
 
@@ -156,13 +157,11 @@ def clear_lto_cache() -> None:
 
 def print_diagnostics() -> dict:
     """Print and return what kdsl sees: versions, backends, devices, CUDA."""
-    from importlib import metadata
-
     import llvmlite
     import numpy
 
     info: dict[str, Any] = {
-        "kdsl_version": metadata.version("kdsl"),
+        "kdsl_version": package_version(),
         "python": sys.version.split()[0],
         "platform": platform.platform(),
         "numpy": numpy.__version__,
