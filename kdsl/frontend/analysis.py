@@ -40,6 +40,8 @@ class _Assigned(ast.NodeVisitor):
 
     def visit_For(self, node: ast.For) -> None:
         _target_names(node.target, self.names)
+        if isinstance(node.iter, ast.Name):  # ``for i in query:`` advances the query in place
+            self.names.add(node.iter.id)
         for s in node.body + node.orelse:
             self.visit(s)
 

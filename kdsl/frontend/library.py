@@ -46,3 +46,19 @@ def library_function(name: str) -> Any:
             "loads kdsl.stdlib) before compiling kernels"
         )
     return fn
+
+
+#: Query struct types (IR ``StructType``) -> the ``..._next`` function that advances them,
+#: so ``for index in query:`` iterates a geometry query as in Warp.
+_QUERY_ITERATORS: dict[Any, Any] = {}
+
+
+def register_query_iterator(query_type: Any, next_fn: Any) -> None:
+    """Let ``for index in q:`` run ``while next_fn(q, index):`` for a ``q`` of ``query_type``
+    (a ``@kdsl.struct`` class); ``next_fn(query, index)`` advances both in place."""
+    _QUERY_ITERATORS[query_type.__kdsl_type__] = next_fn
+
+
+def query_iterator(t: Any) -> Any | None:
+    """The ``..._next`` function registered for query type ``t``, or None."""
+    return _QUERY_ITERATORS.get(t)

@@ -11,6 +11,7 @@ from kdsl.frontend.analysis import BREAK, CONTINUE, RETURN, always_exits, exits
 from kdsl.frontend.builtins import BUILTINS, PYTHON_ALIASES
 from kdsl.frontend.control import BRK, CONT, MAX_UNROLL, RET, ControlFlowLowering
 from kdsl.frontend.expressions import BINOPS, COMPONENTS
+from kdsl.frontend.library import query_iterator
 from kdsl.frontend.static import static
 from kdsl.frontend.structs import is_indexed
 from kdsl.frontend.values import ShapeOf, describe, is_hashable, is_weak
@@ -240,6 +241,12 @@ class StatementLowering(ControlFlowLowering):
                 raise self.error(KdslTypeError, "static() in a for loop must give a range", it)
             self.unroll(node, list(values))
             return
+        if isinstance(it, ast.Name):  # for index in query: (a geometry query, as in Warp)
+            q = self.lookup_local(it.id, it)
+            advance = query_iterator(q.type) if isinstance(q, Value) else None
+            if advance is not None:
+                self.lower_query_for(node, it.id, advance)
+                return
         backwards = _is_reversed_range(self, it)
         if backwards:  # for i in reversed(range(...))
             it = it.args[0]
@@ -263,6 +270,24 @@ class StatementLowering(ControlFlowLowering):
             self.lower_range_for(node.target.id, bounds, node.body, node)
         finally:
             self.loop_depth -= 1
+
+    def lower_query_for(self, node: ast.For, query: str, advance: Any) -> None:
+        """``for index in query: body`` as ``index = 0; while advance(query, index): body``
+        (``advance`` updates both in place: the in-out call rebinding of ``inout.py``)."""
+        name = f"__kdsl_query_next_{getattr(advance, '__name__', 'fn')}"
+        self.globals[name] = advance
+        target = node.target.id
+        init = ast.Assign(targets=[ast.Name(id=target, ctx=ast.Store())], value=ast.Constant(0))
+        test = ast.Call(
+            func=ast.Name(id=name, ctx=ast.Load()),
+            args=[ast.Name(id=query, ctx=ast.Load()), ast.Name(id=target, ctx=ast.Load())],
+            keywords=[],
+        )
+        loop = ast.While(test=test, body=node.body, orelse=[])
+        for new in (init, *ast.walk(init), loop, *ast.walk(test)):
+            ast.copy_location(new, node)
+        self.visit(init)
+        self.visit(loop)
 
     def range_bounds(self, args: list[Any], node: ast.AST) -> list[Value]:
         lb, ub, step = (0, args[0], 1) if len(args) == 1 else (*args, 1)[:3]

@@ -15,8 +15,15 @@ from kdsl.stdlib.transform import *  # noqa: F403
 
 # isort: split
 # The functions the frontend lowers quaternion and transform syntax to (q * q, t.p, ...).
-from kdsl.frontend.library import REQUIRED, register_library
+from kdsl.frontend.library import REQUIRED, register_library, register_query_iterator
+from kdsl.stdlib import bvh as _bvh
+from kdsl.stdlib import hash_grid as _hash_grid
+from kdsl.stdlib import mesh as _mesh
 from kdsl.stdlib import quat as _quat
 from kdsl.stdlib import transform as _transform
 
 register_library({n: getattr(_quat, n, None) or getattr(_transform, n) for n in REQUIRED})
+# ``for index in query:`` over geometry queries, as in Warp.
+register_query_iterator(_bvh.BvhQuery, _bvh.bvh_query_next)
+register_query_iterator(_hash_grid.HashGridQuery, _hash_grid.hash_grid_query_next)
+register_query_iterator(_mesh.MeshQueryAABB, _mesh.mesh_query_aabb_next)
