@@ -30,7 +30,7 @@ LAYERS: list[set[str]] = [
     {"jax_experimental"},
     {"scenes"},  # user code on the public API, above everything (docs/scenes.md)
 ]
-FACADES = {"__init__", "__main__", "cli", "testing", "tools"}
+FACADES = {"__init__", "__main__", "cli", "testing", "tools", "examples"}
 #: Upward imports allowed, with the reason. The standard library is kernel code written
 #: against the public API (``wp.sin``, ``wp.vec3``), as user code is: the frontend
 #: resolves those names when it compiles a body, and ``kdsl/__init__.py`` imports the
