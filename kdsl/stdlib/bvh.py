@@ -26,6 +26,7 @@ depth-first order, left child first.
 import kdsl as wp
 from kdsl.frontend.inout import inout
 from kdsl.frontend.kernel import func
+from kdsl.stdlib.mesh_primitives import greater, lesser, safe_inverse
 
 __kdsl_group__ = "geometry"
 
@@ -100,7 +101,7 @@ def _bvh_query(
     q.kind = kind
     q.a = a
     q.b = b
-    q.inv_b = wp.vec3(_safe_inv(b[0]), _safe_inv(b[1]), _safe_inv(b[2]))
+    q.inv_b = wp.vec3(safe_inverse(b[0]), safe_inverse(b[1]), safe_inverse(b[2]))
     swept = kind == RAY
     swept = swept or kind == CAPSULE
     if swept and (b[0] == 0.0 or b[1] == 0.0 or b[2] == 0.0):
@@ -117,15 +118,6 @@ def _bvh_query(
     q.leaf_pos = 0
     q.leaf_end = 0
     return q
-
-
-@func
-def _safe_inv(x: float) -> float:
-    # A zero direction component: ``_ray_box_parallel`` decides that slab (an infinite
-    # 1 / 0 would give 0 * inf = NaN for a ray starting on a face).
-    if x == 0.0:
-        return 1.0e30
-    return 1.0 / x
 
 
 @func
@@ -158,19 +150,6 @@ def bvh_query_capsule(
 
 
 @func
-def _lesser(a: float, b: float) -> float:
-    # One compare and select (minss on x86); wp.min is IEEE minimumNum, which also
-    # orders -0 below +0 and costs several instructions on a CPU. NaN boxes are kept
-    # out by ``_no_nan`` where an item is reported, not here.
-    return wp.where(a < b, a, b)
-
-
-@func
-def _greater(a: float, b: float) -> float:
-    return wp.where(a > b, a, b)
-
-
-@func
 def _ray_box(
     lo: wp.vec3, hi: wp.vec3, start: wp.vec3, inv: wp.vec3, max_t: float, closed: bool
 ) -> bool:
@@ -179,8 +158,8 @@ def _ray_box(
     rays are half-open)."""
     t0 = wp.cw_mul(lo - start, inv)
     t1 = wp.cw_mul(hi - start, inv)
-    tmin = _greater(_greater(_lesser(t0[0], t1[0]), _lesser(t0[1], t1[1])), _lesser(t0[2], t1[2]))
-    tmax = _lesser(_lesser(_greater(t0[0], t1[0]), _greater(t0[1], t1[1])), _greater(t0[2], t1[2]))
+    tmin = greater(greater(lesser(t0[0], t1[0]), lesser(t0[1], t1[1])), lesser(t0[2], t1[2]))
+    tmax = lesser(lesser(greater(t0[0], t1[0]), greater(t0[1], t1[1])), greater(t0[2], t1[2]))
     return tmin <= tmax and tmax >= 0.0 and (tmin < max_t or (closed and tmin == max_t))
 
 
@@ -201,8 +180,8 @@ def _ray_box_parallel(
         if dir[k] == 0.0:
             inside = inside and lo[k] <= start[k] and start[k] <= hi[k]
         else:
-            tmin = _greater(tmin, _lesser(t0[k], t1[k]))
-            tmax = _lesser(tmax, _greater(t0[k], t1[k]))
+            tmin = greater(tmin, lesser(t0[k], t1[k]))
+            tmax = lesser(tmax, greater(t0[k], t1[k]))
     hit = inside and tmin <= tmax and tmax >= 0.0
     return hit and (tmin < max_t or (closed and tmin == max_t))
 
@@ -212,7 +191,7 @@ def _box_distance_sq(lo: wp.vec3, hi: wp.vec3, p: wp.vec3) -> float:
     """Squared distance from ``p`` to the closed box ``[lo, hi]`` (0 inside)."""
     total = 0.0
     for k in range(3):
-        d = _greater(_greater(lo[k] - p[k], p[k] - hi[k]), 0.0)
+        d = greater(greater(lo[k] - p[k], p[k] - hi[k]), 0.0)
         total = total + d * d
     return total
 

@@ -148,13 +148,14 @@ def safe_inverse(x: float) -> float:
 
 
 @func
-def _lesser(a: float, b: float) -> float:
-    # ``a < b ? a : b`` (one minss), not ``wp.min``: see ``box_distance_sq``.
+def lesser(a: float, b: float) -> float:
+    """``a < b ? a : b`` (one minss on x86), not ``wp.min``: see ``box_distance_sq``."""
     return a if a < b else b
 
 
 @func
-def _greater(a: float, b: float) -> float:
+def greater(a: float, b: float) -> float:
+    """``a > b ? a : b`` (one maxss on x86), not ``wp.max``: see ``box_distance_sq``."""
     return a if a > b else b
 
 
@@ -172,8 +173,8 @@ def ray_box_enter(lo: wp.vec3, hi: wp.vec3, start: wp.vec3, inv: wp.vec3) -> flo
     pad = (wp.abs(lo) + wp.abs(hi)) * BOX_PAD + wp.vec3(1.0e-20)
     t0 = wp.cw_mul(lo - pad - start, inv)
     t1 = wp.cw_mul(hi + pad - start, inv)
-    near = _greater(_greater(_lesser(t0[0], t1[0]), _lesser(t0[1], t1[1])), _lesser(t0[2], t1[2]))
-    far = _lesser(_lesser(_greater(t0[0], t1[0]), _greater(t0[1], t1[1])), _greater(t0[2], t1[2]))
+    near = greater(greater(lesser(t0[0], t1[0]), lesser(t0[1], t1[1])), lesser(t0[2], t1[2]))
+    far = lesser(lesser(greater(t0[0], t1[0]), greater(t0[1], t1[1])), greater(t0[2], t1[2]))
     far = far * BOX_EXIT_SLACK
     if near <= far and far >= 0.0:
         return near
