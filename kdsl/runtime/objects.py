@@ -115,7 +115,6 @@ class ObjectRecord:
         with _lock:
             self.id = _table(self.device).allocate(size)
             _owners[self.id] = (weakref.ref(owner), kind, self.device.alias)
-        self._size = size
         self._finalizer = weakref.finalize(owner, _release, self.device, self.id, size)
 
     def write(self, fields: dict[str, Any]) -> None:
