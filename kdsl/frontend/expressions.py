@@ -20,6 +20,7 @@ from kdsl.errors import (
 from kdsl.frontend import geometry, structs
 from kdsl.frontend.builtins import PYTHON_ALIASES, PYTHON_CASTS
 from kdsl.frontend.builtins_base import Builtin, cast
+from kdsl.frontend.comparisons import comparison_type
 from kdsl.frontend.emitter import Emitter, component_count
 from kdsl.frontend.static import static
 from kdsl.frontend.structs import is_indexed
@@ -183,7 +184,7 @@ class ExpressionLowering(Emitter):
             if is_weak(left) and is_weak(right):
                 r: Any = fold_literal("arith.cmp", left, right, pred=pred)
             else:
-                x, y = self.coerce_pair(left, right, node)
+                x, y = self.comparable_pair(left, right, node)
                 r = self.emit("arith.cmp", x, y, node=node, pred=pred)
             if result is None:
                 result = r
@@ -194,6 +195,18 @@ class ExpressionLowering(Emitter):
                                    node=node)  # fmt: skip
             left = right
         return result
+
+    def comparable_pair(self, left: Any, right: Any, node: ast.AST) -> tuple[Value, Value]:
+        """Two operands of a comparison, scalars of different types converted to a common
+        one as Warp's C comparisons do (the rule is in ``comparisons.py``)."""
+        x, y = self.coerce_pair(left, right, node)
+        a, b = x.type, y.type
+        if a == b or not (isinstance(a, ScalarType) and isinstance(b, ScalarType)):
+            return x, y
+        common = comparison_type(a, b)
+        if isinstance(common, str):
+            raise self.error(KdslTypeError, common, node)
+        return cast(self, common, [x], node), cast(self, common, [y], node)
 
     def visit_IfExp(self, node: ast.IfExp) -> Any:
         cond = self.visit(node.test)
