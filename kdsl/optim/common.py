@@ -32,12 +32,18 @@ class OptimShapeError(OptimError, ValueError):
     """A gradient whose shape is not the parameter's (a ``ValueError``, as in Warp)."""
 
 
-def value_type(dtype: Any) -> T.Type | None:
-    """The IR type of a parameter dtype the optimizers update, or None."""
+def value_type(dtype: Any, quats: bool = False) -> T.Type | None:
+    """The IR type of a parameter dtype the optimizers update, or None.
+
+    ``quats``: quaternions count too (SGD's update is a linear combination, which Warp's
+    SGD applies to quaternions component-wise; Adam's squares do not apply to them).
+    """
     try:
         t = type_of(dtype)
     except TypeError:
         return None
+    if quats and isinstance(t, T.QuatType) and t.elem.is_float:
+        return t
     if isinstance(t, T.QuatType | T.TransformType):  # not componentwise values
         return None
     if isinstance(t, T.ScalarType | T.VectorType | T.MatrixType) and T.elem_type(t).is_float:
@@ -59,8 +65,9 @@ def type_name(dtype: Any) -> str:
     return getattr(dtype, "__name__", repr(dtype))
 
 
-def check_params(who: str, params: Any) -> list[array] | None:
-    """``params`` as a list of kdsl arrays of supported dtypes (None stays None)."""
+def check_params(who: str, params: Any, quats: bool = False) -> list[array] | None:
+    """``params`` as a list of kdsl arrays of supported dtypes (None stays None);
+    ``quats`` as in ``value_type``."""
     if params is None:
         return None
     if isinstance(params, array) or not isinstance(params, Sequence):
@@ -68,10 +75,11 @@ def check_params(who: str, params: Any) -> list[array] | None:
     for i, p in enumerate(params):
         if not isinstance(p, array):
             raise OptimError(f"{who} params[{i}] must be a kdsl array, got {type(p).__name__}")
-        if value_type(p.dtype) is None:
+        if value_type(p.dtype, quats) is None:
             raise OptimError(
                 f"{who} params[{i}] has dtype {type_name(p.dtype)}; supported are float16, "
-                "float32, float64 and vectors and matrices of them"
+                f"float32, float64 and vectors{', quaternions' if quats else ''} and "
+                "matrices of them"
             )
         flat(p, f"{who} params[{i}]")
     return list(params)

@@ -63,7 +63,7 @@ class SGD:
     def set_params(self, params: list[array] | None) -> None:
         """Set the arrays to optimize; momentum buffers are (re)allocated where they no
         longer fit (shape or dtype) and moved where the parameter moved, as in Warp."""
-        self.params = check_params("SGD", params)
+        self.params = check_params("SGD", params, quats=True)
         if not self.params:
             return
         self.b = fitted(self.b, self.params, lambda p: p.dtype)
@@ -91,7 +91,7 @@ class SGD:
         nesterov: bool, t: int, params: array, *, backend: Any = None,
     ) -> None:  # fmt: skip
         """One SGD update of ``params`` in place, with momentum buffer ``b`` and step ``t``."""
-        (params,) = check_params("SGD", [params])
+        (params,) = check_params("SGD", [params], quats=True)
         check_like("SGD", "gradient", g, params)
         check_like("SGD", "momentum buffer", b, params)
         scalars = [check_number("SGD", n, x) for n, x in
@@ -99,7 +99,7 @@ class SGD:
                     ("weight_decay", weight_decay))]  # fmt: skip
         flat_p = flat(params, "SGD params")
         launch(
-            sgd_kernel(value_type(params.dtype)), dim=flat_p.shape[0],
+            sgd_kernel(value_type(params.dtype, quats=True)), dim=flat_p.shape[0],
             inputs=[flat(g, "SGD gradient"), flat(b, "SGD momentum buffer"), *scalars,
                     int(bool(nesterov)), int(t), flat_p],
             device=params.device, backend=backend,

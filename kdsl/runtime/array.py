@@ -628,6 +628,15 @@ def _from_data(
             f"data of shape {buf.shape} cannot hold {t} elements: its last dims must be {inner}"
         )
     outer = buf.ndim - len(inner)
+    if outer == 0 and inner:
+        # One vector/matrix value (``wp.array(np.array(q), dtype=wp.quat)``): Warp makes
+        # a one-element array of it.
+        buf, outer = buf.reshape((1, *inner)), 1
+    elif outer == 0:
+        raise KdslError(
+            f"array data must be a sequence or an array, not the scalar {data!r:.40}; "
+            "write array([x]) for a one-element array"
+        )
     if ndim is not None and outer != ndim:
         raise KdslError(f"data has {outer} dimensions but ndim={ndim}")
     if not 1 <= outer <= 4:

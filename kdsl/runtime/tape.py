@@ -22,6 +22,7 @@ from collections.abc import Callable, Iterable, Sequence
 from typing import Any, NamedTuple
 
 from kdsl.errors import KdslError, api_boundary
+from kdsl.ir.types import StructType
 from kdsl.runtime.array import array
 
 # The active tapes, outermost first; launch() records on the last one.
@@ -150,6 +151,10 @@ class Tape:
         if isinstance(a, array) and a.grad is not None:
             self.gradients[a] = a.grad
             return a.grad
+        # A struct's adjoint is built at the adjoint launch; its array fields' gradients
+        # are tracked here, so ``tape.gradients[s.field]`` and ``zero()`` reach them (Warp).
+        for field, grad in _struct_field_grads(a):
+            self.gradients[field] = grad
         return None
 
     @api_boundary
@@ -181,7 +186,7 @@ class Tape:
     def _replay(self, rec: LaunchRecord) -> None:
         args = [*rec.inputs, *rec.outputs]
         adj = [self.get_adjoint(a) for a in args]
-        if all(g is None for g in adj):
+        if all(g is None for g in adj) and not any(_struct_field_grads(a) for a in args):
             return  # no argument carries a gradient: the adjoint would change nothing
         from kdsl.runtime.modules import backward_enabled
 
@@ -211,6 +216,23 @@ class Tape:
         self.scopes = []
         self.gradients = {}
         self.loss = None
+
+
+def _struct_field_grads(value: Any) -> list[tuple[array, array]]:
+    """(array, gradient) for every array field with a gradient in a struct value, nested
+    structs included; [] for anything else."""
+    t = getattr(value, "__kdsl_type__", None)
+    if not isinstance(t, StructType):
+        return []
+    out = []
+    for name, _ in t.fields:
+        x = getattr(value, name, None)
+        if isinstance(x, array):
+            if x.grad is not None:
+                out.append((x, x.grad))
+        else:
+            out += _struct_field_grads(x)
+    return out
 
 
 def _seed_loss(loss: Any) -> None:

@@ -268,10 +268,31 @@ def test_bad_parameters_are_refused(cls):
         cls(wp.zeros(2, dtype=float))
     with pytest.raises(OptimError, match=r"params\[0\] must be contiguous or one-dimensional"):
         cls([wp.zeros((4, 4), dtype=float)[:, 1:3]])
-    with pytest.raises(OptimError, match="quat"):
-        cls([wp.zeros(2, dtype=wp.quat)])
+    with pytest.raises(OptimError, match=r"params\[0\] has dtype transformf"):
+        cls([wp.zeros(2, dtype=wp.transform)])
     with pytest.raises(OptimError, match="lr must be a real number, got 'fast'"):
         cls([wp.zeros(2, dtype=float)], lr="fast")
+
+
+@pytest.mark.parametrize("device, backend", TARGETS)
+def test_sgd_updates_quaternions_component_wise_as_warps_does(device, backend):
+    rng = np.random.default_rng(3)
+    p0 = _random(wp.quat, rng)
+    params = wp.array(p0, dtype=wp.quat, device=device)
+    opt = SGD([params], lr=0.1, momentum=0.5, weight_decay=0.1, backend=backend)
+    ref = SGDRef(p0, 0.1, momentum=0.5, dampening=0.0, weight_decay=0.1, nesterov=False)
+    for _ in range(2):
+        g = _random(wp.quat, rng)
+        opt.step([wp.array(g, dtype=wp.quat, device=device)])
+        ref.step(g)
+        _close(params.numpy(), ref.p, wp.quat)
+
+
+def test_adam_refuses_quaternions_as_warps_does():
+    with pytest.raises(
+        OptimError, match=r"params\[0\] has dtype quatf; supported are .* vectors and"
+    ):
+        Adam([wp.zeros(2, dtype=wp.quat)])
 
 
 def test_bad_adam_hyperparameters_and_buffers_are_refused():

@@ -126,6 +126,17 @@ def test_from_numpy_infers_vectors_from_inner_dims():
         wp.from_numpy(np.zeros((4, 2)), dtype=wp.vec3)
 
 
+def test_one_composite_value_makes_a_one_element_array_as_in_warp():
+    # Warp's optim/example_diffray: wp.array(np.array(rot), dtype=wp.quat)
+    q = wp.array(np.array([0.0, 0.0, 0.0, 1.0]), dtype=wp.quat)
+    assert q.shape == (1,) and q.numpy().tolist() == [[0, 0, 0, 1]]
+    assert wp.array(np.eye(3), dtype=wp.mat33).shape == (1,)
+    assert wp.array(wp.vec3(1, 2, 3), dtype=wp.vec3, ndim=1).shape == (1,)
+    for scalar in (3.0, np.float32(3.0)):
+        with pytest.raises(KdslError, match=r"not the scalar (np.float32\()?3.0\)?; write array"):
+            wp.array(scalar, dtype=float)
+
+
 def test_array_from_numpy_without_copy_shares_memory():
     data = np.zeros(3, np.float32)
     a = wp.array(data, dtype=float, copy=False)
