@@ -21,13 +21,18 @@ so the exchange and the kernels are ordered on one stream.
 
 from __future__ import annotations
 
+import contextlib
 import threading
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
 import numpy as np
 
 from kdsl.scenes.binding import SceneError
+
+
+class HaloError(SceneError):
+    """A collective between strips failed: a rank died, stalled past the timeout, or broke."""
 
 
 class SingleStrip:
@@ -201,14 +206,27 @@ class TorchHalo:
             ops.append(dist.P2POp(dist.irecv, self._tensor(bottom), down, self.group))
             ops.append(dist.P2POp(dist.isend, self._tensor(last_row), down, self.group))
         if ops:
-            for work in dist.batch_isend_irecv(ops):
-                work.wait()
+            with self._failing("exchanging ghost rows"):
+                for work in dist.batch_isend_irecv(ops):
+                    work.wait()
+
+    @contextlib.contextmanager
+    def _failing(self, what: str) -> Iterator[None]:
+        """Turn torch's error for a dead or stalled peer into a ``HaloError`` saying so."""
+        try:
+            yield
+        except (RuntimeError, ValueError) as e:  # gloo/NCCL errors, DistBackendError
+            raise HaloError(
+                f"rank {self.rank} of {self.size}: {what} failed (did another rank die or "
+                f"stall past the process group's timeout?): {e}"
+            ) from e
 
     def _reduce(self, value: float, op: Any) -> float:
         import torch
 
         t = torch.tensor([value], dtype=torch.float64, device=self._device())
-        self._dist.all_reduce(t, op=op, group=self.group)
+        with self._failing("a reduction"):
+            self._dist.all_reduce(t, op=op, group=self.group)
         return float(t.item())
 
     def _device(self) -> str:
@@ -230,5 +248,6 @@ class TorchHalo:
     def gather(self, values: np.ndarray) -> list[np.ndarray]:
         """Every rank's ``values`` (NumPy, any shapes), in rank order, on every rank."""
         out: list[Any] = [None] * self.size
-        self._dist.all_gather_object(out, np.asarray(values), group=self.group)
+        with self._failing("a gather"):
+            self._dist.all_gather_object(out, np.asarray(values), group=self.group)
         return out
