@@ -1,5 +1,6 @@
 """Geometry objects on the shared runtime: ``Bvh`` (and, built on it, ``Mesh``) and
-``HashGrid``.
+``HashGrid``; iso-surface extraction (``MarchingCubes``, and Warp 1.19's
+``kdsl.geometry.IsoSurfaceMarchingCubes``).
 
 Their queries are kernel code in the standard library (``kdsl.stdlib.bvh``); this
 package builds and updates the objects' arrays and records.
@@ -7,6 +8,8 @@ package builds and updates the objects' arrays and records.
 
 from kdsl.geometry.bvh import Bvh
 from kdsl.geometry.hash_grid import HashGrid
+from kdsl.geometry.iso_surface import IsoSurfaceBase, IsoSurfaceMarchingCubes, MarchingCubes
 from kdsl.geometry.mesh import Mesh
 
-__all__ = ["Bvh", "HashGrid", "Mesh"]
+# IsoSurfaceBase and IsoSurfaceMarchingCubes live in kdsl.geometry only, as in Warp.
+__all__ = ["Bvh", "HashGrid", "MarchingCubes", "Mesh"]
