@@ -15,6 +15,23 @@ import numpy as np
 from kdsl.geometry.nanovdb.layout import GridClass, GridType, ValueLayout
 
 
+@dataclass(frozen=True)
+class FeatureInfo:
+    """One blind data array of a grid (a "feature array" in Warp's terms)."""
+
+    name: str
+    #: Byte offset of the first value from the start of the grid.
+    offset: int
+    value_count: int
+    value_size: int
+    #: A ``GridType`` number, as NanoVDB stores it.
+    data_type: int
+    #: The value type's name as Warp gives it ("float", "Vec3f", ...).
+    type_str: str
+    semantic: int
+    data_class: int
+
+
 @dataclass(frozen=True, eq=False)
 class GridInfo:
     """One validated NanoVDB grid (its arrays are read-only)."""
@@ -41,8 +58,8 @@ class GridInfo:
     translation: np.ndarray
     tree_offset: int
     root_offset: int
-    #: Offsets of the first upper, lower and leaf node (equal to the next level's
-    #: offset, or the grid size, when a level has no node).
+    #: Offsets of the first upper, lower and leaf node (736, the end of the tree header,
+    #: for a level with no node).
     upper_offset: int
     lower_offset: int
     leaf_offset: int
@@ -65,6 +82,8 @@ class GridInfo:
     blind_metadata_offset: int
     blind_metadata_count: int
     checksum: int
+    #: The grid's blind data (feature arrays), in order.
+    features: tuple[FeatureInfo, ...] = ()
 
     @property
     def grid_size(self) -> int:

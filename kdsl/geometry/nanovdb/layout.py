@@ -40,9 +40,10 @@ FILE_MAGICS = (MAGIC_NUMB, MAGIC_FILE)
 
 #: The ABI (major) version a reader must match; minor and patch may differ.
 MAJOR_VERSION = 32
-#: The version kdsl writes: 32.6.0, the last whose magic ("NanoVDB0") every reader of
-#: major version 32 accepts, Warp's included.
-WRITE_VERSION = (32, 6, 0)
+#: The version kdsl writes (that of the PNanoVDB header Warp 1.19 ships). Grids and files
+#: carry the magic "NanoVDB0", which every reader of major version 32 accepts, with
+#: ``MAGIC_GRID`` in ``GridData.mData2`` as NanoVDB itself writes them.
+WRITE_VERSION = (32, 8, 0)
 
 
 def make_version(major: int, minor: int, patch: int) -> int:
