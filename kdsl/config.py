@@ -32,6 +32,10 @@ max_tape_bytes: int = 2 * 1024**3
 #: The lowest level of message the logger emits (``kdsl.LOG_DEBUG`` 10, ``LOG_INFO`` 20,
 #: ``LOG_WARNING`` 30, ``LOG_ERROR`` 40), Warp's ``warp.config.log_level``.
 log_level: int = 20
+#: Warn when a launch recorded on a tape writes an array that an earlier recorded launch
+#: read, which corrupts that launch's gradients (Warp's setting; see
+#: ``kdsl/runtime/array_access.py``).
+verify_autograd_array_access: bool = False
 #: When the pass manager verifies the IR: "auto", "each" or "end" (see above).
 verify_passes: str = os.environ.get("KDSL_VERIFY_PASSES") or "auto"
 

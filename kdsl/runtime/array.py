@@ -42,6 +42,11 @@ def _is_any(dtype: Any) -> bool:
 class array:
     """A typed, strided array (see the module docstring)."""
 
+    # Read mark and viewed array for ``config.verify_autograd_array_access``
+    # (``kdsl/runtime/array_access.py``); set only when that setting or a view needs them.
+    _is_read = False
+    _viewed: array | None = None
+
     def __class_getitem__(cls, params: Any) -> ArrayAnnotation:
         """``array[dtype]`` or ``array[dtype, ndim]``: the annotation Warp 1.19 writes."""
         return subscript(array, params, cls.__dict__.get("_fixed_ndim"))
@@ -395,9 +400,30 @@ class array:
             buf = mem.xp(self._device).array(self._buf, copy=True, order="C")
         return array._wrap(buf, self._t, self._device, self._requires_grad)
 
+    def mark_init(self) -> None:
+        """Clear the read mark ``config.verify_autograd_array_access`` keeps (Warp's)."""
+        self._is_read = False
+
+    def mark_read(self) -> None:
+        """Mark this array, and the arrays it views, as read by a recorded launch."""
+        a: array | None = self
+        while a is not None:
+            a._is_read = True
+            a = a._viewed
+
+    def mark_write(self, **site: Any) -> None:
+        """Warn when this array, read by a recorded launch, is written: gradients of that
+        launch would be wrong. ``site``: Warp's ``arg_name``, ``kernel_name``,
+        ``operation``, ``filename``, ``lineno`` naming the writer."""
+        if self._is_read:
+            from kdsl.runtime.array_access import warn_write_after_read
+
+            warn_write_after_read(self, site)
+
     def _view(self, buf: Any, t: T.Type, grad: array | None) -> array:
         # A view over ``buf`` whose gradient is ``grad`` (the same view of self.grad).
         out = array._wrap(buf, t, self._device)
+        out._viewed = self
         if grad is not None:
             out._grad, out._requires_grad = grad, True
         out.retain_grad = self.retain_grad

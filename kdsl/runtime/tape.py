@@ -21,9 +21,11 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable, Sequence
 from typing import Any, NamedTuple
 
+from kdsl import config
 from kdsl.errors import KdslError, api_boundary
 from kdsl.ir.types import StructType
 from kdsl.runtime.array import array
+from kdsl.runtime.array_access import check_launch, clear_read_marks
 
 # The active tapes, outermost first; launch() records on the last one.
 ACTIVE: list[Tape] = []
@@ -106,6 +108,8 @@ class Tape:
         self.launches.append(rec)
         for a in (*rec.inputs, *rec.outputs):
             self.get_adjoint(a)
+        if config.verify_autograd_array_access:
+            check_launch(kernel, [*rec.inputs, *rec.outputs])
 
     def record_func(self, backward: Callable[[], Any], arrays: Iterable[Any]) -> None:
         """Record a Python step: ``backward()`` runs at its place in the reverse pass.
@@ -182,6 +186,13 @@ class Tape:
                 self._replay(step)
             else:
                 step()
+        if config.verify_autograd_array_access:
+            self._clear_read_marks()  # later writes can no longer corrupt these gradients
+
+    def _clear_read_marks(self) -> None:
+        recorded = [a for r in self.launches if isinstance(r, LaunchRecord)
+                    for a in (*r.inputs, *r.outputs)]  # fmt: skip
+        clear_read_marks([*recorded, *self.gradients])
 
     def _replay(self, rec: LaunchRecord) -> None:
         args = [*rec.inputs, *rec.outputs]
@@ -211,6 +222,8 @@ class Tape:
 
     def reset(self) -> None:
         """Zero the gradients, then forget every recorded launch, function and scope."""
+        if config.verify_autograd_array_access:
+            self._clear_read_marks()
         self.zero()
         self.launches = []
         self.scopes = []
@@ -264,6 +277,9 @@ def record_copy(dest: array, src: array, dest_offset: int, src_offset: int, coun
     tape.record_func(
         lambda: _adj_copy(dest, src, dest_offset, src_offset, count), arrays=[dest, src]
     )
+    if config.verify_autograd_array_access:
+        dest.mark_write(operation="an array copy")
+        src.mark_read()
 
 
 def _adj_copy(dest: array, src: array, dest_offset: int, src_offset: int, count: int) -> None:
