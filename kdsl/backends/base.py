@@ -160,6 +160,18 @@ class Backend(ABC):
         args = list(args)
         return lambda: self.launch(compiled, dims, args, stream)
 
+    def prepare_reusable(
+        self, compiled: CompiledKernel, dims: Dims, args: Args, stream: Any = None
+    ) -> Callable[[], None] | None:
+        """Like ``prepare``, but the callable must not keep ``args``' buffers alive.
+
+        A plain ``launch`` whose arguments match an earlier one's calls it instead of
+        ``launch`` (``kdsl.runtime.launch_reuse``); the runtime checks that every buffer
+        is still alive before each call, so the callable may hold raw pointers into
+        them. None (the default) means the backend packs every launch afresh.
+        """
+        return None
+
     def __repr__(self) -> str:
         return f"<kdsl backend {self.name!r} v{self.version}>"
 

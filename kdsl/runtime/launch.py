@@ -31,6 +31,7 @@ from kdsl.runtime.args import ArgError, convert, launch_error
 from kdsl.runtime.array import array
 from kdsl.runtime.device import Device, get_device
 from kdsl.runtime.graphs import state as _graphs
+from kdsl.runtime.launch_reuse import LaunchReuse
 from kdsl.runtime.objects import foreign_id
 
 _CACHE_ATTR = "_kdsl_compiled"
@@ -125,7 +126,10 @@ def resolve_stream(device: Device, stream: Any) -> Any:
 class _Plan:
     """What a kernel's launches on one device and backend share (see ``launch_plan``)."""
 
-    __slots__ = ("backend", "compiled", "converters", "device", "options", "own", "settings")
+    __slots__ = (
+        "backend", "compiled", "converters", "device", "options", "own", "reuse", "settings",
+        "tid_ndim",
+    )  # fmt: skip
 
     def __init__(self, kernel: Any, device: Device, backend: Backend, settings: tuple) -> None:
         self.device = device
@@ -140,6 +144,9 @@ class _Plan:
             _converter(kernel, i, n, t, device)
             for i, (n, t) in enumerate(zip(kernel.arg_names, kernel.arg_types))
         ]
+        #: Plain launches with unchanged arguments reuse their packed form.
+        self.reuse = LaunchReuse(backend, self.compiled, kernel.arg_types)
+        self.tid_ndim = getattr(kernel, "tid_ndim", 0) or 0
 
 
 _PLAN_ATTR = "_kdsl_plans"
@@ -241,7 +248,7 @@ def _converter(kernel: Any, index: int, name: str, t: Any, device: Device) -> An
         def conv_array(v: Any) -> Any:
             if (
                 isinstance(v, array)
-                and v._device == device
+                and (v._device is device or v._device == device)
                 and v._ndim == ndim
                 and (v._t is dtype or v._t == dtype)
             ):
@@ -447,7 +454,8 @@ def launch(
         else:
             dims = normalize_dim(dim, _kernel_name(kernel))
         args = [*inputs, *outputs] if outputs else inputs
-        if getattr(kernel, "is_generic", False):
+        # A kernel with plans is not generic (a generic one's instances hold them).
+        if getattr(kernel, _PLAN_ATTR, None) is None and getattr(kernel, "is_generic", False):
             kernel = instance_for(kernel, args, len(inputs), len(outputs))
         plan = launch_plan(kernel, device, backend)
         convs = plan.converters
@@ -468,7 +476,7 @@ def launch(
             converted = [conv(v) for conv, v in zip(convs, args)]
             if rec is not None:
                 rec.remember(plan, args, converted)
-        if len(dims) > 1 or (getattr(kernel, "tid_ndim", 0) or 0) > 1:
+        if len(dims) > 1 or plan.tid_ndim > 1:
             check_tid(kernel, dims)
         stream = resolve_stream(dev, stream)
         if record_cmd:
@@ -476,7 +484,7 @@ def launch(
         if rec is not None:
             rec.record_launch(plan, dims, converted, stream)
         elif _timing.RECORDING is None:
-            plan.backend.launch(plan.compiled, dims, converted, stream)
+            plan.reuse.launch(dims, converted, stream)
         else:
             _timing.timed_launch(
                 plan.backend, plan.compiled, dims, converted, stream, dev,

@@ -96,23 +96,24 @@ def descriptor_words(t: T.ArrayType, buf: np.ndarray, index: int = 0) -> tuple[i
 
 # --- the fast path: one struct.pack_into per launch -----------------------------------
 
-#: Array descriptors by ``id`` of their NumPy buffer, checked through a weak reference:
+#: Array descriptors by ``id`` of their NumPy buffer, checked through a weak reference
+#: and against the buffer's shape and strides (a NumPy array can be reshaped in place):
 #: reading a buffer's address from NumPy costs about a microsecond, so a kernel
 #: launched again and again on the same arrays computes each descriptor once.
-_descriptors: dict[int, tuple[weakref.ref, tuple[int, ...]]] = {}
+_descriptors: dict[int, tuple[weakref.ref, tuple, tuple, tuple[int, ...]]] = {}
 
 
 def _cached_descriptor(t: T.ArrayType, buf: np.ndarray, index: int) -> tuple[int, ...]:
     hit = _descriptors.get(id(buf))
-    if hit is not None and hit[0]() is buf:
-        return hit[1]
+    if hit is not None and hit[0]() is buf and hit[1] == buf.shape and hit[2] == buf.strides:
+        return hit[3]
     words = descriptor_words(t, buf, index)
     key = id(buf)
     try:
         ref = weakref.ref(buf, lambda _r, key=key: _descriptors.pop(key, None))
     except TypeError:  # not weak-referenceable: never cache
         return words
-    _descriptors[key] = (ref, words)
+    _descriptors[key] = (ref, buf.shape, buf.strides, words)
     return words
 
 

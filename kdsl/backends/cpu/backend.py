@@ -16,8 +16,13 @@ from kdsl.backends.cpu.lower import kernel_names, kernel_symbol, lower_kernels, 
 from kdsl.ir.core import Module
 from kdsl.ir.ops_debug import debug_sites
 
-#: The C type of every range function: (start, end, args, dims).
-RANGE_FN = ctypes.CFUNCTYPE(None, ctypes.c_int64, ctypes.c_int64, ctypes.c_void_p, ctypes.c_void_p)
+#: The C type of every range function: (start: i64, end: i64, args, dims). ``start`` and
+#: ``end`` are declared pointer-sized (``c_void_p``) here: on every 64-bit ABI LLVM
+#: targets an i64 and a pointer travel in the same integer register, and ctypes converts
+#: a Python int to ``c_void_p`` in half the time it takes for ``c_int64`` (0.28 against
+#: 0.57 us for the call, measured on the 2-core EPYC host). Both are never negative.
+_INDEX = ctypes.c_void_p if ctypes.sizeof(ctypes.c_void_p) == 8 else ctypes.c_int64
+RANGE_FN = ctypes.CFUNCTYPE(None, _INDEX, _INDEX, ctypes.c_void_p, ctypes.c_void_p)
 
 
 @functools.cache
@@ -57,9 +62,7 @@ class CpuBackend(Backend):
 
     name = "cpu"
     version = f"1-{jit.version_tag()}"
-    capabilities = frozenset(
-        {"fp16", "fp32", "fp64", "int8", "int16", "int64", "atomics"}
-    )
+    capabilities = frozenset({"fp16", "fp32", "fp64", "int8", "int16", "int64", "atomics"})
 
     emit_stages = ("llvm-ir-unopt", "llvm-ir", "asm")
 
@@ -133,6 +136,23 @@ class CpuBackend(Backend):
         self, compiled: CompiledKernel, dims: Dims, args: Args, stream: Any = None
     ) -> Callable[[], None]:
         """A launch with its arguments packed once: calling it only enters native code."""
+        return self._prepared(compiled, dims, args, hold=True)
+
+    def prepare_reusable(
+        self, compiled: CompiledKernel, dims: Dims, args: Args, stream: Any = None
+    ) -> Callable[[], None] | None:
+        """``prepare`` holding only the packed bytes (the runtime keeps the buffers alive).
+
+        None for a debug build, which packs a fresh error record every launch.
+        """
+        if compiled.payload.sites is not None:
+            return None
+        return self._prepared(compiled, dims, args, hold=False)
+
+    def _prepared(
+        self, compiled: CompiledKernel, dims: Dims, args: Args, hold: bool
+    ) -> Callable[[], None]:
+        """The packed launch; ``hold`` keeps the argument buffers alive with it."""
         k: CpuKernel = compiled.payload
         total = self._check_dims(compiled, dims)
         if total == 0:
@@ -143,8 +163,8 @@ class CpuBackend(Backend):
         if k.packer.supported:
             buf = k.packer.new_buffer()
             argp = k.packer.pack_into(buf, args)
-            keep: Any = (buf, list(args))  # the buffers the descriptors point into
-        else:
+            keep: Any = (buf, list(args) if hold else None)
+        else:  # Packed copies descriptors and values: it holds no argument buffer
             keep = Packed(k.arg_types, args)
             argp = keep.address
         extents = (ctypes.c_int64 * len(dims))(*dims)

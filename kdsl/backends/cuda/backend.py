@@ -171,10 +171,23 @@ class CudaBackend(Backend):
         self, compiled: CompiledKernel, dims: Dims, args: Args, stream: Any = None
     ) -> Callable[[], None]:
         """A launch packed once: calling it is one ``cuLaunchKernel`` (release builds)."""
-        k: CudaKernel = compiled.payload
-        if k.sites is not None:  # a checked build needs a fresh error record each time
+        if compiled.payload.sites is not None:  # a checked build needs a fresh error record
             return super().prepare(compiled, dims, args, stream)
-        args = list(args)
+        return self._prepared(compiled, dims, args, stream, list(args))
+
+    def prepare_reusable(
+        self, compiled: CompiledKernel, dims: Dims, args: Args, stream: Any = None
+    ) -> Callable[[], None] | None:
+        """``prepare`` holding only the packed parameters (the runtime keeps buffers alive)."""
+        if compiled.payload.sites is not None:
+            return None
+        return self._prepared(compiled, dims, args, stream, None)
+
+    def _prepared(
+        self, compiled: CompiledKernel, dims: Dims, args: Args, stream: Any, hold: Any
+    ) -> Callable[[], None]:
+        """The packed launch; ``hold`` (the arguments, or None) is kept alive with it."""
+        k: CudaKernel = compiled.payload
         total = launch_size(compiled, dims, k.tid_ndims, self.name)
         if total == 0:
             return lambda: None
@@ -189,7 +202,7 @@ class CudaBackend(Backend):
         def run() -> None:
             _on_device(ordinal, launch_kernel, fn, blocks, 1, 1, BLOCK, 1, 1, 0, raw, addr, 0)
 
-        run.keep = (buf, params, args)  # type: ignore[attr-defined]
+        run.keep = (buf, params, hold)  # type: ignore[attr-defined]
         return run
 
 

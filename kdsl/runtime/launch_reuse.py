@@ -1,0 +1,143 @@
+"""Packed-launch reuse: a plain ``launch`` with unchanged arguments skips packing.
+
+A kernel launched again and again on the same arrays (a simulation step) would pack
+the same descriptors every time. ``LaunchReuse`` keeps, per launch plan, a few
+launches prepared by the backend (``Backend.prepare_reusable``: arguments packed
+once, as ``record_cmd=True`` does) under a key made of everything the packed bytes
+depend on:
+
+- the grid and the stream (a different stream is another key; another device is
+  another plan);
+- per array argument, the identity of the converted buffer with its shape and strides
+  (an array reallocated, resized or reshaped is a new buffer or a new shape);
+- per scalar, vector, matrix or handle, the exact bytes of the converted value (so
+  ``-0.0`` and ``0.0``, or two NaN payloads, are different keys).
+
+Struct arguments are not keyed (their fields may be mutated in place), so a kernel
+with a struct parameter is always packed afresh. Arguments are still converted and
+checked on every launch; only the packing is reused.
+
+A prepared launch holds its buffers weakly: the reuse never keeps an array's memory
+alive. A hit first checks that every buffer of the entry is still alive (an alive
+object's ``id`` cannot belong to another), else the entry is dropped and the launch
+packed again. A key is prepared only when seen a second time, so arguments that
+change at every launch (a time step) cost a key lookup, not a prepare.
+"""
+
+from __future__ import annotations
+
+import weakref
+from collections.abc import Callable, Sequence
+from typing import Any
+
+from kdsl.backends.base import Backend, CompiledKernel
+from kdsl.ir import types as T
+
+#: Prepared launches kept per plan (double buffering needs two; a few more for
+#: kernels launched on several array sets in turn). The table is cleared when full.
+MAX_ENTRIES = 8
+#: Keys seen once, waiting for a second launch before they are prepared.
+MAX_SEEN = 32
+
+# Per parameter: how one converted argument adds to the key, and whether it is a
+# buffer the entry must watch.
+_ARRAY, _BYTES = 0, 1
+
+
+def _kind(t: T.Type) -> int | None:
+    """How a converted argument of type ``t`` is keyed (None: not keyable)."""
+    if isinstance(t, T.ArrayType):
+        return _ARRAY
+    if isinstance(t, T.ScalarType | T.VectorType | T.MatrixType | T.HandleType):
+        return _BYTES
+    return None
+
+
+class LaunchReuse:
+    """The prepared launches of one plan (kernel, device, backend), by argument key."""
+
+    __slots__ = ("backend", "compiled", "enabled", "entries", "hits", "kinds", "last", "seen")
+
+    def __init__(self, backend: Backend, compiled: CompiledKernel, arg_types: Sequence[Any]):
+        self.backend = backend
+        self.compiled = compiled
+        kinds = [_kind(t) for t in arg_types]
+        #: False for a signature with a struct (or unknown) parameter: never reused.
+        self.enabled = all(k is not None for k in kinds)
+        self.kinds: list[int] = [k for k in kinds if k is not None]
+        self.entries: dict[tuple, tuple[Callable[[], None], list]] = {}
+        self.seen: set[tuple] = set()
+        #: The entry used last (key, entry), tried before the table.
+        self.last: tuple | None = None
+        #: Launches that reused a prepared entry (for tests and benchmarks).
+        self.hits = 0
+
+    def key(self, dims: tuple, converted: Sequence[Any], stream: Any) -> tuple | None:
+        """Everything the packed launch depends on, or None when it cannot be keyed."""
+        parts: list[Any] = [dims, stream]
+        for kind, v in zip(self.kinds, converted):
+            if kind is _ARRAY:
+                parts += (id(v), v.shape, v.strides)
+            else:
+                try:
+                    parts.append(v.tobytes())
+                except AttributeError:  # a backend-specific value: not keyable
+                    return None
+        return tuple(parts)
+
+    def launch(self, dims: tuple, converted: Sequence[Any], stream: Any) -> None:
+        """Run the launch, reusing its prepared form when its key was prepared before."""
+        key = self.key(dims, converted, stream) if self.enabled else None
+        if key is None:
+            self.backend.launch(self.compiled, dims, converted, stream)
+            return
+        # The last entry first: comparing two tuples is cheaper than hashing one.
+        last = self.last
+        entry = last[1] if last is not None and last[0] == key else self.entries.get(key)
+        if entry is not None:
+            run, refs = entry
+            for ref in refs:
+                if ref() is None:  # a buffer died: its id may now name another one
+                    self.entries.pop(key, None)
+                    self.last = None
+                    break
+            else:
+                self.hits += 1
+                self.last = (key, entry)
+                run()
+                return
+        if key not in self.seen:
+            if len(self.seen) >= MAX_SEEN:
+                self.seen.clear()
+            self.seen.add(key)
+            self.backend.launch(self.compiled, dims, converted, stream)
+            return
+        self._prepare(key, dims, converted, stream)
+
+    def _prepare(self, key: tuple, dims: tuple, converted: Sequence[Any], stream: Any) -> None:
+        refs = self._watch(converted)
+        run = None
+        if refs is not None:
+            run = self.backend.prepare_reusable(self.compiled, dims, converted, stream)
+        if run is None:  # the backend cannot, or a buffer cannot be watched
+            self.backend.launch(self.compiled, dims, converted, stream)
+            return
+        self.seen.discard(key)
+        if len(self.entries) >= MAX_ENTRIES:
+            self.entries.clear()
+        entry = self.entries[key] = (run, refs)
+        self.last = (key, entry)
+        run()
+
+    def _watch(self, converted: Sequence[Any]) -> list | None:
+        """Weak references to the entry's buffers (None: one is not weak-referenceable)."""
+        try:
+            return [weakref.ref(v) for kind, v in zip(self.kinds, converted) if kind == _ARRAY]
+        except TypeError:
+            return None
+
+    def clear(self) -> None:
+        """Forget every prepared launch."""
+        self.entries.clear()
+        self.seen.clear()
+        self.last = None
