@@ -28,6 +28,7 @@ from kdsl.frontend import (
     builtins_math,
     builtins_ops,
     builtins_records,
+    builtins_volume,
     geometry,
     printing,
 )
@@ -41,6 +42,7 @@ TABLES: tuple[BuiltinTable, ...] = (
     builtins_linalg.TABLE,
     builtins_ops.TABLE,
     builtins_records.TABLE,
+    builtins_volume.TABLE,
     geometry.TABLE,
     printing.TABLE,
 )

@@ -45,6 +45,9 @@ class Builtin:
     group: str
     #: Keyword arguments the builtin accepts (passed to ``lower`` as keywords).
     keywords: tuple[str, ...] = ()
+    #: Positions of in-out arguments: a local variable passed there is rebound (the
+    #: lowering writes it back), so loops carry it (``kdsl.frontend.inout``).
+    inout: tuple[int, ...] = ()
 
     def __post_init__(self) -> None:
         self.__doc__ = self.doc

@@ -63,7 +63,7 @@ def inout_positions(fn: Any, nargs: int) -> set[int]:
     parameters may keep their defaults): over-approximating only costs an unchanged
     loop-carried value.
     """
-    out: set[int] = set()
+    out: set[int] = {p for p in getattr(fn, "inout", None) or () if p < nargs}  # builtins
     for ov in getattr(fn, "__kdsl_overloads__", None) or ():
         params = ov.inout_params()
         spec = ov.src.tree.args
