@@ -26,6 +26,7 @@ current stream, so kernels and NCCL transfers are ordered without host syncs.
 """
 
 import argparse
+import contextlib
 import datetime
 import itertools
 import os
@@ -202,7 +203,8 @@ def main(argv: list[str] | None = None) -> int:
         raise SystemExit(f"{args.points} points cannot be cut into {size} pieces")
     u0, target = problem(args.points)
     first, end = pieces(args.points, size)[rank]
-    stream = wp.ScopedStream(wp.stream_from_torch(device)) if device != "cpu" else _Nothing()
+    on_gpu = device != "cpu"
+    stream = wp.ScopedStream(wp.stream_from_torch(device)) if on_gpu else contextlib.nullcontext()
     with stream:
         loss, grad, energy = run(Neighbours(rank, size), u0[first:end], target[first:end],
                                  args.iters, a, device)  # fmt: skip
@@ -232,14 +234,6 @@ def main(argv: list[str] | None = None) -> int:
     if distributed:
         dist.destroy_process_group()
     return 0 if ok else 1
-
-
-class _Nothing:
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        return None
 
 
 if __name__ == "__main__":

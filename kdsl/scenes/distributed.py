@@ -14,6 +14,7 @@ a rank that dies or stalls makes the others fail with torch's error, never hang.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import datetime
 import os
 import sys
@@ -129,16 +130,15 @@ def main(argv: list[str] | None = None) -> int:
     device = init_process_group(args.device, args.timeout)
     halo = TorchHalo()
     dt = args.dt if args.dt is not None else stable_dt(cls, args.grid)
-    scene = cls(wp, halo, precision=args.precision, integrator=args.integrator, device=device,
-                grid=args.grid)  # fmt: skip
-    if device.startswith("cuda"):
-        # kdsl's launches and NCCL's transfers on one stream: ordered without syncs.
-        with wp.ScopedStream(wp.stream_from_torch(device)):
-            result = run_strips(scene, args.steps, dt)
-    else:
+    # On a GPU, kdsl's launches and NCCL's transfers go on one stream (torch's): ordered
+    # without host syncs.
+    on_gpu = device.startswith("cuda")
+    with wp.ScopedStream(wp.stream_from_torch(device)) if on_gpu else contextlib.nullcontext():
+        scene = cls(wp, halo, precision=args.precision, integrator=args.integrator,
+                    device=device, grid=args.grid)  # fmt: skip
         result = run_strips(scene, args.steps, dt)
-    if args.check:
-        result["bitwise_equal"] = matches_single_device(scene, args.steps, dt)
+        if args.check:
+            result["bitwise_equal"] = matches_single_device(scene, args.steps, dt)
     result.update(scene=args.scene, grid=args.grid, steps=args.steps, dt=dt, ranks=halo.size,
                   device=args.device, precision=args.precision,
                   integrator=scene.integrator)  # fmt: skip

@@ -50,17 +50,18 @@ def make_grid_kernels(wp: ModuleType, real: Any) -> SimpleNamespace:
     return SimpleNamespace(laplacian=laplacian, fill=fill)
 
 
-def grid_points(n: int) -> tuple[np.ndarray, np.ndarray]:
-    """The interior points' x and y (flat, ``i * n + j``)."""
+def grid_points(n: int, rows: tuple[int, int] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The interior points' x and y (flat, ``i * n + j``); only rows ``[first, end)`` of
+    them when ``rows`` is given (a strip: the same values as those rows of the whole)."""
     h = 1.0 / (n + 1)
     x = np.arange(1, n + 1) * h
-    gx, gy = np.meshgrid(x, x, indexing="ij")
+    gx, gy = np.meshgrid(x if rows is None else x[rows[0] : rows[1]], x, indexing="ij")
     return gx.ravel(), gy.ravel()
 
 
-def mode(n: int, kx: int, ky: int) -> np.ndarray:
-    """``sin(k pi x) sin(l pi y)`` on the interior points."""
-    gx, gy = grid_points(n)
+def mode(n: int, kx: int, ky: int, rows: tuple[int, int] | None = None) -> np.ndarray:
+    """``sin(k pi x) sin(l pi y)`` on the interior points (of ``rows`` only, if given)."""
+    gx, gy = grid_points(n, rows)
     return np.sin(kx * np.pi * gx) * np.sin(ky * np.pi * gy)
 
 
@@ -87,6 +88,9 @@ class GridScene(Scene):
     interior points, started from ``MODES``; its references are mode sums whose time
     factors ``mode_factor`` gives (the heat equation's decay, the wave's oscillation)."""
 
+    #: The rows ``[first, end)`` this scene holds (None: all; a strip sets its own).
+    rows: tuple[int, int] | None = None
+
     def setup(self) -> None:
         self.grid_n = int(self.params["grid"])
         self.h = 1.0 / (self.grid_n + 1)
@@ -104,7 +108,7 @@ class GridScene(Scene):
 
     def initial_modes(self) -> np.ndarray:
         """The initial field: the sum of ``MODES``."""
-        return sum(a * mode(self.grid_n, kx, ky) for kx, ky, a in MODES)
+        return sum(a * mode(self.grid_n, kx, ky, self.rows) for kx, ky, a in MODES)
 
     def _lap(self, u: Any, s: float, out: Any) -> None:
         n = self.grid_n
@@ -122,7 +126,7 @@ class GridScene(Scene):
 
     def _solution(self, t: float, eigenvalue: Any) -> np.ndarray:
         n = self.grid_n
-        return sum(a * self.mode_factor(eigenvalue(kx, ky), t) * mode(n, kx, ky)
+        return sum(a * self.mode_factor(eigenvalue(kx, ky), t) * mode(n, kx, ky, self.rows)
                    for kx, ky, a in MODES)  # fmt: skip
 
     def picture(self, x: np.ndarray) -> Any:

@@ -81,6 +81,9 @@ def make_strip_kernels(wp: ModuleType, real: Any) -> SimpleNamespace:
 class StripMixin:
     """Makes a ``GridScene`` own one row strip (see the module docstring).
 
+    The initial state and the reference are computed for the strip's rows only
+    (``GridScene.rows``), so no rank ever holds the whole grid.
+
     Construct with ``halo`` (a ``kdsl.scenes.halo`` exchanger: its ``rank`` and
     ``size`` pick the strip) before the scene's usual arguments. ``state()`` and
     ``error()`` are the strip's; ``global_state()`` and ``global_error()`` combine the
@@ -94,8 +97,7 @@ class StripMixin:
     def setup(self) -> None:
         super().setup()
         n = self.grid_n
-        self.row0, self.row1 = strip_bounds(n, self.halo.size)[self.halo.rank]
-        self.strip = slice(self.row0 * n, self.row1 * n)
+        self.row0, self.row1 = self.rows = strip_bounds(n, self.halo.size)[self.halo.rank]
 
     def make_kernels(self, wp: ModuleType, real: Any) -> SimpleNamespace:
         k = super().make_kernels(wp, real)
@@ -103,13 +105,6 @@ class StripMixin:
         self.top = wp.zeros(self.grid_n, dtype=real, device=self.device)
         self.bottom = wp.zeros(self.grid_n, dtype=real, device=self.device)
         return SimpleNamespace(**vars(k), strip_laplacian=strip.strip_laplacian)
-
-    def initial_state(self) -> tuple[np.ndarray, np.ndarray | None]:
-        x0, v0 = super().initial_state()
-        return x0[self.strip], (None if v0 is None else v0[self.strip])
-
-    def reference(self, t: float) -> np.ndarray:
-        return super().reference(t)[self.strip]
 
     def _lap(self, u: Any, s: float, out: Any) -> None:
         n, rows = self.grid_n, self.row1 - self.row0
