@@ -1,5 +1,6 @@
 """Geometry objects on the shared runtime: ``Bvh`` (and, built on it, ``Mesh``) and
-``HashGrid``; iso-surface extraction (``MarchingCubes``, and Warp 1.19's
+``HashGrid``; sparse NanoVDB volumes (``Volume``, format code in
+``kdsl.geometry.nanovdb``); iso-surface extraction (``MarchingCubes``, and Warp 1.19's
 ``kdsl.geometry.IsoSurfaceMarchingCubes``).
 
 Their queries are kernel code in the standard library (``kdsl.stdlib.bvh``); this
@@ -10,6 +11,7 @@ from kdsl.geometry.bvh import Bvh
 from kdsl.geometry.hash_grid import HashGrid
 from kdsl.geometry.iso_surface import IsoSurfaceBase, IsoSurfaceMarchingCubes, MarchingCubes
 from kdsl.geometry.mesh import Mesh
+from kdsl.geometry.volume import Volume
 
 # IsoSurfaceBase and IsoSurfaceMarchingCubes live in kdsl.geometry only, as in Warp.
-__all__ = ["Bvh", "HashGrid", "MarchingCubes", "Mesh"]
+__all__ = ["Bvh", "HashGrid", "MarchingCubes", "Mesh", "Volume"]

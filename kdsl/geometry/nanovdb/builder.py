@@ -79,12 +79,29 @@ def _check_coords(coords: np.ndarray, what: str) -> np.ndarray:
     return coords
 
 
+def _unique_rows(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Sorted unique rows of multiples of 8 and each row's position among them. Rows are
+    packed into one int64 (21 bits per axis of ``row >> 3``) when their span allows:
+    sorting one key is many times faster than NumPy's row-wise ``unique``."""
+    if len(rows) == 0:
+        return rows.reshape(0, 3), np.zeros(0, dtype=np.int64)
+    low = rows.min(axis=0)
+    cells = (rows - low) >> 3
+    if cells.max() >= 1 << 21:
+        origins, inverse = np.unique(rows, axis=0, return_inverse=True)
+        return origins, inverse.reshape(-1)
+    keys = (cells[:, 0] << 42) | (cells[:, 1] << 21) | cells[:, 2]
+    unique, inverse = np.unique(keys, return_inverse=True)
+    mask = (1 << 21) - 1
+    cells = np.stack([unique >> 42, (unique >> 21) & mask, unique & mask], axis=1)
+    return (cells << 3) + low, inverse.reshape(-1)
+
+
 def leaves_from_voxels(coords: np.ndarray, values: np.ndarray | None, background) -> Leaves:
     """Leaves holding the active voxels ``coords`` (N, 3) with ``values`` (N, ...) (a
     repeated voxel keeps its last value), the rest of each leaf at ``background``."""
     coords = _check_coords(coords, "voxel coordinates")
-    origins, leaf = np.unique(coords & ~7, axis=0, return_inverse=True)
-    leaf = leaf.reshape(-1)
+    origins, leaf = _unique_rows(coords & ~7)
     slot = (coords[:, 0] & 7) * 64 + (coords[:, 1] & 7) * 8 + (coords[:, 2] & 7)
     active = np.zeros((len(origins), 512), dtype=bool)
     active[leaf, slot] = True
@@ -100,7 +117,7 @@ def leaves_from_voxels(coords: np.ndarray, values: np.ndarray | None, background
 def leaves_from_tiles(origins: np.ndarray, background, index: bool = False) -> Leaves:
     """Whole active 8^3 tiles at ``origins`` (multiples of 8, repeats allowed), every
     voxel at ``background`` (or none for an index grid)."""
-    origins = np.unique(_check_coords(origins, "tile coordinates") & ~7, axis=0)
+    origins = _unique_rows(_check_coords(origins, "tile coordinates") & ~7)[0]
     values = None
     if not index:
         bg = np.asarray(background)
@@ -157,12 +174,13 @@ def _slot(origins: np.ndarray, child_log2: int, dim_log2: int) -> np.ndarray:
 
 def _leaf_bboxes(leaves: Leaves) -> tuple[np.ndarray, np.ndarray]:
     """Each leaf's inclusive bounding box of its active voxels (its origin when none)."""
-    cube = leaves.active.reshape(-1, 8, 8, 8)
-    lo, hi = np.zeros((len(cube), 3), np.int64), np.zeros((len(cube), 3), np.int64)
+    lo, hi = np.zeros((len(leaves.active), 3), np.int64), np.full((len(leaves.active), 3), 7)
+    partial = np.flatnonzero(~leaves.active.all(axis=1))  # full leaves span 0..7
+    cube = leaves.active[partial].reshape(-1, 8, 8, 8)
     for axis in range(3):
         occupied = cube.any(axis=tuple(a for a in (1, 2, 3) if a != axis + 1))
-        lo[:, axis] = occupied.argmax(axis=1)
-        hi[:, axis] = np.where(occupied.any(axis=1), 7 - occupied[:, ::-1].argmax(axis=1), 0)
+        lo[partial, axis] = occupied.argmax(axis=1)
+        hi[partial, axis] = np.where(occupied.any(axis=1), 7 - occupied[:, ::-1].argmax(axis=1), 0)
     return leaves.origins + lo, leaves.origins + hi
 
 
@@ -232,8 +250,10 @@ def build_grid(
 
     o = leaves.origins
     order = np.lexsort(tuple((o[:, a] >> s) for s in (3, 7, 12) for a in (2, 1, 0)))
-    o, active = o[order], leaves.active[order]
-    values = None if leaves.values is None else leaves.values[order]
+    active, values = leaves.active, leaves.values
+    if (order != np.arange(len(order))).any():  # dense arrays and tiles often come sorted
+        o, active = o[order], active[order]
+        values = None if values is None else values[order]
     lower_of, lower_first = _groups(o >> 7)
     upper_of_lower, upper_first = _groups(o[lower_first] >> 12)
     lower_o, upper_o = o[lower_first] & ~127, o[lower_first][upper_first] & ~4095

@@ -214,9 +214,10 @@ def _check_indices(g: _Grid, lay: ValueLayout, leaves: _Level, index_count: int)
         raise g.error(f"corrupt: a leaf indexes values beyond the grid's {index_count}")
 
 
-def parse_grid(data: bytes, source: str, index: int) -> GridInfo:
+def parse_grid(data: bytes, source: str, index: int, verify_checksum: bool = True) -> GridInfo:
     """Validate one grid's bytes (exactly its size) and return its ``GridInfo``; raise
-    ``NanoVDBError`` naming ``source``, the grid and the fault."""
+    ``NanoVDBError`` naming ``source``, the grid and the fault. ``verify_checksum=False``
+    skips the checksum (for live in-memory buffers whose values kernels may have changed)."""
     g = _Grid(data, source, index)
     if g.size < GRID_SIZE + TREE_SIZE:
         raise g.error(f"truncated: {g.size} bytes cannot hold a grid")
@@ -265,7 +266,7 @@ def parse_grid(data: bytes, source: str, index: int) -> GridInfo:
     if lay.is_index:
         _check_indices(g, lay, leaf, index_count)
     spans = tuple((lv.begin, lv.count, lv.size) for lv in (upper, lower, leaf))
-    if not checksum_matches(checksum, grid_checksum(data, version, spans)):
+    if verify_checksum and not checksum_matches(checksum, grid_checksum(data, version, spans)):
         raise g.error(f"bad checksum 0x{checksum:016x}: the grid's bytes were changed after "
                       f"it was written")  # fmt: skip
     bbox = struct.unpack_from("<6i", data, root.begin + ROOT_OFF_BBOX_MIN)

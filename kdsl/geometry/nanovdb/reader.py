@@ -89,7 +89,7 @@ def _is_raw_grid(buf: memoryview) -> bool:
     return version_major(version) == MAJOR_VERSION and 0 <= index < count
 
 
-def _read_raw(buf: memoryview, source: str) -> list[GridInfo]:
+def _read_raw(buf: memoryview, source: str, verify: bool) -> list[GridInfo]:
     grids, pos = [], 0
     while pos < len(buf):
         if len(buf) - pos < GRID_SIZE + TREE_SIZE:
@@ -99,7 +99,7 @@ def _read_raw(buf: memoryview, source: str) -> list[GridInfo]:
         if size < GRID_SIZE + TREE_SIZE or size > len(buf) - pos:
             raise NanoVDBError(f"{source}: grid {len(grids)} gives a size of {size} bytes, but "
                                f"{len(buf) - pos} bytes remain: truncated or corrupt")  # fmt: skip
-        grids.append(parse_grid(bytes(buf[pos : pos + size]), source, len(grids)))
+        grids.append(parse_grid(bytes(buf[pos : pos + size]), source, len(grids), verify))
         pos += size
     return grids
 
@@ -125,7 +125,7 @@ def _read_header(buf: memoryview, pos: int, source: str) -> tuple[int, Codec]:
     return count, codec
 
 
-def _read_segments(buf: memoryview, source: str) -> list[GridInfo]:
+def _read_segments(buf: memoryview, source: str, verify: bool) -> list[GridInfo]:
     grids: list[GridInfo] = []
     pos = 0
     while pos < len(buf):
@@ -150,18 +150,19 @@ def _read_segments(buf: memoryview, source: str) -> list[GridInfo]:
         for size, name in metas:
             what = f"grid {len(grids)} ({name!r})" if name else f"grid {len(grids)}"
             data, pos = decompress_grid(buf, pos, size, codec, source, what)
-            grids.append(parse_grid(data, source, len(grids)))
+            grids.append(parse_grid(data, source, len(grids), verify))
     return grids
 
 
-def read_grids(file_or_bytes: Any) -> list[GridInfo]:
+def read_grids(file_or_bytes: Any, verify_checksum: bool = True) -> list[GridInfo]:
     """Every grid of a NanoVDB file or buffer: a path, a binary file object, or a
     bytes-like object holding a ``.nvdb`` file or a raw grid buffer. Raises
     ``NanoVDBError`` (``NanoVDBCodecError`` for codecs) naming the source and the fault."""
     buf, source = _source_bytes(file_or_bytes)
     if len(buf) == 0:
         raise NanoVDBError(f"{source}: empty: no NanoVDB grid")
-    grids = _read_raw(buf, source) if _is_raw_grid(buf) else _read_segments(buf, source)
+    read = _read_raw if _is_raw_grid(buf) else _read_segments
+    grids = read(buf, source, verify_checksum)
     if not grids:
         raise NanoVDBError(f"{source}: no NanoVDB grid")
     return grids
