@@ -12,6 +12,7 @@ from kdsl.frontend.constants import *  # noqa: F403
 from kdsl.frontend.constants import __all__ as _constant_names
 from kdsl.frontend.custom_grad import adjoint, func_grad, func_replay
 from kdsl.frontend.generic import Float, Int
+from kdsl.frontend.grad import grad
 from kdsl.frontend.inout import inout
 from kdsl.frontend.kernel import Function, Kernel, func, kernel, overload
 from kdsl.frontend.static import constant, static
@@ -20,7 +21,7 @@ globals().update(BUILTINS)
 
 __all__ = [
     "Builtin", "Float", "Function", "Int", "Kernel", "adjoint", "constant", "func", "func_grad", "func_replay",
-    "inout", "kernel", "overload", "static",
+    "grad", "inout", "kernel", "overload", "static",
     *_constant_names,
     *sorted(BUILTINS),
 ]  # fmt: skip

@@ -336,6 +336,9 @@ class ExpressionLowering(Emitter):
             )
         if getattr(fn, "__kdsl_kernel__", False):
             raise self.error(KdslSyntaxError, "a kernel cannot call another kernel", node)
+        lower_call = getattr(fn, "lower_call", None)  # kdsl.grad and what it returns
+        if lower_call is not None:
+            return lower_call(self, args, node, kwargs or {})
         raise self.error(KdslTypeError, f"{describe(fn)} cannot be called in a kernel", node)
 
     def check_cast_args(self, name: str, args: list[Any], node: ast.AST) -> None:
