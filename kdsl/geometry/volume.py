@@ -358,6 +358,8 @@ class Volume:
     def _from_tiles(cls, tiles, mat, shift, bg_value, device) -> Volume:
         grid_type = grid_type_of_background(bg_value)
         index = grid_type == GridType.ONINDEX
+        if index:  # whole tiles index every voxel: an Index grid, as Warp makes them
+            grid_type = GridType.INDEX
         leaves = leaves_from_tiles(tiles, None if index else bg_value, index=index)
         return cls._built(build_grid(leaves, grid_type, bg_value, mat, shift), device)
 
@@ -367,7 +369,7 @@ class Volume:
                           transform: Any = None, **rebuild: Any) -> Volume:  # fmt: skip
         """A volume with an active 8^3 tile at each of ``tile_points`` (int32 index
         coordinates, or float32 world positions), every voxel at ``bg_value`` (``None``
-        makes an OnIndex grid)."""
+        makes an Index grid)."""
         _refuse_rebuild(rebuild)
         mat, shift = index_to_world(voxel_size, transform), vector3(translation, "translation")
         coords = points_to_coords(tile_points, mat, shift, "tile_points")

@@ -15,8 +15,9 @@ background in every inactive internal-node table slot and inactive leaf voxel; e
 leaf's bounding box of its active voxels; node statistics left zero (the grid's
 ``HAS_MIN_MAX`` flag is off, so readers ignore them). Unlike Warp, kdsl fills in the
 checksum and the tree's tile counts (zero) and the name key NanoVDB's tools look up.
-Index grids are OnIndex grids: index 0 is the background, active voxels count from 1 in
-leaf order; feature arrays become blind data (one value per index).
+Index grids: index 0 is the background; an OnIndex grid numbers its active voxels from 1
+in leaf order, an Index grid (Warp's choice for whole tiles) every voxel of its leaves;
+feature arrays become blind data (one value per index).
 """
 
 from __future__ import annotations
@@ -281,10 +282,13 @@ def build_grid(
     nodes[:, LEAF_OFF_VALUE_MASK : LEAF_OFF_VALUE_MASK + 64] = np.packbits(
         active, axis=1, bitorder="little"
     )
+    indexed = counts if grid_type == GridType.ONINDEX else np.full(n_leaf, 512)
     if lay.is_index:
-        first = 1 + np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.uint64)
+        first = 1 + np.concatenate([[0], np.cumsum(indexed)[:-1]]).astype(np.uint64)
         words = np.cumsum(active.reshape(-1, 8, 64).sum(axis=2), axis=1)[:, :7].astype(np.uint64)
         prefix = np.bitwise_or.reduce(words << (np.arange(7, dtype=np.uint64) * 9), axis=1)
+        if grid_type == GridType.INDEX:  # every voxel indexed: no prefix sums
+            prefix[:] = 0
         index = np.stack([first, prefix], axis=1).astype("<u8")
         nodes[:, LEAF_OFF_INDEX_OFFSET : LEAF_OFF_INDEX_OFFSET + 16] = index.view(np.uint8)
     else:
@@ -369,6 +373,6 @@ def build_grid(
     w.put(632, "<u4", [int(grid_class), int(grid_type)])
     w.put(640, "<i8", blind if features else size)
     w.put(648, "<u4", [len(features), 0])
-    w.put(656, "<u8", [int(counts.sum()) + 1 if lay.is_index else 0, MAGIC_GRID])
+    w.put(656, "<u8", [int(indexed.sum()) + 1 if lay.is_index else 0, MAGIC_GRID])
     w.put(GRID_OFF_CHECKSUM, "<u8", grid_checksum(w.buf.data, version))
     return w.buf.tobytes()
