@@ -131,10 +131,10 @@ def get_cpu_kernel_cache_key(*, cpu_compiler_flags: str | None = None) -> str:
             f"get_cpu_kernel_cache_key: cpu_compiler_flags={cpu_compiler_flags!r}: kdsl's cpu "
             f"backend JIT-compiles for the host CPU only (None or '-march=native')"
         )
-    from kdsl.backends.cpu import jit
+    from kdsl.backends.cpu import host
     from kdsl.backends.registry import get_backend
 
     cpu = get_backend("cpu")
-    target = cpu.cache_target(jit.target_id())
+    target = cpu.cache_target(host.target_id())
     digest = hashlib.sha256(f"{cpu.code_version()}\0{target}".encode()).hexdigest()[:8]
     return f"{package_version()}-{platform.system()}-{platform.machine()}-{digest}"

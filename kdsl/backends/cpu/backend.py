@@ -8,11 +8,13 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import llvmlite  # the package only (its version); the binding is imported on a miss
+
 from kdsl.backends import checks_common
 from kdsl.backends.base import Args, Backend, CompiledKernel, Dims, Job, launch_size, source_version
-from kdsl.backends.cpu import jit, pool, printing
+from kdsl.backends.cpu import host, pool, print_order, shared_object
 from kdsl.backends.cpu.abi import ArgPacker, Packed
-from kdsl.backends.cpu.lower import kernel_names, kernel_symbol, lower_kernels, tid_ndims
+from kdsl.backends.cpu.kernel_facts import kernel_names, kernel_symbol, tid_ndims, uses_print
 from kdsl.ir.core import Module
 from kdsl.ir.ops_debug import debug_sites
 
@@ -61,7 +63,8 @@ class CpuBackend(Backend):
     """
 
     name = "cpu"
-    version = f"1-{jit.version_tag()}"
+    #: The LLVM build is part of the target (``host.target_id``), so the cache key has it.
+    version = f"2-llvmlite-{llvmlite.__version__}"
     capabilities = frozenset({"fp16", "fp32", "fp64", "int8", "int16", "int64", "atomics"})
 
     emit_stages = ("llvm-ir-unopt", "llvm-ir", "asm")
@@ -77,6 +80,9 @@ class CpuBackend(Backend):
 
         ``fast_math`` changes the LLVM stages.
         """
+        from kdsl.backends.cpu import jit
+        from kdsl.backends.cpu.lower import lower_kernels
+
         fast = bool(options.get("fast_math", False))
         text = str(lower_kernels(module, kernel_names(module), fast_math=fast).llmod)
         if stage == "llvm-ir-unopt":
@@ -85,7 +91,11 @@ class CpuBackend(Backend):
         return str(mod) if stage == "llvm-ir" else jit.assembly(mod)
 
     def build(self, job: Job, target: str) -> bytes:
-        """Object code for the host (the only target) at -O3 (-O0 with ``optimize=False``)."""
+        """The kernel for the host (the only target) at -O3 (-O0 with ``optimize=False``):
+        a shared object where a linker is found (``shared_object``), else object code."""
+        from kdsl.backends.cpu import jit
+        from kdsl.backends.cpu.lower import lower_kernels
+
         opts = job.options
         state = lower_kernels(
             job.module, [job.symbol], {job.symbol: _llvm_name(job, target)}, debug=job.checked,
@@ -93,19 +103,28 @@ class CpuBackend(Backend):
         )  # fmt: skip
         mod = jit.parse(str(state.llmod))
         jit.optimize(mod, 3 if opts.get("optimize", True) else 0)
+        if shared_object.linker() is not None:
+            linked = shared_object.link(jit.emit_object(mod, shared=True))
+            if linked is not None:
+                return linked
         return jit.emit_object(mod)
 
     def load_artifact(self, job: Job, target: str, data: bytes) -> int:
-        """The address of the kernel's range function, once the object is in the JIT."""
+        """The address of the kernel's range function: a shared object is loaded with
+        ``ctypes`` (no llvmlite), object code is added to llvmlite's JIT."""
         name = _llvm_name(job, target)
+        if shared_object.is_shared_object(data):
+            return shared_object.load(data, name)
+        from kdsl.backends.cpu import jit
+
         return jit.add_object(data, [name])[name]
 
     def load(self, job: Job) -> CompiledKernel:
-        target = jit.target_id()
+        target = host.target_id()
         fn = RANGE_FN(job.artifact(target))
         module, symbol = job.module, job.symbol
-        if printing.uses_print(module):  # keep C's and Python's stdout in order
-            fn = printing.flushing(fn)
+        if uses_print(module):  # keep C's and Python's stdout in order
+            fn = print_order.flushing(fn)
         func = module.get_func(symbol)
         payload = CpuKernel(fn, [a.type for a in func.regions[0].block.args], tid_ndims(func),
                             _llvm_name(job, target))  # fmt: skip

@@ -44,6 +44,10 @@ def _init() -> None:
 
 
 def _register_libm() -> None:
+    # printf: kd.print (``printing``); registered here too, because a kernel loaded
+    # from the cache may call it before anything imports the printing lowering.
+    printf = ctypes.CDLL(None).printf
+    llvm.add_symbol("printf", ctypes.cast(printf, ctypes.c_void_p).value)
     path = ctypes.util.find_library("m") or "libm.so.6"
     libm = ctypes.CDLL(path)
     for base in _LIBM_NAMES:
@@ -74,6 +78,24 @@ def target_machine() -> llvm.TargetMachine:
         opt=3,
         codemodel="jitdefault",
         jit=True,
+    )
+
+
+@cache
+def shared_target_machine() -> llvm.TargetMachine:
+    """``target_machine`` emitting position-independent code (for ``shared_object.link``).
+
+    The JIT's machine keeps its own code model: MCJIT places sections wherever it
+    maps them, which the small code model of shared objects does not allow for.
+    """
+    _init()
+    target = llvm.Target.from_default_triple()
+    return target.create_target_machine(
+        cpu=llvm.get_host_cpu_name(),
+        features=llvm.get_host_cpu_features().flatten(),
+        opt=3,
+        reloc="pic",
+        codemodel="default",
     )
 
 
@@ -118,9 +140,9 @@ def target_id() -> str:
     return f"{tm.triple};{llvm.get_host_cpu_name()};{llvm.get_host_cpu_features().flatten()}"
 
 
-def emit_object(mod: llvm.ModuleRef) -> bytes:
-    """The host object code of an (optimized) module: what the kernel cache stores."""
-    return target_machine().emit_object(mod)
+def emit_object(mod: llvm.ModuleRef, shared: bool = False) -> bytes:
+    """The host object code of an (optimized) module, position-independent if ``shared``."""
+    return (shared_target_machine() if shared else target_machine()).emit_object(mod)
 
 
 @cache

@@ -22,6 +22,7 @@ from llvmlite import ir
 from kdsl.backends.cpu import types as LT
 from kdsl.backends.cpu.composite import Parts, leaf_types, leaves, rebuild_all
 from kdsl.backends.cpu.emitter import Emitter, ModuleState
+from kdsl.backends.cpu.kernel_facts import kernel_symbol, tid_ndims
 from kdsl.backends.cpu.memory import load_value
 from kdsl.backends.cpu.ops import TABLE
 from kdsl.backends.cpu.versioning import vector_arrays, versioned
@@ -30,16 +31,6 @@ from kdsl.ir import types as T
 from kdsl.ir.core import Block, Module, Operation
 
 KERNEL_TYPE = ir.FunctionType(LT.VOID, [LT.I64, LT.I64, LT.PTR, LT.PTR])
-
-
-def kernel_symbol(name: str) -> str:
-    """The LLVM name of the range function of kernel ``name``."""
-    return f"kdsl_kernel_{name}"
-
-
-def tid_ndims(func: Operation) -> set[int]:
-    """The ``ndim`` of every ``kd.tid`` in ``func``."""
-    return {op.attrs["ndim"] for op in func.walk() if op.name == "kd.tid"}
 
 
 def new_module(module: Module, name: str = "kdsl") -> ModuleState:
@@ -281,8 +272,3 @@ def lower_kernels(
         func = module.get_func(k)
         emit_kernel(state, func, (names or {}).get(k) or kernel_symbol(k))
     return state
-
-
-def kernel_names(module: Module) -> list[str]:
-    """Symbols of the kernels of ``module``."""
-    return [f.attrs["sym_name"] for f in module.funcs if f.attrs.get("kind") == "kernel"]

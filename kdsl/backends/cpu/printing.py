@@ -6,7 +6,7 @@ their conversion's type (i64, u64, f64, i32; bools become the strings ``True`` o
 ``False`` for ``%s``), which are exactly C's promoted vararg types.
 
 C's ``stdout`` is buffered apart from Python's ``sys.stdout``: a kernel that prints
-is launched through ``flushing``, which flushes Python's buffer before the kernel
+is launched through ``print_order.flushing``, which flushes Python's buffer before the kernel
 runs and C's buffers after it, so the output of Python and of kernels appears in
 program order (also when the output is a pipe or a file).
 """
@@ -15,8 +15,6 @@ from __future__ import annotations
 
 import ctypes
 import hashlib
-import sys
-from collections.abc import Callable
 from functools import cache
 from typing import Any
 
@@ -25,7 +23,7 @@ from llvmlite import ir
 
 from kdsl.backends.cpu import types as LT
 from kdsl.backends.cpu.emitter import Emitter
-from kdsl.ir.core import Module, Operation
+from kdsl.ir.core import Operation
 from kdsl.ir.lowering import LOWERINGS
 from kdsl.ir.ops_print import c_format
 
@@ -69,25 +67,6 @@ def _print(em: Emitter, op: Operation) -> None:
             x = em.b.select(x, _cstring(em, b"True"), _cstring(em, b"False"))
         args.append(x)
     em.b.call(printf, args)
-
-
-def uses_print(module: Module) -> bool:
-    """True when ``module`` holds a ``kd.print``."""
-    return any(op.name == "kd.print" for op in module.walk())
-
-
-def flushing(fn: Callable[..., Any]) -> Callable[..., None]:
-    """``fn`` (a native range function) run between flushes of Python's and C's stdout."""
-    fflush = _libc().fflush
-
-    def run(*args: Any) -> None:
-        sys.stdout.flush()
-        try:
-            fn(*args)
-        finally:
-            fflush(None)
-
-    return run
 
 
 CPU.register("kd.print", _print)
