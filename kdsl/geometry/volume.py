@@ -32,6 +32,7 @@ from kdsl.geometry.nanovdb.grid_validation import parse_grid
 from kdsl.geometry.nanovdb.layout import (
     CHECKSUM_DISABLED,
     GRID_OFF_CHECKSUM,
+    GRID_OFF_MAP,
     LEAF_OFF_VALUE_MASK,
     GridType,
 )
@@ -153,10 +154,11 @@ class Volume:
     def get_grid_info(self) -> Volume.GridInfo:
         """The grid's name, size, index and count, value type and transform."""
         g = self._info
+        # the float32 copy of the transform the grid holds, as Warp reports it
+        single = np.frombuffer(g.data, "<f4", 21, GRID_OFF_MAP)
         return Volume.GridInfo(
             g.name, g.grid_size, g.grid_index, g.grid_count, g.type_str,
-            vec3f(*g.translation.astype(np.float32)),
-            mat33f(*g.index_to_world.astype(np.float32).ravel()),
+            vec3f(*single[18:21]), mat33f(*single[:9]),
         )  # fmt: skip
 
     @property

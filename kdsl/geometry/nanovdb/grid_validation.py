@@ -148,7 +148,8 @@ def _transform(g: _Grid) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     mat = g.array(GRID_OFF_MAP + MAP_OFF_MATD, "<f8", 9).reshape(3, 3)
     inv = g.array(GRID_OFF_MAP + MAP_OFF_INVMATD, "<f8", 9).reshape(3, 3)
     vec = g.array(GRID_OFF_MAP + MAP_OFF_VECD, "<f8", 3)
-    if not (np.isfinite(mat).all() and np.isfinite(inv).all() and np.isfinite(vec).all()):
+    single = g.array(GRID_OFF_MAP, "<f4", 21)  # the float32 copy kernels use
+    if not all(np.isfinite(a).all() for a in (mat, inv, vec, single)):
         raise g.error("corrupt: its index-to-world transform is not finite")
     return mat, inv, vec
 
@@ -256,7 +257,7 @@ def parse_grid(data: bytes, source: str, index: int, verify_checksum: bool = Tru
     if end > (blind_off if blind_count or blind_off else g.size):
         raise g.error("corrupt: the tree overlaps the blind data")
     tile_child = g.array(root.end, "<i8", tile_count * lay.root_tile_size // 8)
-    tile_child = tile_child.reshape(tile_count, -1)[:, 1]
+    tile_child = tile_child.reshape(tile_count, lay.root_tile_size // 8)[:, 1]
     if not upper.starts(root.begin + tile_child[tile_child != 0]).all():
         raise g.error("corrupt: a root tile's child offset does not point at an upper node")
     _check_children(g, upper, UPPER_OFF_CHILD_MASK, lay.upper_off_table, UPPER_TABLE_COUNT,
