@@ -128,3 +128,34 @@ def test_strips_on_two_gpus_equal_one_gpu_bit_for_bit(peer):
         results = DeviceTeam(["cuda:0", "cuda:1"], timeout_s=120).run(work)
     whole = _whole("heat", "rk4", steps, grid=grid, device="cuda:0")
     assert results[0].tobytes() == whole.state()[0].tobytes()
+
+
+def test_the_scaling_benchmark_runs_its_cpu_smoke_version(tmp_path):
+    """benchmarks/bench_multigpu.py without GPUs: strips on the cpu device, a table and JSON."""
+    import json
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    if wp.get_cuda_device_count():
+        pytest.skip("with GPUs the benchmark runs at full size (tools/multigpu_check.sh)")
+    root = Path(wp.__file__).resolve().parents[1]
+    out = tmp_path / "multigpu.json"
+    env = dict(
+        os.environ,
+        PYTHONPATH=os.pathsep.join(filter(None, [str(root), os.environ.get("PYTHONPATH")])),
+    )
+    cmd = [sys.executable, str(root / "benchmarks" / "bench_multigpu.py"), "--paths", "team",
+           "--cpu-grid", "16", "--steps", "3", "--json", str(out)]  # fmt: skip
+    proc = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert "efficiency" in proc.stdout
+    rows = json.loads(out.read_text())["scaling"]
+    assert [(r["scaling"], r["ranks"], r["grid"]) for r in rows] == [
+        ("strong", 1, 16),
+        ("strong", 2, 16),
+        ("weak", 1, 16),
+        ("weak", 2, 23),
+    ]
+    assert all(r["ms_per_step"] > 0 and r["error"] < 1e-3 for r in rows)
