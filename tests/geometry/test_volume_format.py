@@ -417,6 +417,8 @@ def test_structural_corruption_is_caught_without_checksum(small_file):
     ]:
         with pytest.raises(NanoVDBError, match=match):
             read_grids(_patch(d, offset, fmt, value))
+    # a root with no tiles leaves its nodes unreachable, which is no fault (fuzz regression)
+    assert read_grids(_patch(d, root + 24, "<I", 0))[0].root_tile_count == 0
 
 
 def test_file_and_argument_errors(tmp_path, monkeypatch, small_file):
@@ -583,3 +585,47 @@ def test_reads_nanovdb_two_grids_and_index_grid():
     assert [tuple(c) for c in index.get_voxels().numpy().tolist()] == list(indices)
     channel = index.feature_array(0).numpy()
     assert all(channel[int(i[0])] == np.float32(sphere[k][0]) for k, i in indices.items())
+
+
+# --- kernels read the loaded grids (the sampling itself is test_volume_sampling's) -----------
+
+
+@wp.kernel
+def _lookup_f(vol: wp.uint64, ijk: wp.array(dtype=wp.vec3i), out: wp.array(dtype=float)):
+    i = wp.tid()
+    p = ijk[i]
+    out[i] = wp.volume_lookup_f(vol, p[0], p[1], p[2])
+
+
+def _lookup(volume, coords, backend, device="cpu"):
+    out = wp.zeros(len(coords), dtype=float, device=device)
+    pts = wp.array(np.asarray(coords, np.int32), dtype=wp.vec3i, device=device)
+    wp.launch(
+        _lookup_f, dim=len(coords), inputs=[volume.id, pts, out], backend=backend, device=device
+    )
+    return out.numpy()
+
+
+@pytest.mark.parametrize("backend", ["interp", "cpu"])
+def test_kernels_read_loaded_grids(backend):
+    """A NanoVDB-written level set and a kdsl-built grid, looked up by kernels."""
+    sphere = _nanovdb_voxels("sphere")
+    coords = list(sphere)[:: 40 if backend == "interp" else 1]
+    v = wp.Volume.load_from_nvdb(DATA / "nanovdb_sphere_zip.nvdb")
+    expected = np.array([sphere[c][0] for c in coords], np.float32)
+    assert np.array_equal(_lookup(v, coords, backend), expected)
+    a = _field((9, 9, 9), seed=5)
+    built = wp.Volume.load_from_numpy(a, bg_value=-3.0)
+    ijk = [(0, 0, 0), (8, 7, 6), (3, 1, 4), (20, 0, 0), (-1, 0, 0)]
+    assert _lookup(built, ijk, backend).tolist() == [a[0, 0, 0], a[8, 7, 6], a[3, 1, 4], -3, -3]
+
+
+@cuda
+def test_kernels_read_loaded_grids_on_cuda():
+    sphere = _nanovdb_voxels("sphere")
+    v = wp.Volume.load_from_nvdb(
+        DATA / "nanovdb_sphere_blosc.nvdb" if HAS_BLOSC else DATA / "nanovdb_sphere_zip.nvdb",
+        device="cuda:0",
+    )
+    expected = np.array([e[0] for e in sphere.values()], np.float32)
+    assert np.array_equal(_lookup(v, list(sphere), "cuda", "cuda:0"), expected)
