@@ -16,8 +16,9 @@ from kdsl.backends import checks_common
 from kdsl.backends.base import Args, Backend, CompiledKernel, Dims, Job, launch_size, source_version
 from kdsl.backends.cuda import nvrtc
 from kdsl.backends.cuda.devices import device_count
-from kdsl.backends.cuda.lower import BLOCK, generate, kernel_names, tid_ndims
+from kdsl.backends.cuda.lower import BLOCK, entry_name, generate, kernel_names, tid_ndims
 from kdsl.backends.cuda.params import Packer
+from kdsl.errors import KdslError
 from kdsl.ir.core import Module
 from kdsl.ir.ops_debug import debug_sites
 
@@ -46,11 +47,14 @@ def current_arch() -> str:
 
 
 class CudaKernel:
-    """The payload of a compiled cuda kernel: source, cubins per arch, functions per GPU."""
+    """The payload of a compiled cuda kernel: cubins per arch, functions per GPU.
 
-    def __init__(self, job: Job, source: str, entry: str) -> None:
+    Its CUDA C is generated only when a cubin has to be compiled (or ``source`` is read):
+    a kernel whose cubin is in the cache is never lowered.
+    """
+
+    def __init__(self, job: Job, entry: str) -> None:
         self.job = job
-        self.source = source
         self.entry = entry
         #: device ordinal -> (cupy Module, CUfunction pointer, Function); kept so it stays loaded.
         self.functions: dict[int, tuple[Any, int, Any]] = {}
@@ -58,6 +62,11 @@ class CudaKernel:
         self.packer: Packer | None = None
         #: Debug builds: the check sites (``kdsl.ir.ops_debug``); None in release builds.
         self.sites: dict | None = None
+
+    @property
+    def source(self) -> str:
+        """The kernel's CUDA C (generated on first use)."""
+        return _source(self.job).text
 
     def cubin(self, arch: str) -> bytes:
         """The cubin for ``arch``, from the kernel cache or compiled now."""
@@ -112,14 +121,16 @@ class CudaBackend(Backend):
     def build(self, job: Job, target: str) -> bytes:
         """The cubin of ``job`` for the architecture ``target`` ("sm_90")."""
         fast = bool(job.options.get("fast_math", False))
-        source = _source(job).text
-        return nvrtc.compile_source(source, target, fast, job.module, job.symbol).cubin
+        gen = _source(job)
+        if gen.entries[job.symbol] != entry_name(job.symbol):  # how load finds the kernel
+            raise KdslError(f"cuda backend: kernel {job.symbol!r} was emitted as "
+                            f"{gen.entries[job.symbol]!r}, not {entry_name(job.symbol)!r}")  # fmt: skip
+        return nvrtc.compile_source(gen.text, target, fast, job.module, job.symbol).cubin
 
     def load(self, job: Job) -> CompiledKernel:
         module, symbol = job.module, job.symbol
-        gen = _source(job)
         func = module.get_func(symbol)
-        payload = CudaKernel(job, gen.text, gen.entries[symbol])
+        payload = CudaKernel(job, entry_name(symbol))
         payload.tid_ndims = tid_ndims(func)
         args = func.regions[0].block.args
         payload.packer = Packer(
@@ -130,7 +141,7 @@ class CudaBackend(Backend):
             payload.sites = debug_sites(module)
         arch = job.options.get("arch") or current_arch()
         payload.cubin(arch)  # compile errors surface here, not at the first launch
-        meta = {"tid_ndims": sorted(payload.tid_ndims), "arch": arch, "source": gen.text}
+        meta = {"tid_ndims": sorted(payload.tid_ndims), "arch": arch}
         return CompiledKernel(self.name, symbol, module, payload, meta)
 
     def launch(self, compiled: CompiledKernel, dims: Dims, args: Args, stream: Any = None) -> None:

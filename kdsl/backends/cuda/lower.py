@@ -25,6 +25,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from kdsl.backends.cuda import ctypes_ as CT
 from kdsl.backends.cuda.emitter import FuncEmitter, Source
 from kdsl.backends.cuda.ops import TABLE
 from kdsl.errors import KdslCapabilityError
@@ -55,6 +56,12 @@ def tid_ndims(func: Operation) -> set[int]:
 def kernel_names(module: Module) -> list[str]:
     """Symbols of the kernels of ``module``."""
     return [f.attrs["sym_name"] for f in module.funcs if f.attrs.get("kind") == "kernel"]
+
+
+def entry_name(symbol: str) -> str:
+    """The C name ``generate(module, [symbol])`` gives kernel ``symbol``: known without
+    generating, so a kernel whose cubin comes from the cache is never lowered."""
+    return f"k_{CT.sanitize(symbol)}_0"
 
 
 def generate(module: Module, kernels: list[str], debug: bool = False) -> CudaSource:
