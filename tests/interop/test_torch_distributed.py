@@ -78,3 +78,27 @@ def test_two_nccl_ranks_match_one_gpu():
     out = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stdout[-2000:] + out.stderr[-3000:]
     assert "ranks=2 device=cuda" in out.stdout and out.stdout.strip().endswith("ok"), out.stdout
+
+
+@wp.kernel
+def _fill(a: wp.array(dtype=float), value: float):
+    a[wp.tid()] = value
+
+
+@pytest.mark.skipif(
+    not (
+        torch.cuda.is_available()
+        and torch.cuda.device_count() >= 2
+        and wp.get_cuda_device_count() >= 2
+    ),
+    reason="needs two GPUs",
+)
+def test_a_tensor_of_another_gpu_in_a_launch_is_an_error():
+    """The usual slip of a rank: its tensor on one GPU, its launch on another."""
+    t = torch.zeros(8, device="cuda:1")
+    with pytest.raises(wp.KdslError, match=r"expected an array on device 'cuda:0'.*cuda:1"):
+        wp.launch(_fill, dim=8, inputs=[t, 1.0], device="cuda:0")
+    with pytest.raises(wp.KdslError, match=r"expected an array on device 'cuda:0'.*cuda:1"):
+        wp.launch(_fill, dim=8, inputs=[wp.from_torch(t), 1.0], device="cuda:0")
+    wp.launch(_fill, dim=8, inputs=[t, 1.0], device="cuda:1")
+    assert float(t.sum()) == 8.0
