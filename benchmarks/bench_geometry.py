@@ -1,7 +1,8 @@
 """Geometry queries, kdsl beside Warp: BVH builds and queries, triangle meshes.
 
-    python benchmarks/bench_geometry.py [--section bvh|mesh] [--boxes 200000]
-        [--tris 200000] [--queries 1000000] [--reps 3] [--device cpu|cuda:0] [--json PATH]
+    python benchmarks/bench_geometry.py [--section bvh|mesh|marching_cubes] [--boxes 200000]
+        [--tris 200000] [--queries 1000000] [--mc-nodes 256] [--reps 3]
+        [--device cpu|cuda:0] [--json PATH]
 
 Each section is a function returning rows; ``main`` runs the sections asked for, prints
 one table per section and writes every row to benchmarks/results/geometry.json.
@@ -17,6 +18,9 @@ mismatch exits 1 with the reason.
 Mesh section (``bench_geometry_mesh.py``, which also runs alone): the bumpy
 cube-sphere of about ``--tris`` triangles, ``--queries`` closest points and rays
 (closest and any hit), a move-and-refit; kdsl beside Warp, and Embree for rays.
+
+Marching cubes section (``bench_geometry_mc.py``): two 256^3 fields (a bumpy sphere,
+a gyroid), ``surface(field, 0.0)`` with a reusable context; kdsl beside Warp.
 """
 
 from __future__ import annotations
@@ -35,6 +39,7 @@ import kdsl as wp
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from bench_geometry_mc import marching_cubes_section, print_marching_cubes
 from bench_geometry_mesh import mesh_section, print_mesh
 
 RESULTS = Path(__file__).resolve().parent / "results" / "geometry.json"
@@ -189,7 +194,11 @@ def _print_bvh(rows: list[dict]) -> None:
               f"{1e3 * r['refit_s']:9.2f} {r['aabb_s'] * scale:11.1f} {r['ray_s'] * scale:10.1f}")  # fmt: skip
 
 
-SECTIONS = {"bvh": (bvh_section, _print_bvh), "mesh": (mesh_section, print_mesh)}
+SECTIONS = {
+    "bvh": (bvh_section, _print_bvh),
+    "mesh": (mesh_section, print_mesh),
+    "marching_cubes": (marching_cubes_section, print_marching_cubes),
+}
 
 
 def main() -> None:
@@ -198,6 +207,7 @@ def main() -> None:
     p.add_argument("--boxes", type=int, default=200_000)
     p.add_argument("--tris", type=int, default=200_000, help="the mesh section's triangles")
     p.add_argument("--queries", type=int, default=1_000_000)
+    p.add_argument("--mc-nodes", type=int, default=256, help="marching_cubes: nodes per axis")
     p.add_argument("--constructors", default="lbvh,median,sah")
     p.add_argument("--reps", type=int, default=3)
     p.add_argument("--device", default="cpu")
