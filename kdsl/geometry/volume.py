@@ -30,7 +30,6 @@ from kdsl.geometry.nanovdb.codecs import parse_codec
 from kdsl.geometry.nanovdb.grid_info import GridInfo
 from kdsl.geometry.nanovdb.grid_validation import parse_grid
 from kdsl.geometry.nanovdb.layout import (
-    CHECKSUM_DISABLED,
     GRID_OFF_CHECKSUM,
     GRID_OFF_MAP,
     LEAF_OFF_VALUE_MASK,
@@ -52,6 +51,13 @@ from kdsl.runtime.device import get_device
 from kdsl.types import class_of, mat33f, type_of, uint8, uint32, vec3f
 
 __all__ = ["Volume", "VolumeError"]
+
+
+def _build(*args: Any, **kwargs: Any) -> bytes:
+    # In-memory grids carry no checksum (kernels may change their values, as in Warp);
+    # save_to_nvdb computes one for the file.
+    return build_grid(*args, checksum=False, **kwargs)
+
 
 # NanoVDB type names (Warp's type_str) -> kdsl dtypes, for ``dtype`` and feature arrays
 _DTYPES = {
@@ -107,7 +113,8 @@ class Volume:
         self.device = get_device(device)
         self._grids = grids
         self._info = grids[0]
-        words = np.frombuffer(b"".join(g.data for g in grids), dtype=np.uint32)
+        raw = grids[0].data if len(grids) == 1 else b"".join(g.data for g in grids)
+        words = np.frombuffer(raw, dtype=np.uint32)
         self._words = array(words, dtype=uint32, device=self.device)
         self._bytes: array | None = None
         self._record: Any = None
@@ -279,19 +286,17 @@ class Volume:
 
     def _current_grids(self) -> list[GridInfo]:
         """The grids as they are now on the device (kernels may have stored values),
-        with refreshed checksums."""
+        each with a full checksum of what it holds now."""
         data = np.ascontiguousarray(self._words.numpy()).view(np.uint8)
         out, pos = [], 0
         for g in self._grids:
             raw = bytearray(data[pos : pos + g.grid_size].tobytes())
             pos += g.grid_size
-            if g.checksum != CHECKSUM_DISABLED:
-                spans = ((g.upper_offset, g.upper_count, g.layout.upper_size),
-                         (g.lower_offset, g.lower_count, g.layout.lower_size),
-                         (g.leaf_offset, g.leaf_count, g.layout.leaf_size))  # fmt: skip
-                raw[GRID_OFF_CHECKSUM : GRID_OFF_CHECKSUM + 8] = grid_checksum(
-                    bytes(raw), g.version, spans
-                ).to_bytes(8, "little")
+            spans = ((g.upper_offset, g.upper_count, g.layout.upper_size),
+                     (g.lower_offset, g.lower_count, g.layout.lower_size),
+                     (g.leaf_offset, g.leaf_count, g.layout.leaf_size))  # fmt: skip
+            checksum = grid_checksum(bytes(raw), g.version, spans)
+            raw[GRID_OFF_CHECKSUM : GRID_OFF_CHECKSUM + 8] = checksum.to_bytes(8, "little")
             out.append(parse_grid(bytes(raw), "<volume>", len(out), verify_checksum=False))
         return out
 
@@ -333,7 +338,7 @@ class Volume:
                               f"shape {a.shape}")  # fmt: skip
         bg = np.asarray(bg_value, dtype=dtype)
         leaves = leaves_from_dense(a.astype(dtype, copy=False), (0, 0, 0), bg)
-        return cls._built(build_grid(leaves, grid_type, bg, np.diag(sizes), origin), device)
+        return cls._built(_build(leaves, grid_type, bg, np.diag(sizes), origin), device)
 
     @classmethod
     def allocate(cls, min: Any, max: Any, voxel_size: Any, bg_value: Any = 0.0,
@@ -363,7 +368,7 @@ class Volume:
         if index:  # whole tiles index every voxel: an Index grid, as Warp makes them
             grid_type = GridType.INDEX
         leaves = leaves_from_tiles(tiles, None if index else bg_value, index=index)
-        return cls._built(build_grid(leaves, grid_type, bg_value, mat, shift), device)
+        return cls._built(_build(leaves, grid_type, bg_value, mat, shift), device)
 
     @classmethod
     def allocate_by_tiles(cls, tile_points: array, voxel_size: Any = None, bg_value: Any = 0.0,
@@ -386,7 +391,7 @@ class Volume:
         _refuse_rebuild(rebuild)
         mat, shift = index_to_world(voxel_size, transform), vector3(translation, "translation")
         coords = points_to_coords(voxel_points, mat, shift, "voxel_points")
-        data = build_grid(leaves_from_voxels(coords, None, None), GridType.ONINDEX, None, mat,
+        data = _build(leaves_from_voxels(coords, None, None), GridType.ONINDEX, None, mat,
                           shift)  # fmt: skip
         return cls._built(data, device or voxel_points.device)
 
@@ -408,7 +413,7 @@ class Volume:
                                   f"grid indexes {g.index_count}")  # fmt: skip
             items.append(Feature(name, values, kind))
         coords = index_volume.get_voxels().numpy()
-        data = build_grid(leaves_from_voxels(coords, None, None), GridType.ONINDEX, None,
+        data = _build(leaves_from_voxels(coords, None, None), GridType.ONINDEX, None,
                           g.index_to_world, g.translation, g.name, features=items)  # fmt: skip
         return cls._built(data, device or index_volume.device)
 

@@ -32,6 +32,7 @@ from kdsl.geometry.nanovdb.checksum import grid_checksum
 from kdsl.geometry.nanovdb.errors import NanoVDBError
 from kdsl.geometry.nanovdb.layout import (
     BLIND_METADATA_SIZE,
+    CHECKSUM_DISABLED,
     DATA_ALIGNMENT,
     GRID_NAME_SIZE,
     GRID_OFF_CHECKSUM,
@@ -234,9 +235,12 @@ def build_grid(
     name: str = "",
     grid_class: GridClass | None = None,
     features: Sequence[Feature] = (),
+    checksum: bool = True,
 ) -> bytes:
     """The bytes of a NanoVDB grid of ``grid_type`` holding ``leaves``, with ``world =
-    index_to_world @ index + translation`` and the given root ``background``."""
+    index_to_world @ index + translation`` and the given root ``background``; with
+    ``checksum=False`` the checksum is left disabled (all ones), as Warp leaves it in
+    the grids it builds in memory."""
     lay = value_layout(grid_type)
     assert lay is not None, grid_type
     raw_name = name.encode("utf-8")
@@ -374,5 +378,6 @@ def build_grid(
     w.put(640, "<i8", blind if features else size)
     w.put(648, "<u4", [len(features), 0])
     w.put(656, "<u8", [int(indexed.sum()) + 1 if lay.is_index else 0, MAGIC_GRID])
-    w.put(GRID_OFF_CHECKSUM, "<u8", grid_checksum(w.buf.data, version))
+    sum64 = grid_checksum(w.buf.data, version) if checksum else CHECKSUM_DISABLED
+    w.put(GRID_OFF_CHECKSUM, "<u8", sum64)
     return w.buf.tobytes()
