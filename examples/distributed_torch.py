@@ -103,45 +103,36 @@ class GhostCells(torch.autograd.Function):
         return g, None
 
 
-class Smooth(torch.autograd.Function):
-    """One smoothing step of a piece with ghost cells, by a kdsl kernel on a ``kdsl.Tape``."""
+class TapedKernel(torch.autograd.Function):
+    """``out = kernel(x, *rest)``: one kdsl launch recorded on a ``kdsl.Tape``, differentiable
+    in the tensor ``x`` (its backward replays the tape with the incoming gradient)."""
 
     @staticmethod
-    def forward(ctx, padded, a):
-        # kdsl sees the tensor's memory; its gradient goes to a fresh tensor (not padded.grad).
-        u = wp.from_torch(padded.detach(), requires_grad=True,
-                          grad=torch.zeros_like(padded))  # fmt: skip
-        out = wp.zeros(len(padded) - 2, dtype=wp.float64, device=u.device, requires_grad=True)
+    def forward(ctx, x, kernel, dim, rest, out_len):
+        # kdsl sees the tensor's memory; its gradient goes to a fresh tensor (not x.grad).
+        wx = wp.from_torch(x.detach(), requires_grad=True, grad=torch.zeros_like(x))
+        out = wp.zeros(out_len, dtype=wp.float64, device=wx.device, requires_grad=True)
         ctx.tape = wp.Tape()
         with ctx.tape:
-            wp.launch(smooth, dim=len(out), inputs=[u, a], outputs=[out], device=u.device)
-        ctx.u, ctx.out = u, out
+            wp.launch(kernel, dim=dim, inputs=[wx, *rest], outputs=[out], device=wx.device)
+        ctx.x, ctx.out = wx, out
         return wp.to_torch(out, requires_grad=False)
 
     @staticmethod
     def backward(ctx, grad):
         ctx.tape.backward(grads={ctx.out: wp.from_torch(grad.contiguous())})
-        return wp.to_torch(ctx.u.grad, requires_grad=False), None
+        return wp.to_torch(ctx.x.grad, requires_grad=False), None, None, None, None
 
 
-class SquaredError(torch.autograd.Function):
-    """``sum (u - target)^2`` by a kdsl kernel (atomic adds) on a ``kdsl.Tape``."""
+def smooth_step(padded: torch.Tensor, a: float) -> torch.Tensor:
+    """One smoothing step of a piece given with its ghost cells (kdsl kernel ``smooth``)."""
+    n = len(padded) - 2
+    return TapedKernel.apply(padded, smooth, n, [a], n)
 
-    @staticmethod
-    def forward(ctx, u, target):
-        wu = wp.from_torch(u.detach(), requires_grad=True, grad=torch.zeros_like(u))
-        loss = wp.zeros(1, dtype=wp.float64, device=wu.device, requires_grad=True)
-        ctx.tape = wp.Tape()
-        with ctx.tape:
-            wp.launch(squared_error, dim=len(u), inputs=[wu, wp.from_torch(target)],
-                      outputs=[loss], device=wu.device)  # fmt: skip
-        ctx.u, ctx.loss = wu, loss
-        return wp.to_torch(loss, requires_grad=False)
 
-    @staticmethod
-    def backward(ctx, grad):
-        ctx.tape.backward(grads={ctx.loss: wp.from_torch(grad.contiguous())})
-        return wp.to_torch(ctx.u.grad, requires_grad=False), None
+def squared_error_sum(u: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+    """``sum (u - target)^2`` as a one-element tensor (kdsl kernel ``squared_error``)."""
+    return TapedKernel.apply(u, squared_error, len(u), [wp.from_torch(target)], 1)
 
 
 def problem(points: int) -> tuple[np.ndarray, np.ndarray]:
@@ -158,8 +149,8 @@ def run(nb: Neighbours, u0: np.ndarray, target: np.ndarray, iters: int, a: float
     t = torch.tensor(target, dtype=torch.float64, device=device)
     v = u
     for _ in range(iters):
-        v = Smooth.apply(GhostCells.apply(v, nb), a)
-    local = SquaredError.apply(v, t)
+        v = smooth_step(GhostCells.apply(v, nb), a)
+    local = squared_error_sum(v, t)
     # The global loss is the sum of the pieces' losses: each rank's backward of its own
     # piece gives the gradient of the sum, since the ghost cells carry the cross terms.
     local.backward()

@@ -14,6 +14,7 @@ exactly what one device computes: bit for bit on the same backend and precision.
 
 # No ``from __future__ import annotations``: kernel annotations name closure variables.
 
+import itertools
 from functools import cache
 from types import ModuleType, SimpleNamespace
 from typing import Any
@@ -27,20 +28,15 @@ from kdsl.scenes.wave import Wave
 
 def strip_bounds(rows: int, parts: int) -> list[tuple[int, int]]:
     """The ``[first, end)`` rows of each of ``parts`` strips of ``rows`` rows (sizes differ
-    by at most one, the larger first)."""
+    by at most one)."""
     if parts < 1:
         raise SceneError(f"a grid is cut into at least 1 strip, not {parts}")
     if parts > rows:
         raise SceneError(
             f"a grid of {rows} rows cannot be cut into {parts} strips (one row each at least)"
         )
-    base, extra = divmod(rows, parts)
-    bounds, first = [], 0
-    for p in range(parts):
-        end = first + base + (1 if p < extra else 0)
-        bounds.append((first, end))
-        first = end
-    return bounds
+    edges = [rows * p // parts for p in range(parts + 1)]
+    return list(itertools.pairwise(edges))
 
 
 @cache

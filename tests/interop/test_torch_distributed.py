@@ -55,15 +55,22 @@ def test_pieces_cover_the_line(ex):
     assert ex.pieces(10, 3) == [(0, 3), (3, 7), (7, 10)]
 
 
-@pytest.mark.skipif(not dist.is_available(), reason="this torch build has no torch.distributed")
-def test_two_gloo_ranks_match_one_process():
+def _example_on_two_ranks(*args, timeout=180):
+    """``torchrun --nproc-per-node=2 examples/distributed_torch.py ARGS``: its stdout, checked."""
     env = dict(os.environ, OMP_NUM_THREADS="1")
     env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(ROOT), env.get("PYTHONPATH")]))
     cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc-per-node=2",
-           str(EXAMPLE), "--points", "40", "--iters", "4", "--timeout", "60"]  # fmt: skip
-    out = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=180)
+           str(EXAMPLE), *args]  # fmt: skip
+    out = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=timeout)
     assert out.returncode == 0, out.stdout[-2000:] + out.stderr[-3000:]
-    assert "ranks=2 device=cpu" in out.stdout and out.stdout.strip().endswith("ok"), out.stdout
+    assert out.stdout.strip().endswith("ok"), out.stdout
+    return out.stdout
+
+
+@pytest.mark.skipif(not dist.is_available(), reason="this torch build has no torch.distributed")
+def test_two_gloo_ranks_match_one_process():
+    out = _example_on_two_ranks("--points", "40", "--iters", "4", "--timeout", "60")
+    assert "ranks=2 device=cpu" in out
 
 
 @pytest.mark.skipif(
@@ -71,13 +78,9 @@ def test_two_gloo_ranks_match_one_process():
     reason="needs two GPUs and NCCL",
 )
 def test_two_nccl_ranks_match_one_gpu():
-    env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(ROOT), env.get("PYTHONPATH")]))
-    cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc-per-node=2",
-           str(EXAMPLE), "--device", "cuda", "--points", "100000", "--iters", "8"]  # fmt: skip
-    out = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=300)
-    assert out.returncode == 0, out.stdout[-2000:] + out.stderr[-3000:]
-    assert "ranks=2 device=cuda" in out.stdout and out.stdout.strip().endswith("ok"), out.stdout
+    out = _example_on_two_ranks("--device", "cuda", "--points", "100000", "--iters", "8",
+                                timeout=300)  # fmt: skip
+    assert "ranks=2 device=cuda" in out
 
 
 @wp.kernel

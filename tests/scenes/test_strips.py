@@ -4,6 +4,7 @@ process (``DeviceTeam``), bit-for-bit equality with the undivided scene, and the
 The torch.distributed runs (several processes) are in ``test_distributed.py``.
 """
 
+import itertools
 import time
 
 import numpy as np
@@ -17,7 +18,14 @@ from kdsl.scenes.strips import HeatStrip, strip_bounds, strip_scene_class
 
 
 def test_strip_bounds_cover_the_rows_in_order_and_differ_by_one_at_most():
-    assert strip_bounds(7, 3) == [(0, 3), (3, 5), (5, 7)]
+    for rows in range(1, 40):
+        for parts in range(1, rows + 1):
+            b = strip_bounds(rows, parts)
+            assert b[0][0] == 0 and b[-1][1] == rows
+            assert all(x[1] == y[0] for x, y in itertools.pairwise(b))
+            sizes = [e - f for f, e in b]
+            assert min(sizes) >= 1 and max(sizes) - min(sizes) <= 1
+    assert strip_bounds(7, 3) == [(0, 2), (2, 4), (4, 7)]
     assert strip_bounds(4, 4) == [(0, 1), (1, 2), (2, 3), (3, 4)]
     assert strip_bounds(5, 1) == [(0, 5)]
 
