@@ -16,8 +16,9 @@ nothing of kdsl never reads as a success.
 Workloads: saxpy, particles, nbody, nbody_fast, jacobi, cloth, launch,
 launch_prepared (``suite.workloads``), plus triad (Numba's STREAM triad bandwidth,
 which saxpy's is held to), scaling (kdsl's n-body speedup from 1 to 2 threads), graph
-(kdsl's 100-kernel step replayed as one graph against 100 launches: the speedup), and
-cold_compile, compile and warm_start, measured in fresh processes with a fresh (then
+(kdsl's 100-kernel step replayed as one graph against 100 launches: the speedup), leaks
+(kdsl's resident memory over 10^5 launches, 10^4 captures and 10^4 allocations:
+``suite.leaks``), and cold_compile, compile and warm_start, measured in fresh processes with a fresh (then
 reused) kernel cache directory.
 """
 
@@ -47,7 +48,7 @@ PEERS = FRAMEWORKS[1:]
 #: Step workloads in run order: Taichi's fast-math n-body re-initializes Taichi, so last.
 RUN_ORDER = ("saxpy", "particles", "nbody", "jacobi", "cloth", "launch", "launch_prepared",
              "nbody_fast")  # fmt: skip
-ALL = (*WORKLOADS, "triad", "scaling", "graph", *PROCESS_WORKLOADS)
+ALL = (*WORKLOADS, "triad", "scaling", "graph", "leaks", *PROCESS_WORKLOADS)
 RESULTS = Path(__file__).resolve().parent / "results"
 PROCESS_REPS = 3
 
@@ -173,6 +174,12 @@ def target_rows(cells: dict[str, dict[str, Cell]], saxpy_n: int) -> list[list[st
                      best, ratio, target])  # fmt: skip
     if "saxpy" in cells and "triad" in cells:
         rows.append(bandwidth_row(cells, saxpy_n))
+    from suite.leaks import COUNTS, leak_row
+
+    for name in COUNTS:
+        if f"leak_{name}" in cells:
+            title, text, target, _ = leak_row(name, cells[f"leak_{name}"].get("kdsl"))
+            rows.append([title, text, "-", "-", "-", "-", "-", target])
     return rows
 
 
@@ -240,6 +247,11 @@ def main() -> int:
         from suite.graph_step import run_graph
 
         cells["graph"] = {"kdsl": run_graph("cpu", args.quick, args.reps)}
+    if "leaks" in only and not isinstance(mods.get("kdsl", "x"), str):
+        from suite.leaks import run_leaks
+
+        for k, c in run_leaks("cpu", args.quick).items():
+            cells[k] = {"kdsl": c}
     if any(w in only for w in PROCESS_WORKLOADS):
         for f in chosen:
             m = mods[f]
@@ -254,6 +266,10 @@ def main() -> int:
     print()
     headers = ["workload [unit]", *FRAMEWORKS, "best peer", "kdsl vs best", "target met"]
     harness.print_table(headers, target_rows(cells, saxpy_n))
+    if "leaks" in only:
+        from suite.leaks import print_details
+
+        print_details(cells)
     print(
         f"\n{'quick' if args.quick else 'full'} run in {elapsed:.0f} s; medians; "
         "kdsl vs best > 1 means kdsl is faster"

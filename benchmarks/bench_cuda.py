@@ -23,7 +23,10 @@ again with the same cache (warm); "compile" is first launch to first result,
 Frameworks that are not installed are reported and skipped; a failing cell shows
 ``error [k]`` with the message in a note under the table. The graph row (kdsl only)
 replays a 100-kernel step captured with ``kdsl.ScopedCapture`` against the same 100
-launches; its cell is the speedup (target >= 5x). Without a CUDA device the
+launches; its cell is the speedup (target >= 5x). The leak rows (``suite.leaks``)
+give the growth of resident memory over 10^5 launches, 10^4 captures with replays
+and 10^4 allocate/free cycles, with CuPy's pool before and after (target: flat
+within 1%). Without a CUDA device the
 script says so and exits 1: nothing was measured (``--device cpu`` runs its logic
 on the CPU, CuPy skipped: a check of the script, not a benchmark). It also exits 1
 when a kdsl result failed its check against the reference. Everything, samples included,
@@ -59,7 +62,7 @@ COMPILE_ROWS = {
     "warm_compile": ("warm compile [ms]", 1e3),
     "warm_start": ("warm start [s]", 1.0),
 }
-ALL = (*RUN_ORDER, "graph", "compile")
+ALL = (*RUN_ORDER, "graph", "leaks", "compile")
 #: The graph row's target: a 100-kernel step replayed as one graph this much faster.
 GRAPH_TARGET = 5.0
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -279,6 +282,13 @@ class Table:
             ok = None if mine is None else mine >= GRAPH_TARGET
             self.add(f"{graph_title(cell)} [x]", [text, "-", "-", "-"], "-", "-",
                      "-" if ok is None else _yes(ok, f">={GRAPH_TARGET:.0f}x"), ok)  # fmt: skip
+        from suite.leaks import COUNTS, leak_row
+
+        for name in COUNTS:
+            if f"leak_{name}" in self.cells:
+                title, text, target, _ = leak_row(name, self.cells[f"leak_{name}"].get("kdsl"))
+                ok = None if target == "-" else target.startswith("yes")
+                self.add(title, [text, "-", "-", "-"], "-", "-", target, ok)
         warp = _median(cells.get("cold_compile", {}).get("warp"))
 
         def vs_warp(mine: float) -> tuple[bool, str] | None:
@@ -303,6 +313,9 @@ def print_summary(
     harness.print_table(headers, table.rows)
     for line in table.notes.lines():
         print(line)
+    from suite.leaks import print_details
+
+    print_details(cells)
     kind = "quick" if meta["quick"] else "full"
     print(f"targets met: {sum(table.met)} of {len(table.met)}; {kind} run in "
           f"{meta['elapsed_s']:.0f} s; medians")  # fmt: skip
@@ -355,6 +368,12 @@ def main() -> int:
 
         cells["graph"] = {"kdsl": run_graph(args.device, args.quick, args.reps)}
         print(f"  {'graph':16s} kdsl    {harness.format_cell(cells['graph']['kdsl'], 'x')}")
+    if "leaks" in only and not isinstance(mods.get("kdsl", "x"), str):
+        from suite.leaks import run_leaks
+
+        for k, c in run_leaks(args.device, args.quick).items():
+            cells[k] = {"kdsl": c}
+        print(f"  {'leaks':16s} kdsl    done", flush=True)
     if "compile" in only and not args.skip_compile:
         for f, m in mods.items():
             got = run_compile(m, args.device, args.quick)

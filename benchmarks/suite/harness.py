@@ -262,7 +262,7 @@ def format_cell(cell: Cell | None, unit: str) -> str:
         return "-"
     if cell.stats is None:
         return cell.status
-    scale = {"ms": 1e3, "us": 1e6, "s": 1.0, "x": 1.0, "GB/s": 1.0}[unit]
+    scale = {"ms": 1e3, "us": 1e6, "s": 1.0, "x": 1.0, "GB/s": 1.0, "%": 1.0}[unit]
     v = cell.stats.median * scale
     text = f"{v:.3g}" if v < 100 else f"{v:.0f}"
     return text if cell.status == "ok" else f"{text} ({cell.status})"
