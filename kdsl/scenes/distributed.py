@@ -24,13 +24,14 @@ from typing import Any
 import numpy as np
 
 from kdsl.scenes.binding import SceneError
+from kdsl.scenes.halo import TorchHalo, torch_distributed
 
 
 def init_process_group(device: str, timeout_s: float) -> str:
     """Join torchrun's process group (gloo for ``cpu``, NCCL for ``cuda``); returns this
     rank's kdsl device (``"cpu"`` or ``"cuda:LOCAL_RANK"``)."""
+    dist = torch_distributed()
     import torch
-    import torch.distributed as dist
 
     if "RANK" not in os.environ:
         raise SceneError("run under torchrun (no RANK/WORLD_SIZE in the environment)")
@@ -122,7 +123,6 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point under torchrun (see the module docstring)."""
     import kdsl as wp
     from kdsl.scenes.cli import write_json
-    from kdsl.scenes.halo import TorchHalo
     from kdsl.scenes.strips import strip_scene_class
 
     args = _parser().parse_args(argv)
@@ -149,11 +149,13 @@ def main(argv: list[str] | None = None) -> int:
         print(f"kdsl.scenes.distributed: {line}", flush=True)
         if args.json:
             write_json(args.json, result)
-    import torch.distributed as dist
-
-    dist.destroy_process_group()
+    torch_distributed().destroy_process_group()
     return 0 if result.get("bitwise_equal", True) else 1
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    try:
+        sys.exit(main())
+    except SceneError as e:  # bad arguments or setup: the reason, not a traceback
+        print(f"kdsl.scenes.distributed: error: {e}", file=sys.stderr)
+        sys.exit(2)

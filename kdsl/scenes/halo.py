@@ -156,6 +156,17 @@ class TeamHalo:
         return [np.asarray(v) for v in self.team._share(self.rank, values)]
 
 
+def torch_distributed() -> Any:
+    """``torch.distributed``, or a ``SceneError`` saying how to install PyTorch."""
+    try:
+        import torch.distributed
+    except ImportError:
+        raise SceneError(
+            "distributed strips need PyTorch's torch.distributed (pip install kdsl[torch])"
+        ) from None
+    return torch.distributed
+
+
 class TorchHalo:
     """Ghost rows and reductions through ``torch.distributed`` (an initialized process group).
 
@@ -165,8 +176,7 @@ class TorchHalo:
     """
 
     def __init__(self, group: Any = None) -> None:
-        import torch.distributed as dist
-
+        dist = torch_distributed()
         if not dist.is_available() or not dist.is_initialized():
             raise SceneError(
                 "TorchHalo needs an initialized torch.distributed process group "

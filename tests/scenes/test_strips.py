@@ -167,3 +167,30 @@ def test_the_scaling_benchmark_runs_its_cpu_smoke_version(tmp_path):
         ("weak", 2, 23),
     ]
     assert all(r["ms_per_step"] > 0 and r["error"] < 1e-3 for r in rows)
+
+
+def test_torch_strips_without_pytorch_say_how_to_install_it(monkeypatch):
+    import sys
+
+    from kdsl.scenes.halo import TorchHalo
+
+    monkeypatch.setitem(sys.modules, "torch.distributed", None)  # import fails as if absent
+    with pytest.raises(SceneError, match=r"pip install kdsl\[torch\]"):
+        TorchHalo()
+
+
+def test_the_runner_outside_torchrun_is_a_short_error():
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(wp.__file__).resolve().parents[1]
+    env = {k: v for k, v in os.environ.items() if k not in ("RANK", "WORLD_SIZE")}
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(root), env.get("PYTHONPATH")]))
+    proc = subprocess.run([sys.executable, "-m", "kdsl.scenes.distributed", "--scene", "cloth"],
+                          env=env, capture_output=True, text=True, timeout=120)  # fmt: skip
+    assert proc.returncode == 2
+    assert proc.stderr.startswith("kdsl.scenes.distributed: error: scene 'cloth' has no"), (
+        proc.stderr
+    )
