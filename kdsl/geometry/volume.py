@@ -191,6 +191,25 @@ class Volume:
         """The number of active voxels."""
         return self._info.active_voxel_count
 
+    class ActiveStats(NamedTuple):
+        """Active topology counts, as ``warp.Volume.ActiveStats``."""
+
+        voxel_count: int
+        leaf_node_count: int
+        lower_node_count: int
+        upper_node_count: int
+
+    def get_active_stats(self) -> Volume.ActiveStats:
+        """The active voxel count and the leaf, lower and upper node counts."""
+        g = self._info
+        return Volume.ActiveStats(g.active_voxel_count, g.leaf_count, g.lower_count,
+                                  g.upper_count)  # fmt: skip
+
+    @property
+    def is_rebuildable(self) -> bool:
+        """Always ``False``: kdsl volumes have no reserved capacity for ``rebuild``."""
+        return False
+
     def _leaf_bytes(self) -> np.ndarray:
         g = self._info
         start, size = g.leaf_offset, g.layout.leaf_size

@@ -110,6 +110,7 @@ def test_load_from_numpy_float_grid():
     v = wp.Volume.load_from_numpy(a, min_world=(0.5, -1.0, 2.0), voxel_size=0.25, bg_value=-1.0)
     assert v.get_tiles().numpy().tolist() == [[0, 0, 0], [0, 8, 0], [8, 0, 0], [8, 8, 0]]
     assert v.get_voxel_count() == 2048 and v.get_tile_count() == 4
+    assert tuple(v.get_active_stats()) == (2048, 4, 1, 1) and not v.is_rebuildable
     assert v.dtype is wp.float32 and not v.is_index
     assert v.get_voxel_size() == (0.25, 0.25, 0.25)
     info = v.get_grid_info()
