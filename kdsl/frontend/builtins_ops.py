@@ -185,3 +185,12 @@ def _cast(em, args, node):
               "block size kdsl launches with), 1 on cpu and interp (as Warp on the CPU).", "utility")  # fmt: skip
 def _block_dim(em, args, node):
     return em.emit("kd.block_dim", node=node)
+
+
+@TABLE.define("thread_fence", (0, 0), "A memory fence across the launch (kdsl's, CUDA's "
+              "``__threadfence``): this thread's memory reads and writes before it are ordered "
+              "before those after it for every thread. Write, fence, then an atomic publishes "
+              "the writes to a thread that sees the atomic's result and then fences.",
+              "utility")  # fmt: skip
+def _thread_fence(em, args, node):
+    em.b.create("kd.fence", [], [], None, loc=em.loc(node))

@@ -2,16 +2,17 @@
 
 Every constructor ends in a ``DeviceTree``: the preorder topology ``kdsl.stdlib.bvh``
 documents (``skip``, ``first``, ``count``, ``items``, ``group_roots``) on the boxes'
-device, plus what a GPU refit needs: ``by_level``, the inner nodes ordered deepest level
-first, and ``levels``, the ``(start, count)`` of each level in it (on the host, so a
-refit reads nothing back from a GPU; both empty on a CPU). An inner node ``n``'s children are ``n + 1`` and
-``skip[n + 1]``, so the tree needs no child arrays.
+device, plus what a GPU refit needs: ``parent`` (each node's parent, -1 at the root) and
+``arrivals``, one counter per node (both empty on a CPU). An inner node ``n``'s children
+are ``n + 1`` and ``skip[n + 1]``, so the tree needs no child arrays.
 
-``refit`` runs as kdsl kernels on the device: on a GPU one launch for the leaves (the
-union of their items' boxes), then one per level of inner nodes, deepest first, each
-the union of its two children (a level's nodes are independent, so no atomics or
-fences); on a CPU, after the leaves, one thread walks the inner nodes in reverse
-preorder (children before parents), which costs less than a launch per level.
+``refit`` runs as kdsl kernels on the device. On a GPU it is one launch, bottom up as
+Karras and Apetrei build theirs: a thread per leaf writes the union of its items' boxes,
+then climbs; at each parent it fences and bumps the parent's arrival counter, and the
+second child's thread to arrive (it fences again, so it sees the first child's bounds)
+writes the parent's union and climbs on, while the first stops. On a CPU, after the
+leaves, one thread walks the inner nodes in reverse preorder (children before parents),
+which beats atomics on a few cores.
 """
 
 from __future__ import annotations
@@ -20,10 +21,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from kdsl.frontend.api import kernel, tid
+from kdsl.frontend.api import atomic_add, func, inout, kernel, thread_fence, tid
 from kdsl.frontend.api import max as vmax
 from kdsl.frontend.api import min as vmin
 from kdsl.geometry.median import Tree
+from kdsl.runtime.alloc import empty, zeros
 from kdsl.runtime.array import array
 from kdsl.runtime.launch import launch
 from kdsl.types import int32, vec3
@@ -38,8 +40,8 @@ class DeviceTree:
     count: array
     items: array
     group_roots: array
-    by_level: array
-    levels: list[tuple[int, int]]  # (start, count) in ``by_level``, deepest level first
+    parent: array  # empty on a CPU
+    arrivals: array  # int32 per node, zero between refits; empty on a CPU
     num_nodes: int
 
 
@@ -47,32 +49,52 @@ def _device_ints(a: np.ndarray, device) -> array:
     return array(np.ascontiguousarray(a, dtype=np.int32), dtype=int32, device=device)
 
 
-def level_order(first: np.ndarray, depth: np.ndarray, device) -> tuple[array, list]:
-    """``by_level`` (on ``device``) and ``levels`` of a tree from its nodes' ``first`` and
-    depth (host arrays)."""
-    inner = np.flatnonzero(first < 0)
-    d = depth[inner]
-    deepest = int(d.max(initial=-1))
-    # A radix sort (NumPy sorts 16-bit keys by radix) of the depths, deepest first.
-    key = (deepest - d).astype(np.uint16 if deepest < 1 << 16 else np.int64)
-    by_level = inner[np.argsort(key, kind="stable")]
-    counts = np.bincount(key, minlength=deepest + 1)
-    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
-    levels = [(int(s), int(c)) for s, c in zip(starts, counts) if c]
-    return _device_ints(by_level, device), levels
+@kernel
+def _link_parents(first: array(dtype=int32), skip: array(dtype=int32), parent: array(dtype=int32)):
+    n = tid()
+    if n == 0:
+        parent[0] = -1
+    if first[n] < 0:
+        parent[n + 1] = n
+        parent[skip[n + 1]] = n
+
+
+def with_parents(tree: DeviceTree, bottom_up: bool | None = None) -> DeviceTree:
+    """``tree`` with the arrays of the bottom-up refit (``parent``, ``arrivals``) filled
+    in: on a GPU by default, anywhere with ``bottom_up=True``."""
+    device = tree.skip.device
+    if not (device.is_cuda if bottom_up is None else bottom_up) or tree.num_nodes == 0:
+        return tree
+    tree.parent = empty(tree.num_nodes, dtype=int32, device=device)
+    tree.arrivals = zeros(tree.num_nodes, dtype=int32, device=device)
+    launch(_link_parents, dim=tree.num_nodes, device=device,
+           inputs=[tree.first, tree.skip, tree.parent])  # fmt: skip
+    return tree
 
 
 def upload_tree(tree: Tree, device) -> DeviceTree:
     """A host-built ``Tree`` copied to ``device``."""
-    if device.is_cpu:  # a CPU refit needs no levels (``refit``)
-        by_level, levels = _device_ints(np.zeros(0), device), []
-    else:
-        by_level, levels = level_order(tree.first, tree.level, device)
-    return DeviceTree(
+    none = _device_ints(np.zeros(0), device)
+    return with_parents(DeviceTree(
         _device_ints(tree.skip, device), _device_ints(tree.first, device),
         _device_ints(tree.count, device), _device_ints(tree.items, device),
-        _device_ints(tree.group_roots, device), by_level, levels, tree.num_nodes,
-    )  # fmt: skip
+        _device_ints(tree.group_roots, device), none, none, tree.num_nodes,
+    ))  # fmt: skip
+
+
+@func
+def _leaf_bounds(
+    f: int, count: int, items: array(dtype=int32), item_lowers: array(dtype=vec3),
+    item_uppers: array(dtype=vec3), lo: inout(vec3), hi: inout(vec3),
+):  # fmt: skip
+    """The union of the boxes of ``items[f : f + count]`` into ``lo``/``hi``."""
+    k = items[f]
+    lo = item_lowers[k]
+    hi = item_uppers[k]
+    for j in range(f + 1, f + count):
+        k = items[j]
+        lo = vmin(lo, item_lowers[k])
+        hi = vmax(hi, item_uppers[k])
 
 
 @kernel
@@ -85,27 +107,41 @@ def _refit_leaves(
     n = tid()
     f = first[n]
     if f >= 0:
-        k = items[f]
-        lo = item_lowers[k]
-        hi = item_uppers[k]
-        for j in range(f + 1, f + count[n]):
-            k = items[j]
-            lo = vmin(lo, item_lowers[k])
-            hi = vmax(hi, item_uppers[k])
+        lo = vec3()
+        hi = vec3()
+        _leaf_bounds(f, count[n], items, item_lowers, item_uppers, lo, hi)
         lowers[n] = lo
         uppers[n] = hi
 
 
 @kernel
-def _refit_level(
-    by_level: array(dtype=int32), start: int32, skip: array(dtype=int32),
+def _refit_bottom_up(
+    first: array(dtype=int32), count: array(dtype=int32), items: array(dtype=int32),
+    item_lowers: array(dtype=vec3), item_uppers: array(dtype=vec3),
+    skip: array(dtype=int32), parent: array(dtype=int32), arrivals: array(dtype=int32),
     lowers: array(dtype=vec3), uppers: array(dtype=vec3),
 ):  # fmt: skip
-    n = by_level[start + tid()]
-    a = n + 1
-    b = skip[a]
-    lowers[n] = vmin(lowers[a], lowers[b])
-    uppers[n] = vmax(uppers[a], uppers[b])
+    n = tid()
+    f = first[n]
+    if f < 0:
+        return
+    lo = vec3()
+    hi = vec3()
+    _leaf_bounds(f, count[n], items, item_lowers, item_uppers, lo, hi)
+    lowers[n] = lo
+    uppers[n] = hi
+    p = parent[n]
+    while p >= 0:
+        thread_fence()  # publish this child's bounds before its arrival
+        if atomic_add(arrivals, p, 1) == 0:
+            return  # the sibling's thread, arriving second, completes ``p``
+        thread_fence()  # see the sibling's bounds, published before its arrival
+        arrivals[p] = 0  # ready for the next refit
+        a = p + 1
+        b = skip[a]
+        lowers[p] = vmin(lowers[a], lowers[b])
+        uppers[p] = vmax(uppers[a], uppers[b])
+        p = parent[p]
 
 
 @kernel
@@ -150,20 +186,23 @@ def _refit_inner_reverse_preorder(
 
 def refit(tree: DeviceTree, item_lowers: array, item_uppers: array, lowers: array,
           uppers: array) -> None:  # fmt: skip
-    """Write the node bounds of ``tree`` over the item boxes into ``lowers``/``uppers``."""
+    """Write the node bounds of ``tree`` over the item boxes into ``lowers``/``uppers``:
+    bottom up where the tree has ``parent`` links (on a GPU), else leaves then a
+    sequential pass (see the module docstring)."""
     if tree.num_nodes == 0:
         return
     device = item_lowers.device
-    launch(
-        _refit_leaves, dim=tree.num_nodes, device=device,
-        inputs=[tree.first, tree.count, tree.items, item_lowers, item_uppers, lowers, uppers],
-    )  # fmt: skip
-    if device.is_cpu:  # one sequential pass beats a launch per level on a CPU
+    if tree.parent.shape[0] == 0:
+        launch(
+            _refit_leaves, dim=tree.num_nodes, device=device,
+            inputs=[tree.first, tree.count, tree.items, item_lowers, item_uppers, lowers,
+                    uppers],
+        )  # fmt: skip
         launch(_refit_inner_reverse_preorder, dim=1, device=device,
                inputs=[tree.num_nodes, tree.first, tree.skip, lowers, uppers])  # fmt: skip
         return
-    for start, count in tree.levels:
-        launch(
-            _refit_level, dim=count, device=device,
-            inputs=[tree.by_level, start, tree.skip, lowers, uppers],
-        )  # fmt: skip
+    launch(
+        _refit_bottom_up, dim=tree.num_nodes, device=device,
+        inputs=[tree.first, tree.count, tree.items, item_lowers, item_uppers, tree.skip,
+                tree.parent, tree.arrivals, lowers, uppers],
+    )  # fmt: skip

@@ -18,57 +18,66 @@ them, so every group is a contiguous run and becomes one subtree); each of the
   starting before ``b + 1``.
 
 The leaves' items are the sorted item indices themselves. The build reads back from
-the device only a few scalars and the per-level node counts.
+the device one scalar, the number of kept nodes.
 """
 
 from __future__ import annotations
 
-import numpy as np
-
-from kdsl.frontend.api import atomic_add, atomic_max, func, kernel, tid
+from kdsl.frontend.api import atomic_add, func, kernel, tid
 from kdsl.frontend.api import max as vmax
 from kdsl.frontend.api import min as vmin
-from kdsl.geometry.device_tree import DeviceTree
+from kdsl.geometry.device_tree import DeviceTree, with_parents
 from kdsl.runtime.alloc import empty, full, zeros
 from kdsl.runtime.array import array
 from kdsl.runtime.launch import launch
 from kdsl.types import int32, uint64, vec3
 from kdsl.utils import array_scan, radix_sort_pairs
 
-#: Items a thread reduces when the centres' bounds are computed.
-_CHUNK = 1024
+#: Boxes a thread reduces per pass of the centres' bounds, per device kind: on a GPU few
+#: (many threads, a pass or two more), on a CPU many (one chunk per core's share).
+_CHUNK = {"cuda": 64, "cpu": 1024}
 
 
 @kernel
-def _centre_bounds_partial(
-    lowers: array(dtype=vec3), uppers: array(dtype=vec3), n: int32,
-    part_lo: array(dtype=vec3), part_hi: array(dtype=vec3),
+def _bounds_pass(
+    lowers: array(dtype=vec3), uppers: array(dtype=vec3), n: int32, chunk: int32,
+    centres: int32, part_lo: array(dtype=vec3), part_hi: array(dtype=vec3),
 ):  # fmt: skip
+    # The bounds of chunk ``tid()`` of the boxes (of their centres, with ``centres``).
     t = tid()
-    begin = t * _CHUNK
-    end = vmin(begin + _CHUNK, n)
-    c = 0.5 * (lowers[begin] + uppers[begin])
-    lo = c
-    hi = c
-    for i in range(begin + 1, end):
-        c = 0.5 * (lowers[i] + uppers[i])
-        lo = vmin(lo, c)
-        hi = vmax(hi, c)
+    begin = t * chunk
+    lo = lowers[begin]
+    hi = uppers[begin]
+    if centres != 0:
+        lo = 0.5 * (lo + hi)
+        hi = lo
+    for i in range(begin + 1, vmin(begin + chunk, n)):
+        box_lo = lowers[i]
+        box_hi = uppers[i]
+        if centres != 0:
+            box_lo = 0.5 * (box_lo + box_hi)
+            box_hi = box_lo
+        lo = vmin(lo, box_lo)
+        hi = vmax(hi, box_hi)
     part_lo[t] = lo
     part_hi[t] = hi
 
 
-@kernel
-def _centre_bounds_total(
-    part_lo: array(dtype=vec3), part_hi: array(dtype=vec3), parts: int32
-):  # fmt: skip
-    lo = part_lo[0]
-    hi = part_hi[0]
-    for i in range(1, parts):
-        lo = vmin(lo, part_lo[i])
-        hi = vmax(hi, part_hi[i])
-    part_lo[0] = lo
-    part_hi[0] = hi
+def _centre_bounds(lowers: array, uppers: array) -> tuple[array, array]:
+    """One-element arrays holding the bounds of the boxes' centres, reduced on the device
+    in passes of ``_CHUNK`` boxes a thread."""
+    device = lowers.device
+    chunk = _CHUNK["cuda" if device.is_cuda else "cpu"]
+    lo, hi, n, centres = lowers, uppers, lowers.shape[0], 1
+    while True:
+        parts = -(-n // chunk)
+        part_lo = empty(parts, dtype=vec3, device=device)
+        part_hi = empty(parts, dtype=vec3, device=device)
+        launch(_bounds_pass, dim=parts, device=device,
+               inputs=[lo, hi, n, chunk, centres, part_lo, part_hi])  # fmt: skip
+        if parts == 1:
+            return part_lo, part_hi
+        lo, hi, n, centres = part_lo, part_hi, parts, 0
 
 
 @func
@@ -246,57 +255,32 @@ def _preorder(
     range_b: array(dtype=int32), parent: array(dtype=int32),
     leaf_size: int32, before: array(dtype=int32), has_groups: int32,
     skip: array(dtype=int32), first: array(dtype=int32),
-    count: array(dtype=int32), depth: array(dtype=int32),
-    level_count: array(dtype=int32), max_depth: array(dtype=int32),
-    count_levels: int32, group_roots: array(dtype=int32),
+    count: array(dtype=int32), group_roots: array(dtype=int32),
 ):  # fmt: skip
     x = tid()
     if not _is_kept(keys, range_a, range_b, parent, x, leaf_size):
         return
     a = range_a[x]
     b = range_b[x]
-    rank = 0
-    levels = 0
-    on_chain = True
+    rank = 0  # kept ancestors starting at ``a`` too (a chain of left children above x)
     p = parent[x]
-    while p >= 0:  # kept ancestors: all of them, since a kept node's parent is kept
-        levels += 1
-        if on_chain and range_a[p] == a:
-            rank += 1
-        else:
-            on_chain = False
+    while p >= 0 and range_a[p] == a:
+        rank += 1
         p = parent[p]
     pre = before[a] + rank
     skip[pre] = before[b + 1]
-    depth[pre] = levels
     if _is_leaf(keys, a, b, leaf_size):
         first[pre] = a
         count[pre] = b - a + 1
     else:
         first[pre] = -1
         count[pre] = 0
-        if count_levels != 0:
-            atomic_add(level_count, levels, 1)
-            atomic_max(max_depth, 0, levels)
     if has_groups != 0:
         g = keys[a] >> uint64(32)
         if g == (keys[b] >> uint64(32)):
             q = parent[x]
             if q < 0 or (keys[range_a[q]] >> uint64(32)) != (keys[range_b[q]] >> uint64(32)):
                 group_roots[int(g)] = pre
-
-
-@kernel
-def _bucket_levels(
-    first: array(dtype=int32), depth: array(dtype=int32),
-    level_start: array(dtype=int32), level_fill: array(dtype=int32),
-    by_level: array(dtype=int32),
-):  # fmt: skip
-    n = tid()
-    if first[n] < 0:
-        d = depth[n]
-        slot = atomic_add(level_fill, d, 1)
-        by_level[level_start[d] + slot] = n
 
 
 def build_lbvh(lowers: array, uppers: array, leaf_size: int, groups: array | None,
@@ -306,72 +290,44 @@ def build_lbvh(lowers: array, uppers: array, leaf_size: int, groups: array | Non
     n = lowers.shape[0]
     leaf_size = max(1, int(leaf_size))
 
-    def ints(size: int, fill: int = 0) -> array:
-        return full(size, fill, dtype=int32, device=device)
+    def ints(size: int) -> array:  # every element is written before it is read
+        return empty(size, dtype=int32, device=device)
 
     if n == 0:
         none = ints(0)
-        return DeviceTree(none, none, none, none, ints(num_groups, -1), none, [], 0)
-    parts = -(-n // _CHUNK)
-    part_lo = empty(parts, dtype=vec3, device=device)
-    part_hi = empty(parts, dtype=vec3, device=device)
-    launch(_centre_bounds_partial, dim=parts, device=device,
-              inputs=[lowers, uppers, n, part_lo, part_hi])  # fmt: skip
-    launch(_centre_bounds_total, dim=1, device=device, inputs=[part_lo, part_hi, parts])
+        return DeviceTree(none, none, none, none, full(num_groups, -1, dtype=int32,
+                          device=device), none, none, 0)  # fmt: skip
+    bounds_lo, bounds_hi = _centre_bounds(lowers, uppers)
     keys = empty(2 * n, dtype=uint64, device=device)
     values = empty(2 * n, dtype=int32, device=device)
     group_arg = groups if groups is not None else ints(1)
     launch(
         _morton_keys, dim=n, device=device,
-        inputs=[lowers, uppers, part_lo, part_hi, group_arg, int(groups is not None), keys, values],
+        inputs=[lowers, uppers, bounds_lo, bounds_hi, group_arg, int(groups is not None), keys,
+                values],
     )  # fmt: skip
-    radix_sort_pairs(keys, values, n)
+    # Only the Morton code's 30 bits and the group id's bits above bit 32 decide the order.
+    key_bits = 32 + max(num_groups - 1, 0).bit_length() if groups is not None else 30
+    radix_sort_pairs(keys, values, n, end_bit=key_bits)
     nodes = 2 * n - 1
     range_a, range_b, parent = ints(nodes), ints(nodes), ints(nodes)
     launch(_karras_nodes, dim=nodes, device=device,
               inputs=[keys, n, range_a, range_b, parent])  # fmt: skip
-    starts = ints(n + 1)
+    starts = zeros(n + 1, dtype=int32, device=device)
     launch(_count_starts, dim=nodes, device=device,
               inputs=[keys, range_a, range_b, parent, leaf_size, starts])  # fmt: skip
     array_scan(starts, starts, inclusive=False)
-    skip, first, count, depth = ints(nodes), ints(nodes), ints(nodes), ints(nodes)
-    level_count, max_depth = ints(nodes), ints(1)
-    group_roots = ints(max(num_groups, 1), -1)
+    skip, first, count = ints(nodes), ints(nodes), ints(nodes)
+    group_roots = full(max(num_groups, 1), -1, dtype=int32, device=device)
     launch(
         _preorder, dim=nodes, device=device,
         inputs=[keys, range_a, range_b, parent, leaf_size, starts, int(groups is not None),
-                skip, first, count, depth, level_count, max_depth, int(device.is_cuda),
-                group_roots],
+                skip, first, count, group_roots],
     )  # fmt: skip
-    num_nodes = int(starts[n : n + 1].numpy()[0])
-    skip, first, count, depth = (
-        skip[:num_nodes],
-        first[:num_nodes],
-        count[:num_nodes],
-        depth[:num_nodes],
-    )
-    if device.is_cpu:  # a CPU refit needs no levels (``device_tree.refit``)
-        by_level, levels = ints(0), []
-    else:
-        by_level, levels = _device_level_order(first, depth, level_count, max_depth)
+    num_nodes = int(starts[n : n + 1].numpy()[0])  # the build's one read back
     if num_groups == 0:
         group_roots = group_roots[:0]
-    return DeviceTree(skip, first, count, values[:n], group_roots, by_level, levels, num_nodes)
-
-
-def _device_level_order(first: array, depth: array, level_count: array, max_depth: array):
-    """``by_level`` and ``levels`` (see ``DeviceTree``) bucketed by kernels on the device,
-    from the inner nodes' counts per depth ``_preorder`` took with atomics."""
-    device = first.device
-    deepest = int(max_depth.numpy()[0])
-    counts = level_count[: deepest + 1].numpy().astype(np.int64)
-    level_start = np.zeros(deepest + 1, np.int64)  # deepest level first in ``by_level``
-    level_start[::-1] = np.concatenate([[0], np.cumsum(counts[::-1])[:-1]])
-    by_level = empty(max(int(counts.sum()), 1), dtype=int32, device=device)
-    launch(
-        _bucket_levels, dim=first.shape[0], device=device,
-        inputs=[first, depth, array(level_start.astype(np.int32), dtype=int32, device=device),
-                zeros(deepest + 1, dtype=int32, device=device), by_level],
-    )  # fmt: skip
-    levels = [(int(level_start[d]), int(counts[d])) for d in range(deepest, -1, -1) if counts[d]]
-    return by_level, levels
+    none = ints(0)
+    tree = DeviceTree(skip[:num_nodes], first[:num_nodes], count[:num_nodes], values[:n],
+                      group_roots, none, none, num_nodes)  # fmt: skip
+    return with_parents(tree)

@@ -18,10 +18,11 @@ from kdsl.errors import KdslTypeError
 from kdsl.geometry.bvh import Bvh
 from kdsl.geometry.mesh_refit import face_boxes, first_non_finite
 from kdsl.ir import types as T
+from kdsl.runtime.alloc import empty, zeros
 from kdsl.runtime.array import array
 from kdsl.runtime.objects import ObjectRecord
 from kdsl.stdlib.mesh import MeshRecord
-from kdsl.types import type_of
+from kdsl.types import float32, int32, type_of
 
 VEC3 = T.VectorType(3, T.F32)
 
@@ -114,11 +115,15 @@ class Mesh:
         self._points, self.indices, self.velocities = pts, idx, vel
         self.support_winding_number = bool(support_winding_number)
         self._num_tris = len(host_idx) // 3
+        self._first_bad = empty(1, dtype=int32, device=self.device)  # the finite check's
         self._check_points()
         n = self._num_tris
         self._lowers = array(np.zeros((n, 3), np.float32), dtype=VEC3, device=self.device)
         self._uppers = array(np.zeros((n, 3), np.float32), dtype=VEC3, device=self.device)
         self._no_velocities = array(np.zeros((0, 3), np.float32), dtype=VEC3, device=self.device)
+        self._edges = empty(n, dtype=float32, device=self.device)
+        self._edge_sum = zeros(1, dtype=float32, device=self.device)
+        self._recorded: tuple | None = None
         self._write_boxes()
         self.bvh = Bvh(
             self._lowers, self._uppers, constructor=bvh_constructor, groups=groups,
@@ -157,7 +162,7 @@ class Mesh:
         self._write_record()
 
     def _check_points(self) -> None:
-        bad = first_non_finite(self._points)
+        bad = first_non_finite(self._points, self._first_bad)
         if bad >= 0:
             value = self._points[bad : bad + 1].numpy()[0].tolist()
             raise KdslTypeError(f"Mesh point {bad} is not finite: {value}")
@@ -165,9 +170,14 @@ class Mesh:
     def _write_boxes(self) -> None:
         """The faces' boxes (the BVH's items) and the average edge length, by kernels on
         the mesh's device."""
-        self._mean_edge = face_boxes(self._points, self.indices, self._lowers, self._uppers)
+        face_boxes(self._points, self.indices, self._lowers, self._uppers, self._edges,
+                   self._edge_sum)  # fmt: skip
 
     def _write_record(self) -> None:
+        state = (self._points, self.velocities, self.bvh.id)
+        if self._recorded is not None and all(a is b for a, b in zip(state, self._recorded)):
+            return  # the same arrays: the record is current (the edge sum is on the device)
+        self._recorded = state
         self._record.write(
             {
                 "points": self._points,
@@ -175,7 +185,7 @@ class Mesh:
                 else self._no_velocities,
                 "indices": self.indices, "bvh": self.bvh.id,
                 "num_points": self._points.shape[0], "num_tris": self._num_tris,
-                "average_edge_length": self._mean_edge,
+                "edge_length_sum": self._edge_sum,
                 "support_winding_number": int(self.support_winding_number),
             }
         )  # fmt: skip

@@ -1,15 +1,15 @@
 """What a ``kdsl.Mesh`` recomputes from its points at construction and at every
 ``refit()``, as kernels on the mesh's device (no copy of the points to the host): the
-faces' boxes (the items of its BVH), the average edge length (Warp's
-``average_edge_length``, recomputed by refit as Warp's is) and the check that every
-point is finite."""
+faces' boxes (the items of its BVH), the sum of the edge lengths (for Warp's
+``average_edge_length``, recomputed by refit as Warp's is; it stays on the device, where
+the mesh's record points at it) and the check that every point is finite (the one value
+a refit reads back)."""
 
 from __future__ import annotations
 
 from kdsl.frontend.api import atomic_min, isfinite, kernel, length, tid
 from kdsl.frontend.api import max as vmax
 from kdsl.frontend.api import min as vmin
-from kdsl.runtime.alloc import empty, full
 from kdsl.runtime.array import array
 from kdsl.runtime.launch import launch
 from kdsl.types import float32, int32, vec3
@@ -37,24 +37,27 @@ def _first_non_finite(points: array(dtype=vec3), first: array(dtype=int32)):
         atomic_min(first, 0, i)
 
 
-def first_non_finite(points: array) -> int:
-    """The index of the first point with a NaN or infinite coordinate, or -1."""
+def first_non_finite(points: array, first: array) -> int:
+    """The index of the first point with a NaN or infinite coordinate, or -1; ``first``
+    is a one-element int32 scratch array on the points' device."""
     n = points.shape[0]
     if n == 0:
         return -1
-    first = full(1, n, dtype=int32, device=points.device)
+    first.fill_(n)
     launch(_first_non_finite, dim=n, inputs=[points, first], device=points.device)
     i = int(first.numpy()[0])
     return -1 if i == n else i
 
 
-def face_boxes(points: array, indices: array, lowers: array, uppers: array) -> float:
-    """Write each face's box into ``lowers``/``uppers``; return the mean edge length
-    (0 without faces)."""
+def face_boxes(points: array, indices: array, lowers: array, uppers: array, edges: array,
+               edge_sum: array) -> None:  # fmt: skip
+    """Write each face's box into ``lowers``/``uppers`` and the sum of its three edge
+    lengths into ``edges``, and the sum of all of them into ``edge_sum[0]``, on the
+    device (the mean edge length is ``edge_sum[0] / (3 * faces)``)."""
     n = lowers.shape[0]
     if n == 0:
-        return 0.0
-    edges = empty(n, dtype=float32, device=points.device)
+        edge_sum.zero_()
+        return
     launch(_face_boxes, dim=n, inputs=[points, indices, lowers, uppers, edges],
            device=points.device)  # fmt: skip
-    return float(array_sum(edges)) / (3 * n)
+    array_sum(edges, out=edge_sum)

@@ -301,3 +301,16 @@ ATOMIC_CAS = CATALOG.define(
     array_operand=2,  # writes only where the compare matches: no stored_operand
     example="%4 = kd.atomic_cas %2, %3, %0, %1 : i32", group="memory",
 )  # fmt: skip
+
+
+FENCE = CATALOG.define(
+    "kd.fence",
+    "A sequentially consistent memory fence across the whole launch (CUDA's "
+    "``__threadfence``, LLVM's ``fence seq_cst``): the thread's reads and writes before it "
+    "are ordered before those after it as every thread of the launch sees them. A thread "
+    "that writes, fences, then bumps an atomic counter publishes its writes to the thread "
+    "that reads the counter's new value and then fences (the bottom-up pattern of BVH "
+    "refits). The interpreter runs threads one at a time, so it needs no fence.",
+    traits=frozenset({READS, WRITES}), type_rule=lambda ts, attrs: [],
+    interp=lambda ctx, op: None, example="kd.fence", group="memory",
+)  # fmt: skip

@@ -207,7 +207,9 @@ class Parser:
         if name_tok.text not in CATALOG:
             raise self.error("unknown op", name_tok)
         operands: list[Value] = []
-        if self.tok.kind == "value":
+        # Operands start on the op's line: a value on the next line starts the next op
+        # (after an op with neither operands nor results, such as ``kd.fence``).
+        if self.tok.kind == "value" and self.tok.line == name_tok.line:
             operands = self.parse_separated(lambda: self.use(self.expect_kind("value", "a value")))
         attrs = self.parse_attrs() if self.at_attrs() else {}
         result_types: list[Type] = []

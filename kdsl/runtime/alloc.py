@@ -41,14 +41,17 @@ def _make(
     t = resolve_dtype(dtype)
     dims = _dims(shape, length)
     dev = get_device(device)
-    if dev.is_cuda and isinstance(t, T.StructType):
+    if dev.is_cuda and isinstance(t, T.StructType) and not _zero_or_unset(init):
         # CuPy holds structured buffers but cannot fill them: fill on the host, upload once.
         host = np.zeros(dims, np_dtype(t))
         if init is not None:
             host[...] = np.asarray(host_value(t, init), dtype=host.dtype)
         return array._wrap(mem.from_host(host, dev), t, dev, requires_grad)
     buf = mem.empty(dims + inner_shape(t), np_dtype(t), dev)
-    if init is not None:
+    if dev.is_cuda and isinstance(t, T.StructType) and init is not None:
+        with mem.scope(dev):  # zeros: a memset on the device's stream, no upload
+            buf.data.memset_async(0, buf.nbytes)
+    elif init is not None:
         try:
             value = np.asarray(host_value(t, init), dtype=buf.dtype)
         except ValueError as e:
@@ -64,6 +67,11 @@ def _make(
     elif graphs.ACTIVE:
         graphs.captured_fill(buf, dev, None, fresh=True)
     return array._wrap(buf, t, dev, requires_grad)
+
+
+def _zero_or_unset(init: Any) -> bool:
+    """Whether a fill value leaves a new array unset (None) or all zero bytes (the int 0)."""
+    return init is None or (type(init) is int and init == 0)
 
 
 def _filled(name: str, fill: Any, doc: str):  # the inner signature is the return type

@@ -90,7 +90,7 @@ class MeshRecord:
     bvh: wp.uint64
     num_points: wp.int32
     num_tris: wp.int32
-    average_edge_length: wp.float32
+    edge_length_sum: wp.array(dtype=wp.float32)  # one element: the faces' edges, summed
     support_winding_number: wp.int32
 
 
@@ -846,7 +846,9 @@ def mesh_query_point_sign_normal(
     count as touching it): fast, for watertight, non-self-intersecting meshes."""
     rec = wp.object_record(id, MeshRecord)
     bvh = wp.object_record(rec.bvh, BvhRecord)
-    eps = rec.average_edge_length * epsilon
+    eps = 0.0
+    if rec.num_tris > 0:  # epsilon times the mean edge length
+        eps = rec.edge_length_sum[0] / float(3 * rec.num_tris) * epsilon
     best = max_dist
     best_face = -1
     normal = wp.vec3(0.0)

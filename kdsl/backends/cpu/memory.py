@@ -258,6 +258,7 @@ def _atomic_cas(em: Emitter, op: Operation) -> Any:
 
 CPU.register("kd.tid", _tid)
 CPU.register("kd.block_dim", lambda em, op: ir.Constant(LT.I32, 1))  # one thread a block, as Warp
+CPU.register("kd.fence", lambda em, op: em.b.fence("seq_cst"))
 CPU.register("kd.array_shape", _array_shape)
 CPU.register("kd.load", _load)
 CPU.register("kd.array_view", _array_view)

@@ -325,6 +325,7 @@ def _atomic(em: FuncEmitter, op: Operation) -> str:
 
 CUDA.register("kd.tid", _tid)
 CUDA.register("kd.block_dim", lambda em, op: "(int)blockDim.x")
+CUDA.register("kd.fence", lambda em, op: em.line("__threadfence();", op.loc))
 CUDA.register("kd.array_shape", _array_shape)
 CUDA.register("kd.load", _load)
 CUDA.register("kd.array_view", _array_view)

@@ -270,6 +270,46 @@ def _exch_each_case(name, dtype, np_dtype, req) -> Case:
                 requires=("atomics", *req))  # fmt: skip
 
 
+# -- a fence publishing writes through an atomic counter (bottom-up tree sums) ---------
+
+_LEAVES = 2048
+
+
+@wp.kernel
+def fence_tree_sums(v: wp.array(dtype=wp.int32), sums: wp.array(dtype=wp.int32),
+                    arrivals: wp.array(dtype=wp.int32)):  # fmt: skip
+    # A heap-ordered binary tree: node 1 is the root, leaf i is node LEAVES + i. The
+    # second thread to reach a node sums its children; the first thread's write must be
+    # visible to it, which the fence before the counter and the one after guarantee.
+    i = wp.tid()
+    node = _LEAVES + i
+    sums[node] = v[i]
+    while node > 1:
+        wp.thread_fence()
+        parent = node // 2
+        if wp.atomic_add(arrivals, parent, 1) == 0:
+            break
+        wp.thread_fence()
+        sums[parent] = sums[2 * parent] + sums[2 * parent + 1]
+        node = parent
+
+
+def _fence_inputs(rng):
+    v = integers(rng, _LEAVES, -1000, 1000, np.int32)
+    return {"v": v, "sums": np.zeros(2 * _LEAVES, np.int32),
+            "arrivals": np.zeros(_LEAVES, np.int32)}  # fmt: skip
+
+
+def _fence_ref(ins):
+    sums = np.zeros(2 * _LEAVES, np.int64)
+    sums[_LEAVES:] = ins["v"]
+    for node in range(_LEAVES - 1, 0, -1):
+        sums[node] = sums[2 * node] + sums[2 * node + 1]
+    arrivals = np.full(_LEAVES, 2)
+    arrivals[0] = 0
+    return {"sums": sums, "arrivals": arrivals}
+
+
 def _per_type_cases() -> list[Case]:
     cases = _arith_cases()
     cases += [
@@ -277,6 +317,8 @@ def _per_type_cases() -> list[Case]:
              ("a", "old", "swapped"), requires=("atomics",)),
         Case("atomic_cas_i64_each", cas_int_each, 16, _cas_int_inputs, _cas_int_ref,
              ("a", "old"), requires=("atomics", "int64")),
+        Case("thread_fence_tree_sums", fence_tree_sums, _LEAVES, _fence_inputs, _fence_ref,
+             ("sums", "arrivals"), requires=("atomics",)),
     ]  # fmt: skip
     for name, dtype, np_dtype, req in INT_TYPES:
         cases.append(Case(f"atomic_and_or_xor_{name}", _bits_kernel(dtype), N,
