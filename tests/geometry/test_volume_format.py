@@ -637,3 +637,32 @@ def test_kernels_read_loaded_grids_on_cuda():
     )
     expected = np.array([e[0] for e in sphere.values()], np.float32)
     assert np.array_equal(_lookup(v, list(sphere), "cuda", "cuda:0"), expected)
+
+
+def test_more_argument_errors(tmp_path):
+    pts = wp.array(np.zeros((1, 3), np.int32), dtype=wp.vec3i)
+    index = wp.Volume.allocate_by_voxels(pts, 1.0)
+    dense = wp.Volume.load_from_numpy(_field((2, 2, 2)))
+    with pytest.raises(VolumeError, match="needs an index volume"):
+        wp.Volume.from_index_grid(dense, {})
+    with pytest.raises(VolumeError, match="grid indexes 2"):
+        wp.Volume.from_index_grid(index, {"x": np.zeros(3, np.float32)})
+    with pytest.raises(KdslTypeError, match="feature arrays hold"):
+        wp.Volume.from_index_grid(index, {"x": np.zeros(2, np.int8)})
+    text = tmp_path / "t.nvdb"
+    text.write_bytes(b"x")
+    with open(text) as f, pytest.raises(NanoVDBError, match="binary mode"):
+        wp.Volume.load_from_nvdb(f)
+    far = wp.array(np.array([[3e9, 0, 0]], np.float32), dtype=wp.vec3)
+    with pytest.raises(VolumeError, match="int32 index space"):
+        wp.Volume.allocate_by_voxels(far, 1.0)
+    with pytest.raises(VolumeError, match="more than 2\\*\\*24"):
+        wp.Volume.allocate((0, 0, 0), (1 << 12, 1 << 12, 1 << 12), 1.0)
+    with pytest.raises(KdslTypeError, match="voxel_size must be a number"):
+        wp.Volume.load_from_numpy(_field((2, 2, 2)), voxel_size="big")
+    with pytest.raises(VolumeError, match="min_world must be finite"):
+        wp.Volume.load_from_numpy(_field((2, 2, 2)), min_world=(0, float("inf"), 0))
+    with pytest.raises(VolumeError, match="a voxel_size or a transform"):
+        wp.Volume.allocate_by_tiles(pts)
+    with pytest.raises(VolumeError, match="on cpu"):
+        dense.get_voxels(np.zeros((8, 3), np.int32))
