@@ -20,11 +20,12 @@ from typing import Any
 
 import numpy as np
 
+from kdsl.ir import bfloat16 as bfloat16_bits
 from kdsl.ir import types as T
 
 __all__ = [
     "Scalar", "Composite", "bool", "int8", "int16", "int32", "int64", "uint8", "uint16",
-    "uint32", "uint64", "float16", "float32", "float64", "half", "vector", "matrix",
+    "uint32", "uint64", "float16", "float32", "float64", "bfloat16", "half", "vector", "matrix",
     "quaternion", "transformation", "vec2", "vec3", "vec4", "vec2f", "vec3f", "vec4f",
     "vec2d", "vec3d", "vec4d", "vec2h", "vec3h", "vec4h", "vec2i", "vec3i", "vec4i",
     "vec2ui", "vec3ui", "vec4ui", "vec2b", "vec3b", "vec4b", "vec2ub", "vec3ub", "vec4ub",
@@ -47,7 +48,16 @@ class Scalar:
         return cls.__kdsl_type__.np_dtype.type(value)
 
 
+def _bfloat16_value(value: Any = 0.0) -> np.float32:
+    """``kdsl.bfloat16(x)``: ``x`` rounded to bfloat16, as the float32 kernels compute with."""
+    return bfloat16_bits.from_bits(bfloat16_bits.to_bits(value))[()]
+
+
 def _scalar(t: T.ScalarType) -> type:
+    if t is T.BF16:  # a storage type: its values are float32 (see kdsl.ir.types.BF16)
+        ns = {"__kdsl_type__": t, "__new__": staticmethod(lambda cls, v=0.0: _bfloat16_value(v)),
+              "__doc__": "The bfloat16 storage type (values are float32 rounded to it)."}  # fmt: skip
+        return type("bfloat16", (Scalar,), ns)
     name = t.np_dtype.name  # Warp names its scalars as NumPy does
     return type(name, (Scalar,), {"__kdsl_type__": t, "__doc__": f"The {t} scalar type."})
 
@@ -68,6 +78,7 @@ uint64 = SCALAR_CLASSES[T.U64]
 float16 = SCALAR_CLASSES[T.F16]
 float32 = SCALAR_CLASSES[T.F32]
 float64 = SCALAR_CLASSES[T.F64]
+bfloat16 = SCALAR_CLASSES[T.BF16]
 half = float16
 
 
@@ -270,6 +281,8 @@ def _scalar_type(dtype: Any) -> T.ScalarType:
     t = type_of(dtype)
     if not isinstance(t, T.ScalarType):
         raise TypeError(f"expected a scalar dtype, got {dtype!r}")
+    if t is T.BF16:
+        raise TypeError("bfloat16 is a storage type: no vectors or matrices of it")
     return t
 
 

@@ -18,9 +18,10 @@ from dataclasses import dataclass
 from typing import Any
 
 from kdsl.errors import KdslTypeError
+from kdsl.frontend import bfloat16
 from kdsl.frontend.values import is_weak
 from kdsl.ir import Value
-from kdsl.ir.types import F32, ScalarType
+from kdsl.ir.types import BF16, F32, ScalarType
 from kdsl.types import python_scope
 
 #: ``lower(emitter, args, node)``: emits a builtin's ops for one call.
@@ -123,6 +124,8 @@ def float_default(em, x: Any, node: ast.AST) -> Value:
 
 def cast(em, t: ScalarType, args: list[Any], node: ast.AST) -> Value:
     """``float32(x)``/``float(x)``/``int(x)``: a conversion (or a typed constant)."""
+    if t is BF16:  # bfloat16(x): x rounded to it, as a float32 (a storage type)
+        return bfloat16.round_value(em, args[0] if args else 0.0, node)
     if not args:
         return em.zero(t, node)
     x = args[0]

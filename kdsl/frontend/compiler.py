@@ -9,13 +9,14 @@ from typing import TYPE_CHECKING, Any
 
 from kdsl.errors import KdslError, KdslSyntaxError, KdslTypeError
 from kdsl.frontend.analysis import always_returns, has_nontail_return
+from kdsl.frontend.bfloat16 import STORAGE_ONLY
 from kdsl.frontend.control import RET
 from kdsl.frontend.generic import Generic, generic_of
 from kdsl.frontend.inout import InOut
 from kdsl.frontend.statements import StatementLowering
 from kdsl.frontend.values import describe, is_weak
 from kdsl.ir import Module, Operation, Value, new_func
-from kdsl.ir.types import BOOL, F32, I32, ScalarType, Type
+from kdsl.ir.types import BF16, BOOL, F32, I32, ScalarType, Type
 
 if TYPE_CHECKING:
     from kdsl.frontend.kernel import Function, Overload
@@ -40,6 +41,9 @@ class FunctionCompiler(StatementLowering):
             raise self.error(KdslSyntaxError, "a kernel cannot have inout() parameters; "
                              "only a @kdsl.func writes one back to its caller", fdef)  # fmt: skip
         names = [a.arg for a in fdef.args.args]
+        for name, t in zip(names, arg_types):
+            if t is BF16:
+                raise self.error(KdslTypeError, f"parameter '{name}': {STORAGE_ONLY}", fdef)
         func = new_func(self.unit.module, sym_name, arg_types, names, [], self.kind,
                         self.loc(fdef))  # fmt: skip
         body = func.regions[0].block

@@ -13,10 +13,12 @@ from typing import Any
 import numpy as np
 
 from kdsl.errors import KdslError, KdslNameError, KdslSyntaxError, KdslTypeError
+from kdsl.frontend import bfloat16
 from kdsl.frontend.source import ParsedSource
 from kdsl.frontend.values import default_type, describe, is_weak, literal_fits
 from kdsl.ir import Builder, Loc, Value
 from kdsl.ir.types import (
+    BF16,
     BOOL,
     MatrixType,
     ScalarType,
@@ -25,6 +27,8 @@ from kdsl.ir.types import (
     elem_type,
     value_shape,
 )
+
+_ATOMICS = ("kd.atomic_rmw", "kd.atomic_cas")
 
 
 class Emitter(ast.NodeVisitor):
@@ -62,10 +66,20 @@ class Emitter(ast.NodeVisitor):
 
     def emit(self, name: str, *operands: Value, node: ast.AST | None = None, **attrs: Any) -> Value:
         """A one-result op typed by its catalog rule; rule errors become located errors."""
+        if (
+            name in _ATOMICS
+            and getattr(operands[1 + (name == "kd.atomic_cas")].type, "dtype", None) is BF16
+        ):
+            raise self.error(KdslTypeError, "atomic operations on bfloat16 arrays are not "
+                             "supported (no backend has 16-bit float atomics); accumulate in "
+                             "a float32 array", node)  # fmt: skip
         try:
-            return self.b.value(name, *operands, loc=self.loc(node), **attrs)
+            v = self.b.value(name, *operands, loc=self.loc(node), **attrs)
         except TypeError as e:
             raise self.error(KdslTypeError, str(e), node) from None
+        if v.type is BF16 and name == "kd.load":  # a storage type: kernels see float32
+            return bfloat16.load_value(self, v, node)
+        return v
 
     def emit_typed(self, name: str, operands: list[Value], t: Type, node=None, **attrs) -> Value:
         """A one-result op with an explicit result type (casts, constructors)."""
@@ -106,6 +120,8 @@ class Emitter(ast.NodeVisitor):
 
     def value(self, x: Any, node: ast.AST | None = None, want: Type | None = None) -> Value:
         """``x`` as an IR value; a weak literal takes ``want`` (or its default type)."""
+        if want is BF16:  # storing into a bfloat16 array: round
+            return bfloat16.store_value(self, x, node)
         if isinstance(x, Value):
             return x
         if is_weak(x):

@@ -3,8 +3,10 @@
 No second table lives here: a framework dtype is matched to a kdsl scalar through
 its NumPy name (``torch.float32`` -> ``"float32"`` -> ``kdsl.ir.types`` ``f32``),
 and back through the scalar table's name for that framework (``ScalarType.torch``,
-``.paddle``, ``.jax``). A dtype kdsl has no scalar for (bfloat16, complex, strings)
-is an ``InteropTypeError``.
+``.paddle``, ``.jax``). A dtype kdsl has no scalar for (complex, strings) is an
+``InteropTypeError``, and so is bfloat16: kdsl's is a storage type, and NumPy's DLPack
+import (which kdsl's zero-copy paths use) has no bfloat16; such data is passed as its
+16-bit patterns (``kdsl.array(bits, dtype=kdsl.bfloat16)`` takes uint16 data as bits).
 """
 
 from __future__ import annotations
@@ -27,11 +29,19 @@ class InteropDeviceError(KdslError, RuntimeError):
     """A device with no counterpart on the other side (also a ``RuntimeError``, as Warp raises)."""
 
 
-_KNOWN = ", ".join(f"{t.np_dtype.name}" for t in T.SCALARS.values())
+_KNOWN = ", ".join(class_of(t).__name__ for t in T.SCALARS.values() if t is not T.BF16)
+#: Why a bfloat16 tensor does not cross zero-copy (``{what}`` names it), and what to do.
+BF16_HINT = (
+    "{what} has no kdsl equivalent for zero-copy interop: kdsl's bfloat16 arrays hold 16-bit "
+    "patterns; pass them as uint16 (torch: t.view(torch.uint16), then "
+    "kdsl.array(bits, dtype=kdsl.bfloat16)) or convert to float32 first"
+)
 
 
 def scalar_from_name(name: str, what: str) -> T.ScalarType:
     """The kdsl scalar whose NumPy name is ``name`` (``"float32"``); ``what`` names the source."""
+    if name == "bfloat16":
+        raise InteropTypeError(BF16_HINT.format(what=what))
     try:
         return T.scalar_from_numpy(np.dtype(name))
     except (TypeError, KeyError, ValueError):
@@ -43,6 +53,8 @@ def scalar_from_name(name: str, what: str) -> T.ScalarType:
 
 def scalar_from_numpy_dtype(dtype: np.dtype, what: str) -> T.ScalarType:
     """The kdsl scalar of a NumPy dtype (ml_dtypes' bfloat16 and complex are errors)."""
+    if np.dtype(dtype).name == "bfloat16":
+        raise InteropTypeError(BF16_HINT.format(what=what))
     try:
         return T.scalar_from_numpy(dtype)
     except (TypeError, KeyError, ValueError):

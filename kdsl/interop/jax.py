@@ -17,12 +17,14 @@ import numpy as np
 from kdsl.errors import KdslError
 from kdsl.interop.dlpack import Exporter, from_dlpack
 from kdsl.interop.dtypes import (
+    BF16_HINT,
     InteropDeviceError,
     InteropTypeError,
     public_scalar,
     scalar_from_numpy_dtype,
 )
 from kdsl.interop.frameworks import Framework
+from kdsl.ir import types as T
 from kdsl.runtime.array import array
 from kdsl.runtime.device import Device, get_device
 
@@ -116,6 +118,8 @@ def to_jax(warp_array: array) -> Any:
     """
     if not isinstance(warp_array, array):
         raise KdslError(f"to_jax() takes a kdsl array, not {type(warp_array).__name__}")
+    if warp_array.__kdsl_type__.dtype is T.BF16:  # DLPack would hand JAX its uint16 bits
+        raise InteropTypeError(BF16_HINT.format(what="to_jax() of a bfloat16 array"))
     buf = warp_array._buf
     if warp_array.device.is_cpu and not buf.flags.writeable:
         # JAX asks for a legacy capsule, which cannot carry NumPy's read-only flag

@@ -9,7 +9,7 @@ their lists from here; none keeps a second one.
 
 Text forms::
 
-    bool  i8 i16 i32 i64  u8 u16 u32 u64  f16 f32 f64
+    bool  i8 i16 i32 i64  u8 u16 u32 u64  f16 f32 f64  bf16
     vec<3, f32>   mat<3, 3, f32>   quat<f32>   transform<f32>
     array<vec<3, f32>, 2>   struct<Particle>   handle<mesh>
 """
@@ -50,7 +50,8 @@ class ScalarType(Type):
     """
 
     kind: str
-    """One of ``bool``, ``int``, ``uint``, ``float``."""
+    """One of ``bool``, ``int``, ``uint``, ``float``, ``bfloat`` (bfloat16, a storage type:
+    see ``BF16``)."""
     bits: int
     """The width in bits (8 for bool: its size in memory)."""
     name: str = field(compare=False, repr=False)
@@ -108,8 +109,8 @@ class ScalarType(Type):
         return self.name
 
 
-_IR_PREFIX = {"int": "i", "uint": "u", "float": "f"}
-_DLPACK_CODE = {"int": 0, "uint": 1, "float": 2, "bool": 6}  # DLDataTypeCode, by kind
+_IR_PREFIX = {"int": "i", "uint": "u", "float": "f", "bfloat": "bf"}
+_DLPACK_CODE = {"int": 0, "uint": 1, "float": 2, "bfloat": 4, "bool": 6}  # DLDataTypeCode
 
 
 def _scalar(
@@ -165,13 +166,21 @@ SCALARS: dict[str, ScalarType] = {t.name: t for t in (_scalar(*row) for row in (
     ("float", 16, "float16", "e", "kd_f16",             "half",   "h",  "float16", "float16", 10),
     ("float", 32, "float32", "f", "float",              "float",  "f",  "float32", "float32", 11),
     ("float", 64, "float64", "d", "double",             "double", "d",  "float64", "float64", 12),
+    ("bfloat", 16, "uint16", "H", "unsigned short",     "i16",    "",   "bfloat16", "bfloat16", 16),
 ))}
 # fmt: on
-BOOL, I8, I16, I32, I64, U8, U16, U32, U64, F16, F32, F64 = SCALARS.values()
+BOOL, I8, I16, I32, I64, U8, U16, U32, U64, F16, F32, F64, BF16 = SCALARS.values()
+#: bfloat16 (Warp's ``wp.bfloat16``) is a storage type: arrays hold its bits (the NumPy
+#: dtype is their ``uint16``), and kernels see float32 values. The frontend converts at
+#: each load and store with integer ops (``kdsl/frontend/bfloat16.py``), so a ``bf16``
+#: value lives in the IR only between a memory op and its conversion (as 16 bits: the
+#: backends treat it as ``u16``), and no backend computes with it.
 _BY_KIND_BITS: dict[tuple[str, int], ScalarType] = {(t.kind, t.bits): t for t in SCALARS.values()}
-_BY_NP_NAME: dict[str, ScalarType] = {t.np_dtype.name: t for t in SCALARS.values()}
+# NumPy has no bfloat16: its storage dtype (uint16) names uint16.
+_NUMPY_SCALARS = [t for t in SCALARS.values() if t is not BF16]
+_BY_NP_NAME: dict[str, ScalarType] = {t.np_dtype.name: t for t in _NUMPY_SCALARS}
 _BY_NP: dict[object, ScalarType] = {
-    key: t for t in SCALARS.values() for key in (t.np_dtype, t.np_dtype.type)
+    key: t for t in _NUMPY_SCALARS for key in (t.np_dtype, t.np_dtype.type)
 }
 
 

@@ -24,7 +24,9 @@ from kdsl.runtime.adapters import adapter
 from kdsl.runtime.annotation import ArrayAnnotation, subscript
 from kdsl.runtime.device import Device, get_device
 from kdsl.runtime.dtypes import (
+    host_scalar,
     host_value,
+    host_view,
     inner_shape,
     normalize_shape,
     np_dtype,
@@ -209,6 +211,9 @@ class array:
 
     @requires_grad.setter
     def requires_grad(self, value: bool) -> None:
+        if value and self._t is T.BF16:
+            raise KdslError("bfloat16 arrays carry no gradients in kdsl (a storage type); "
+                            "differentiate through a float32 copy")  # fmt: skip
         self._requires_grad = builtins.bool(value)
         if self._requires_grad and self._grad is None and self._t is not None:
             self._grad = array._wrap(mem.zeros_like(self._buf, self._device), self._t, self._device)
@@ -245,10 +250,10 @@ class array:
         enqueued on the device's stream has finished (so no ``synchronize()`` is needed).
         """
         if self._device.is_cuda:
-            return mem.to_host(self._buf, self._device)
+            return host_view(self._t, mem.to_host(self._buf, self._device))
         if graphs.ACTIVE:  # captured CPU work has not run: refuse, as on CUDA
             graphs.refuse_host_read(self._device, "numpy()")
-        return self._buf.view()
+        return host_view(self._t, self._buf.view())
 
     @property
     def __array_interface__(self) -> dict:
@@ -302,7 +307,7 @@ class array:
         if isinstance(self._t, T.StructType):
             return [self.dtype.from_numpy(x) for x in flat]
         if not self._inner:
-            return flat.tolist()  # Python numbers, as Warp's
+            return host_scalar(self._t, flat).tolist()  # Python numbers, as Warp's
         cls = self.dtype
         return [cls(x) for x in flat]
 
@@ -560,7 +565,7 @@ class array:
             if isinstance(self._t, T.StructType):
                 return self.dtype.from_numpy(view[()])
             if not self._inner:
-                return view[()]
+                return host_scalar(self._t, view[()])
             return self.dtype(view)
         grad = None if self._grad is None else self._grad[key]
         return self._view(view, self._t, grad)

@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 
 from kdsl.errors import KdslError
+from kdsl.ir import bfloat16
 from kdsl.ir import types as T
 from kdsl.types import class_of, type_of
 
@@ -55,7 +56,10 @@ def public_dtype(t: T.Type) -> type:
 
 
 def host_value(t: T.Type, value: Any) -> Any:
-    """A fill or element value as NumPy takes it: struct instances become tuples."""
+    """A fill or element value as NumPy takes it: struct instances become tuples, and
+    numbers for bfloat16 arrays their bits (uint16 data is taken as bits, as Warp does)."""
+    if t is T.BF16:
+        return bfloat16_bits_of(value)
     if isinstance(t, T.StructType) and hasattr(value, "numpy_value"):
         return value.numpy_value()
     if isinstance(t, T.StructType) and isinstance(value, list):  # a list of instances
@@ -114,3 +118,33 @@ def scalar_dtype_of_numpy(dtype: np.dtype) -> T.ScalarType:
         return T.scalar_from_numpy(dtype)
     except KeyError:
         raise KdslError(f"NumPy dtype {dtype} has no kdsl equivalent") from None
+
+
+def bfloat16_bits_of(value: Any) -> Any:
+    """Data for a bfloat16 array as its bits: uint16 data and ``ml_dtypes`` bfloat16 data
+    as they are, anything else rounded from float32 (``kdsl.ir.bfloat16.to_bits``)."""
+    if isinstance(value, np.ndarray | np.generic):
+        if value.dtype == np.uint16:
+            return value
+        if value.dtype == bfloat16.numpy_dtype():
+            return value.view(np.uint16)
+    if hasattr(value, "__cuda_array_interface__"):  # device data: left to the copy's checks
+        return value
+    return bfloat16.to_bits(value)
+
+
+def host_view(t: T.Type, data: np.ndarray) -> np.ndarray:
+    """Host data of an array of ``t`` as users see it: bfloat16 bits as ``ml_dtypes``'s
+    bfloat16 when that package is installed (else the uint16 bits, as Warp does)."""
+    if t is T.BF16:
+        dt = bfloat16.numpy_dtype()
+        return data.view(dt) if dt is not None else data
+    return data
+
+
+def host_scalar(t: T.Type, x: Any) -> Any:
+    """One scalar element read from the host (a bfloat16's bits become its float32)."""
+    if t is not T.BF16:
+        return x
+    x = np.asarray(x)
+    return bfloat16.from_bits(x if x.dtype == np.uint16 else x.view(np.uint16))[()]

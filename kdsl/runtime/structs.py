@@ -25,7 +25,7 @@ import numpy as np
 
 from kdsl.errors import KdslTypeError
 from kdsl.ir import Loc
-from kdsl.ir.types import ArrayType, StructType, Type, storage_dtype
+from kdsl.ir.types import BF16, ArrayType, StructType, Type, storage_dtype
 from kdsl.runtime.args import ArgError, convert_composite, convert_scalar
 from kdsl.runtime.array import array
 from kdsl.types import class_of, type_of
@@ -166,6 +166,11 @@ def _field_type(cls: type, name: str, ann: Any, scope: dict[str, Any]) -> Type:
         t = type_of(ann)
     except (TypeError, KdslTypeError):
         t = None
+    if t is BF16:
+        raise KdslTypeError(
+            f"field '{name}' of struct {cls.__name__} is a bfloat16, a storage type in kdsl: "
+            "make it a float32 (arrays of bfloat16 may be fields)", _class_loc(cls, name),
+        )  # fmt: skip
     if t is None or not (t.is_value or isinstance(t, ArrayType)):
         raise KdslTypeError(
             f"field '{name}' of struct {cls.__name__} has type {_ann_name(ann)}, which a struct "

@@ -20,6 +20,9 @@ from kdsl.types import SCALAR_CLASSES, class_of
 
 SCALARS = list(T.SCALARS.values())
 ids = [t.name for t in SCALARS]
+#: The rows NumPy has a type for (bfloat16 is stored as uint16: see test_bfloat16_row).
+NUMERIC = [t for t in SCALARS if t is not T.BF16]
+nids = [t.name for t in NUMERIC]
 
 
 @pytest.mark.parametrize("t", SCALARS, ids=ids)
@@ -36,7 +39,7 @@ def test_unknown_scalar_is_an_error():
         T.ScalarType("float", 128)
 
 
-@pytest.mark.parametrize("t", SCALARS, ids=ids)
+@pytest.mark.parametrize("t", NUMERIC, ids=nids)
 def test_numpy_and_struct(t):
     assert t.np_dtype.itemsize * 8 == t.bits
     assert t.np_dtype.kind == {"bool": "b", "int": "i", "uint": "u", "float": "f"}[t.kind]
@@ -45,7 +48,7 @@ def test_numpy_and_struct(t):
     assert T.scalar_from_numpy(t.np_dtype) is t and T.scalar_from_numpy(t.np_dtype.type) is t
 
 
-@pytest.mark.parametrize("t", SCALARS, ids=ids)
+@pytest.mark.parametrize("t", NUMERIC, ids=nids)
 def test_public_names(t):
     cls = SCALAR_CLASSES[t]
     assert class_of(t) is cls and getattr(wp, t.np_dtype.name) is cls  # wp.float32, as Warp
@@ -88,7 +91,7 @@ def test_c_spellings_compile_with_nvrtc():
     nvrtc.compile_source("\n".join(lines) + "\n", nvrtc.DEFAULT_ARCH)
 
 
-@pytest.mark.parametrize("t", SCALARS, ids=ids)
+@pytest.mark.parametrize("t", NUMERIC, ids=nids)
 def test_dlpack_type_matches_numpys_capsules(t):
     capsule = np.zeros(1, t.np_dtype).__dlpack__()
     get = ctypes.pythonapi.PyCapsule_GetPointer
@@ -105,19 +108,32 @@ def test_xla_ffi_codes_match_the_header_jax_ships():
     with open(header) as f:
         codes = dict(re.findall(r"XLA_FFI_DataType_(\w+) = (\d+)", f.read()))
     for t in SCALARS:
-        xla = "PRED" if t.is_bool else {"int": "S", "uint": "U", "float": "F"}[t.kind] + str(t.bits)
+        kind = {"int": "S", "uint": "U", "float": "F", "bfloat": "BF"}
+        xla = "PRED" if t.is_bool else kind[t.kind] + str(t.bits)
         assert t.xla_ffi == int(codes[xla]), t
 
 
 def test_framework_names():
     """torch/Paddle names: the same bits, signed where torch lacks the unsigned type."""
-    for t in SCALARS:
+    for t in NUMERIC:
         twin = T.scalar_from_numpy(np.dtype(t.torch))
         assert twin.bits == t.bits and t.paddle == t.torch
         assert twin is t or (t.kind == "uint" and twin.kind == "int")
     jnp = pytest.importorskip("jax.numpy")
-    for t in SCALARS:
+    for t in NUMERIC:
         assert np.dtype(getattr(jnp, t.jax)) == t.np_dtype
+    assert np.dtype(jnp.bfloat16).itemsize == 2 and jnp.bfloat16.__name__ == "bfloat16"
     torch = pytest.importorskip("torch")
     for t in SCALARS:
         assert getattr(torch, t.torch).itemsize == t.np_dtype.itemsize
+
+
+def test_bfloat16_row():
+    """bfloat16 is a storage type: 16 bits held as NumPy's uint16, Warp's name."""
+    t = T.BF16
+    assert (t.kind, t.bits, t.name) == ("bfloat", 16, "bf16")
+    assert t.np_dtype == np.uint16 and struct.calcsize("<" + t.struct) == 2
+    assert T.scalar_from_numpy(np.uint16) is T.U16  # uint16 data stays uint16
+    assert class_of(t) is wp.bfloat16 and SCALAR_CLASSES[t] is wp.bfloat16
+    assert t.dlpack == (4, 16)  # kDLBfloat
+    assert (t.torch, t.jax) == ("bfloat16", "bfloat16") and not t.suffix
