@@ -108,12 +108,17 @@ class DeviceTeam:
         except threading.BrokenBarrierError:
             raise SceneError("another strip failed or timed out; this one stops") from None
 
-    def _share(self, rank: int, value: Any) -> list[Any]:
-        """Every strip's ``value``, once all have given one."""
+    def _publish(self, rank: int, value: Any) -> list[Any]:
+        """Every strip's ``value``, once all have given one. The caller must ``_meet``
+        before its next ``_publish`` (no strip may overwrite the board while others read)."""
         self._board[rank] = value
         self._meet()
-        shared = list(self._board)
-        self._meet()  # nobody overwrites the board before everyone has read it
+        return list(self._board)
+
+    def _share(self, rank: int, value: Any) -> list[Any]:
+        """``_publish``, then wait until every strip has read the board."""
+        shared = self._publish(rank, value)
+        self._meet()
         return shared
 
 
@@ -135,8 +140,9 @@ class TeamHalo:
         # No host synchronization: a copy between devices waits for the work enqueued on
         # both devices' streams and makes both wait for it. The first barrier puts each
         # strip's kernels that write its rows before the copies that read them, the second
-        # the copies before the next kernels that write them again.
-        rows = self.team._share(self.rank, (first_row, last_row))
+        # the copies before the next kernels that write them again (and every read of the
+        # board before the next exchange writes it).
+        rows = self.team._publish(self.rank, (first_row, last_row))
         if self.rank > 0:
             wp.copy(top, rows[self.rank - 1][1])
         if self.rank < self.size - 1:
