@@ -36,13 +36,16 @@ def sphere_sdf(n: int) -> np.ndarray:
 
 
 def median_time(fn, reps: int) -> float:
-    fn()  # warm-up: kernel compiles, first-touch allocations
-    times = []
-    for _ in range(reps):
+    """The median wall time of ``reps`` calls of ``fn`` after one warm-up call (kernel
+    compiles, first-touch allocations)."""
+
+    def once() -> float:
         t = time.perf_counter()
         fn()
-        times.append(time.perf_counter() - t)
-    return statistics.median(times)
+        return time.perf_counter() - t
+
+    fn()
+    return statistics.median([once() for _ in range(reps)])
 
 
 def main() -> None:
@@ -73,64 +76,27 @@ def main() -> None:
         )
         return wp.Volume(wp.array(np.frombuffer(data, np.uint8), device=args.device))
 
-    kd_tiles = wp.array(tiles, dtype=wp.vec3i, device=args.device)
-    rows.append(
-        (
-            "kdsl",
-            "load_from_numpy",
-            median_time(
-                lambda: wp.Volume.load_from_numpy(
-                    sdf, voxel_size=h, bg_value=0.0, device=args.device
-                ),
-                args.reps,
-            ),
-        )
-    )
-    rows.append(
-        (
-            "kdsl",
-            "allocate_by_tiles",
-            median_time(
-                lambda: wp.Volume.allocate_by_tiles(
-                    kd_tiles, h, float(args.band), device=args.device
-                ),
-                args.reps,
-            ),
-        )
-    )
-    rows.append(("kdsl", "builder (voxels)", median_time(kdsl_builder, args.reps)))
+    sides = [("kdsl", wp)]
     try:
         import warp
-    except ImportError:
-        warp = None
-    if warp is not None:
+
         warp.config.quiet = True
-        w_tiles = warp.array(tiles, dtype=warp.vec3i, device=args.device)
-        rows.append(
-            (
-                "warp",
-                "load_from_numpy",
-                median_time(
-                    lambda: warp.Volume.load_from_numpy(
-                        sdf, voxel_size=h, bg_value=0.0, device=args.device
-                    ),
-                    args.reps,
-                ),
-            )
-        )
-        rows.append(
-            (
-                "warp",
-                "allocate_by_tiles",
-                median_time(
-                    lambda: warp.Volume.allocate_by_tiles(
-                        w_tiles, h, float(args.band), device=args.device
-                    ),
-                    args.reps,
-                ),
-            )
-        )
-        warp.synchronize()
+        sides.append(("warp", warp))
+    except ImportError:
+        pass
+    for who, m in sides:  # the same calls through each module
+        tile_points = m.array(tiles, dtype=m.vec3i, device=args.device)
+        calls = {
+            "load_from_numpy": lambda m=m: m.Volume.load_from_numpy(
+                sdf, voxel_size=h, bg_value=0.0, device=args.device
+            ),
+            "allocate_by_tiles": lambda m=m, t=tile_points: m.Volume.allocate_by_tiles(
+                t, h, float(args.band), device=args.device
+            ),
+        }
+        if m is wp:
+            calls["builder (voxels)"] = kdsl_builder
+        rows += [(who, name, median_time(call, args.reps)) for name, call in calls.items()]
     for who, what, t in rows:
         print(f"  {who:5s} {what:18s} {t * 1e3:9.1f} ms")
 

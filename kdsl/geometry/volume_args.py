@@ -75,12 +75,14 @@ def voxel_sizes(voxel_size: Any) -> tuple[float, float, float]:
 def vector3(value: Any, name: str) -> np.ndarray:
     """Three finite float64 values."""
     try:
-        v = np.asarray(value, dtype=np.float64).reshape(3)
+        v = np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError):
-        raise KdslTypeError(f"Volume {name} must be 3 numbers, not {value!r}") from None
-    if not np.isfinite(v).all():
-        raise VolumeError(f"Volume {name} must be finite, not {value!r}")
-    return v
+        v = None
+    if v is None or v.shape != (3,):
+        raise KdslTypeError(f"Volume {name} must be 3 numbers, not {value!r}")
+    if np.isfinite(v).all():
+        return v
+    raise VolumeError(f"Volume {name} must be finite, not {value!r}")
 
 
 def index_to_world(voxel_size: Any, transform: Any) -> np.ndarray:
