@@ -67,7 +67,8 @@ def _median_seconds(fn, reps: int) -> float:
 def crossover(kernel, max_log2: int, reps: int) -> tuple[list[dict], int | None]:
     """Inline and pooled launch times per size, and the first size where the pool wins."""
     rows, first = [], None
-    saved = pool.min_parallel
+    saved = pool.min_parallel, pool.adaptive
+    pool.adaptive = False  # min_parallel alone decides, so each column is the path it names
     try:
         for k in range(4, max_log2 + 1):
             n = 1 << k
@@ -88,7 +89,7 @@ def crossover(kernel, max_log2: int, reps: int) -> tuple[list[dict], int | None]
                 if prev["pool_us"] < prev["inline_us"]:
                     first = prev["threads"]
     finally:
-        pool.min_parallel = saved
+        pool.min_parallel, pool.adaptive = saved
     return rows, first
 
 
