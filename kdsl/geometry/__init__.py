@@ -11,7 +11,13 @@ from kdsl.geometry.bvh import Bvh
 from kdsl.geometry.hash_grid import HashGrid
 from kdsl.geometry.iso_surface import IsoSurfaceBase, IsoSurfaceMarchingCubes, MarchingCubes
 from kdsl.geometry.mesh import Mesh
+from kdsl.geometry.sparse_marching_cubes import (
+    lipschitz_octree,
+    sparse_marching_cubes,
+    sparse_marching_cubes_from_cells,
+)
 from kdsl.geometry.volume import Volume
 
-# IsoSurfaceBase and IsoSurfaceMarchingCubes live in kdsl.geometry only, as in Warp.
+# IsoSurfaceBase, IsoSurfaceMarchingCubes and the sparse marching cubes functions live
+# in kdsl.geometry only, as in Warp.
 __all__ = ["Bvh", "HashGrid", "MarchingCubes", "Mesh", "Volume"]

@@ -52,7 +52,9 @@ def check_node_counts(nx: Any, ny: Any, nz: Any) -> tuple[int, int, int]:
     return dims
 
 
-def _bound(name: str, value: Bounds) -> np.ndarray:
+def as_bound(name: str, value: Bounds) -> np.ndarray:
+    """``value`` (a vec3 or 3 numbers) as a float32 array of 3 finite numbers, else a
+    marching cubes error naming ``name``."""
     try:
         v = np.asarray(value, dtype=np.float32).reshape(3)
     except (TypeError, ValueError):
@@ -68,8 +70,8 @@ def resolve_domain_bounds(
     """``(lower, delta)`` in float32 (Warp's arithmetic): node ``(i, j, k)`` maps to
     ``lower + (i, j, k) * delta``. ``lower`` defaults to the origin and ``upper`` (where
     the last node maps) to ``shape - 1``, so positions are grid indices by default."""
-    lo = np.zeros(3, np.float32) if lower is None else _bound("lower", lower)
-    hi = np.array(shape, np.float32) - 1 if upper is None else _bound("upper", upper)
+    lo = np.zeros(3, np.float32) if lower is None else as_bound("lower", lower)
+    hi = np.array(shape, np.float32) - 1 if upper is None else as_bound("upper", upper)
     cells = np.array(shape, np.float32) - 1
     return lo, (hi - lo) / cells
 
