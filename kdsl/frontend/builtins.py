@@ -8,6 +8,7 @@ an op of its own). The builtins are defined in groups, each module with a
 - ``builtins_math``: scalar math composed from ops (``clamp``, ``lerp``...);
 - ``builtins_linalg``: vector and matrix math (``trace``, ``inverse``, ``vector()``...);
 - ``builtins_ops``: the operator-named builtins (``add``, ``bit_and``...), ``reversed``;
+- ``builtins_arrays``: ``view`` (and ``array``, which the runtime maps onto its class);
 - ``geometry``: quaternion and transform constructors;
 - ``printing``: ``print`` and ``printf``.
 
@@ -23,6 +24,7 @@ import builtins as py
 from typing import Any
 
 from kdsl.frontend import (
+    builtins_arrays,
     builtins_core,
     builtins_linalg,
     builtins_math,
@@ -43,6 +45,7 @@ TABLES: tuple[BuiltinTable, ...] = (
     builtins_ops.TABLE,
     builtins_records.TABLE,
     builtins_volume.TABLE,
+    builtins_arrays.TABLE,
     geometry.TABLE,
     printing.TABLE,
 )

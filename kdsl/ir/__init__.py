@@ -12,6 +12,7 @@ from kdsl.ir import (
     ops_local,
     ops_math,
     ops_mem,
+    ops_pointer,
     ops_print,
     ops_scf,
     ops_vec,

@@ -107,8 +107,9 @@ def element_strides(t: ArrayType) -> tuple[int, int]:
 # -- the interpreter's reading of a record --------------------------------------------
 
 
-def _array_from_words(t: ArrayType, words: Sequence[int]) -> np.ndarray:
-    """The NumPy view of the memory an array descriptor (record words) describes."""
+def array_from_words(t: ArrayType, words: Sequence[int]) -> np.ndarray:
+    """The NumPy view of the memory an array descriptor (record words: the data address,
+    the shape, the strides in bytes) describes; zeros for a null or empty one."""
     nd = t.ndim
     data, shape, strides = int(words[0]), tuple(words[1 : 1 + nd]), tuple(words[1 + nd :])
     inner = value_shape(t.dtype) if not isinstance(t.dtype, StructType) else ()
@@ -133,7 +134,7 @@ def _value_from_bytes(t: Type, raw: bytes, offset: int) -> Any:
         )
     if isinstance(t, ArrayType):
         words = np.frombuffer(raw, np.int64, descriptor_words(t.ndim), offset)
-        return _array_from_words(t, words.tolist())
+        return array_from_words(t, words.tolist())
     if isinstance(t, HandleType):
         return np.frombuffer(raw, np.uint64, 1, offset)[0]
     dt = storage_dtype(t)

@@ -1,6 +1,7 @@
 """Public names of the runtime (arrays, devices, streams, launch, Tape)."""
 
 from kdsl.frontend.builtins import register_host_alias
+from kdsl.frontend.builtins_arrays import ARRAY_FROM_PTR
 from kdsl.frontend.builtins_local import LOCAL_ZEROS
 from kdsl.runtime import context
 from kdsl.runtime.alloc import (
@@ -162,3 +163,5 @@ __all__ = [
 
 # In kernels, ``zeros(shape, dtype)`` makes a thread-local array (Warp's fixedarray).
 register_host_alias(zeros, LOCAL_ZEROS)
+# ``array(ptr=..., shape=..., dtype=...)`` wraps memory at an address (Warp's builtin).
+register_host_alias(array, ARRAY_FROM_PTR)

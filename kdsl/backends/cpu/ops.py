@@ -7,7 +7,17 @@ an op missing from the table is reported as a capability error naming the op.
 
 from __future__ import annotations
 
-from kdsl.backends.cpu import arith, checks, control, local, mathops, memory, printing, vector
+from kdsl.backends.cpu import (
+    arith,
+    checks,
+    control,
+    local,
+    mathops,
+    memory,
+    pointer,
+    printing,
+    vector,
+)
 from kdsl.backends.cpu.emitter import Lowering
 from kdsl.ir.lowering import LOWERINGS
 
@@ -21,6 +31,7 @@ __all__ = [
     "local",
     "mathops",
     "memory",
+    "pointer",
     "printing",
     "vector",
 ]
