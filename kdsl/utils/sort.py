@@ -145,6 +145,9 @@ def _argsort(xp: Any, keys: Any, on_gpu: bool) -> Any:
     """The stable sorting permutation of ``keys`` (unsigned integers)."""
     if on_gpu:
         return xp.argsort(keys)  # CuPy: CUB's radix sort, stable
+    packed = _argsort_packed(keys)
+    if packed is not None:
+        return packed
     ranges = chunks(len(keys))
     runs = run_parallel(lambda a, b: a + np.argsort(keys[a:b], kind="stable"), ranges)
     while len(runs) > 1:  # merge neighbours, pairs of runs at a time on the pool
@@ -152,6 +155,25 @@ def _argsort(xp: Any, keys: Any, on_gpu: bool) -> Any:
         merged = run_parallel(lambda i, j, runs=runs: _merge(keys, runs[i], runs[j]), pairs)
         runs = merged + ([runs[-1]] if len(runs) % 2 else [])
     return runs[0]
+
+
+def _argsort_packed(keys: np.ndarray) -> np.ndarray | None:
+    """The stable sorting permutation of ``keys`` by one plain sort of each key with its
+    position in the bits below it (all distinct, so any sort is stable), or None when key
+    and position do not fit in 64 bits. NumPy's sort of 64-bit integers is several times
+    faster than its stable sort (a merge sort beyond 16-bit keys): Morton codes, cell
+    indices and other small keys take this path."""
+    n = len(keys)
+    if n == 0:
+        return np.zeros(0, np.intp)
+    index_bits = max(1, (n - 1).bit_length())
+    if int(keys.max()).bit_length() + index_bits > 64:
+        return None
+    packed = keys.astype(np.uint64) << np.uint64(index_bits)
+    packed |= np.arange(n, dtype=np.uint64)
+    packed.sort()
+    packed &= np.uint64((1 << index_bits) - 1)
+    return packed.astype(np.intp)
 
 
 def _merge(keys: np.ndarray, left: np.ndarray, right: np.ndarray) -> np.ndarray:
