@@ -99,17 +99,11 @@ class GradOf:
 
 
 def _inlined(module: Module, func: Operation) -> Operation:
-    """A call-free copy of ``func`` (in a scratch module holding what it reaches)."""
+    """A call-free copy of ``func`` (in a scratch module holding copies of the functions)."""
     scratch = Module("grad")
-    todo, seen = [func], set()
-    while todo:
-        f = todo.pop()
-        name = f.attrs["sym_name"]
-        if name in seen:
-            continue
-        seen.add(name)
-        scratch.add_func(clone_op(f, {}))
-        todo += [module.get_func(op.attrs["callee"]) for op in f.walk() if op.name == "func.call"]
+    for f in module.funcs:
+        if f.attrs.get("kind") == "func":  # the primal and whatever it may call
+            scratch.add_func(clone_op(f, {}))
     InlinePass(drop_unused=False).apply(scratch)
     return scratch.get_func(func.attrs["sym_name"])
 

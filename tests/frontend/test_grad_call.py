@@ -33,15 +33,9 @@ def _potential(d: wp.vec3, k: float, n: int):
 
 
 @wp.kernel
-def _grads(
-    x: wp.array(dtype=float),
-    v: wp.array(dtype=wp.vec3),
-    out: wp.array(dtype=float),
-    gv: wp.array(dtype=wp.vec3),
-    gk: wp.array(dtype=float),
-    gn: wp.array(dtype=int),
-    gatan: wp.array(dtype=wp.vec2),
-):
+def _grads(x: wp.array(dtype=float), v: wp.array(dtype=wp.vec3), out: wp.array(dtype=float),
+           gv: wp.array(dtype=wp.vec3), gk: wp.array(dtype=float), gn: wp.array(dtype=int),
+           gatan: wp.array(dtype=wp.vec2)):  # fmt: skip
     i = wp.tid()
     out[i] = wp.grad(_cube)(x[i])
     dv, dk, dn = wp.grad(_potential)(v[i], 2.0, i)

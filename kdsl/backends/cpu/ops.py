@@ -7,17 +7,8 @@ an op missing from the table is reported as a capability error naming the op.
 
 from __future__ import annotations
 
-from kdsl.backends.cpu import (
-    arith,
-    checks,
-    control,
-    local,
-    mathops,
-    memory,
-    pointer,
-    printing,
-    vector,
-)
+from kdsl.backends.cpu import arith, checks, control, local, mathops, memory, printing, vector
+from kdsl.backends.cpu import pointer as array_from_ptr  # kd.array_from_ptr's lowering
 from kdsl.backends.cpu.emitter import Lowering
 from kdsl.ir.lowering import LOWERINGS
 
@@ -30,8 +21,8 @@ __all__ = [
     "control",
     "local",
     "mathops",
+    "array_from_ptr",
     "memory",
-    "pointer",
     "printing",
     "vector",
 ]
