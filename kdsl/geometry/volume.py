@@ -399,7 +399,7 @@ class Volume:
         _refuse_rebuild(rebuild)
         mat, shift = index_to_world(voxel_size, transform), vector3(translation, "translation")
         coords = points_to_coords(tile_points, mat, shift, "tile_points")
-        return cls._from_tiles(coords, mat, shift, bg_value, device or tile_points.device)
+        return cls._from_tiles(coords, mat, shift, bg_value, device)
 
     @classmethod
     def allocate_by_voxels(cls, voxel_points: array, voxel_size: Any = None,
@@ -412,7 +412,7 @@ class Volume:
         coords = points_to_coords(voxel_points, mat, shift, "voxel_points")
         data = _build(leaves_from_voxels(coords, None, None), GridType.ONINDEX, None, mat,
                           shift)  # fmt: skip
-        return cls._built(data, device or voxel_points.device)
+        return cls._built(data, device)
 
     @classmethod
     def from_index_grid(cls, index_volume: Volume, features: dict[str, Any],
