@@ -256,7 +256,29 @@ def _warp_kernels(warp):
             p = ijk[i]
             out[i] = warp.int32(warp.volume_lookup_index(vol, p[0], p[1], p[2]))
 
-        _WARP_KERNELS.update(lookup=lookup, sample=sample, lookup_index=lookup_index)
+        @warp.kernel
+        def lookup_v(
+            vol: warp.uint64, ijk: warp.array(dtype=warp.vec3i), out: warp.array(dtype=warp.vec3)
+        ):
+            i = warp.tid()
+            p = ijk[i]
+            out[i] = warp.volume_lookup_v(vol, p[0], p[1], p[2])
+
+        @warp.kernel
+        def lookup_i(
+            vol: warp.uint64, ijk: warp.array(dtype=warp.vec3i), out: warp.array(dtype=warp.int32)
+        ):
+            i = warp.tid()
+            p = ijk[i]
+            out[i] = warp.volume_lookup_i(vol, p[0], p[1], p[2])
+
+        _WARP_KERNELS.update(
+            lookup=lookup,
+            sample=sample,
+            lookup_index=lookup_index,
+            lookup_v=lookup_v,
+            lookup_i=lookup_i,
+        )
     return _WARP_KERNELS
 
 
@@ -666,3 +688,48 @@ def test_more_argument_errors(tmp_path):
         wp.Volume.allocate_by_tiles(pts)
     with pytest.raises(VolumeError, match="on cpu"):
         dense.get_voxels(np.zeros((8, 3), np.int32))
+
+
+@wp.kernel
+def _store_f(vol: wp.uint64, ijk: wp.array(dtype=wp.vec3i), values: wp.array(dtype=float)):
+    i = wp.tid()
+    p = ijk[i]
+    wp.volume_store_f(vol, p[0], p[1], p[2], values[i])
+
+
+def test_saved_files_hold_what_kernels_stored():
+    """save_to_nvdb writes the grid as kernels left it, with a checksum of that."""
+    v = wp.Volume.allocate((0, 0, 0), (15, 7, 7), 0.5, bg_value=0.0)
+    ijk = np.array([[0, 0, 0], [15, 7, 7], [9, 2, 3]], np.int32)
+    wp.launch(
+        _store_f,
+        dim=3,
+        inputs=[v.id, wp.array(ijk, dtype=wp.vec3i), wp.array([1.5, -2.0, 7.0], dtype=float)],
+    )
+    back = wp.Volume.load_from_nvdb(_saved(v, "zip"))
+    values = _voxel_values(back)
+    assert (values[(0, 0, 0)], values[(15, 7, 7)], values[(9, 2, 3)], values[(1, 1, 1)]) == (
+        1.5,
+        -2.0,
+        7.0,
+        0.0,
+    )
+
+
+def test_vec3_and_int_files_look_up_the_same_in_warp(warp):
+    ijk = np.stack(np.meshgrid(*(np.arange(-1, 11),) * 3, indexing="ij"), -1).reshape(-1, 3)
+    ijk = ijk.astype(np.int32)
+    vec = _field((9, 10, 3), seed=6, vec=True)
+    ints = np.random.default_rng(7).integers(-100, 100, (9, 10, 3)).astype(np.int32)
+    for a, bg, kernel, out in [
+        (vec, (1.0, 2.0, 3.0), "lookup_v", warp.vec3),
+        (ints, -5, "lookup_i", warp.int32),
+    ]:
+        ours = warp.Volume.load_from_nvdb(
+            _saved(wp.Volume.load_from_numpy(a, bg_value=bg)), device="cpu"
+        )
+        theirs = warp.Volume.load_from_numpy(a, bg_value=bg, device="cpu")
+        assert np.array_equal(
+            _warp_run(warp, kernel, ours, ijk, warp.vec3i, out),
+            _warp_run(warp, kernel, theirs, ijk, warp.vec3i, out),
+        )
