@@ -16,8 +16,9 @@ from kdsl.geometry.sparse_marching_cubes import (
     sparse_marching_cubes,
     sparse_marching_cubes_from_cells,
 )
+from kdsl.geometry.surface_nets import IsoSurfaceNets
 from kdsl.geometry.volume import Volume
 
-# IsoSurfaceBase, IsoSurfaceMarchingCubes and the sparse marching cubes functions live
+# IsoSurfaceBase, IsoSurfaceMarchingCubes, IsoSurfaceNets and sparse marching cubes live
 # in kdsl.geometry only, as in Warp.
 __all__ = ["Bvh", "HashGrid", "MarchingCubes", "Mesh", "Volume"]

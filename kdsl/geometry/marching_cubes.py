@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from kdsl.errors import KdslTypeError, KdslValueError
-from kdsl.frontend.api import clamp, func, kernel, lerp, tid
+from kdsl.frontend.api import clamp, func, isfinite, isnan, kernel, lerp, tid
 from kdsl.frontend.api import min as kmin
 from kdsl.geometry.marching_cubes_tables import (
     CASE_TO_TRI_RANGE,
@@ -110,11 +110,24 @@ def _node_position(lower: vec3, delta: vec3, i: int32, j: int32, k: int32) -> ve
 
 
 @func
-def _edge_vertex(a: float32, b: float32, threshold: float32, p: vec3, q: vec3) -> vec3:
-    # Warp's interpolation. An undefined t (an infinite or NaN end) clamps to 0: min and
-    # max return the non-NaN operand, so the vertex sits on p, as on Warp's devices.
+def edge_fraction(a: float32, b: float32, threshold: float32) -> float32:
+    """Where ``threshold`` crosses the edge from value ``a`` to value ``b``, from 0 at
+    ``a`` to 1 at ``b``: Warp's ``clamp((threshold - a) / (b - a), 0, 1)``. Where that
+    is NaN (an infinite or NaN end) the vertex goes to the finite end if one end is
+    finite, else to the middle (Warp's answer there differs between its devices)."""
     t = clamp((threshold - a) / (b - a), 0.0, 1.0)
-    return lerp(p, q, t)
+    if isnan(t):
+        t = 0.5
+        if isfinite(a) and not isfinite(b):
+            t = 0.0
+        elif isfinite(b) and not isfinite(a):
+            t = 1.0
+    return t
+
+
+@func
+def _edge_vertex(a: float32, b: float32, threshold: float32, p: vec3, q: vec3) -> vec3:
+    return lerp(p, q, edge_fraction(a, b, threshold))
 
 
 @func

@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 from kdsl.frontend.api import abs as kabs
-from kdsl.frontend.api import atomic_max, atomic_min, clamp, cw_mul, kernel, lerp, tid
+from kdsl.frontend.api import atomic_max, atomic_min, cw_mul, kernel, lerp, tid
 from kdsl.frontend.kernel import Function
 from kdsl.geometry.iso_surface import Bounds, as_bound, check_node_counts, resolve_domain_bounds
 from kdsl.geometry.marching_cubes import (
@@ -35,6 +35,7 @@ from kdsl.geometry.marching_cubes import (
     MarchingCubesTypeError,
     case_tables,
     check_threshold,
+    edge_fraction,
 )
 from kdsl.geometry.marching_cubes_tables import (
     CUBE_CORNER_OFFSETS,
@@ -204,7 +205,7 @@ def _emit_vertices(
         lo = slot // 3
         hi = upper[slot]
         a = values[lo]
-        t = clamp((threshold - a) / (values[hi] - a), 0.0, 1.0)
+        t = edge_fraction(a, values[hi], threshold)
         verts[index[slot] - 1] = lerp(positions[lo], positions[hi], t)
 
 

@@ -257,13 +257,23 @@ def test_strided_field():
     np.testing.assert_array_equal(v.numpy(), ev)
 
 
-def test_non_finite_values_give_a_finite_closed_mesh():
+def test_non_finite_values_put_vertices_on_the_finite_end():
     f = sphere(16)
-    f[7:9, 7:9, 7:9] = np.nan  # deep inside: NaNs count as outside, a closed cavity
-    f[0, 0, :] = np.inf
-    f[5, 7, 7] = -np.inf  # t = inf / inf: the vertex sits on the edge's first node
-    verts, tris = extract(f)
+    base_verts, base_tris = extract(f)
+    g = f.copy()
+    # Next to the surface: replacing a value by a non-finite one of the same side (a NaN
+    # is outside, as a negative value is) keeps the topology; the vertices on the
+    # changed nodes' crossing edges move to the edge's finite end.
+    below = np.argwhere((f < 0) & (f > -0.6))
+    above = np.argwhere((f >= 0) & (f < 0.6))
+    g[tuple(below[0])], g[tuple(below[len(below) // 2])] = -np.inf, np.nan
+    g[tuple(above[len(above) // 3])] = np.inf
+    verts, tris = extract(g)
+    np.testing.assert_array_equal(tris, base_tris)
     assert np.isfinite(verts).all()
+    moved = np.any(verts != base_verts, axis=1)
+    assert 3 <= moved.sum() <= 18
+    np.testing.assert_array_equal(verts[moved], np.round(verts[moved]))  # on grid nodes
     check_watertight(verts, tris)
     wp.Mesh(points=wp.array(verts, dtype=wp.vec3), indices=wp.array(tris.ravel(), dtype=wp.int32))
 
