@@ -17,6 +17,8 @@ and its vertices Warp's within 1e-5; otherwise the run exits 1 with the reason.
 
 from __future__ import annotations
 
+import importlib
+import importlib.util
 import sys
 
 import numpy as np
@@ -37,11 +39,11 @@ def _fields(n: int) -> dict[str, np.ndarray]:
 
 
 def _warp():
-    try:
-        import warp
-        import warp.geometry
-    except ImportError:
+    """warp-lang with its ``warp.geometry`` submodule loaded, or None without it."""
+    if importlib.util.find_spec("warp") is None:
         return None
+    importlib.import_module("warp.geometry")  # Warp does not import it itself
+    warp = sys.modules["warp"]
     warp.config.quiet = True
     return warp
 

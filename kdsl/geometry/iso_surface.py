@@ -10,7 +10,6 @@ The extraction itself is ``kdsl.geometry.marching_cubes``.
 
 from __future__ import annotations
 
-import operator
 import warnings
 from abc import ABC, abstractmethod
 from typing import Any
@@ -33,21 +32,20 @@ from kdsl.runtime.device import get_device
 Bounds = Any
 
 
-def _node_count(name: str, value: Any) -> int:
-    if isinstance(value, bool):
+def _int_at_least(name: str, value: Any, least: int, what: str) -> int:
+    """``value`` as an int (NumPy ints too, bools not) of at least ``least``."""
+    n = None if isinstance(value, bool) else getattr(value, "__index__", None)
+    if n is None:
         raise MarchingCubesTypeError(f"{name} must be an int, not {value!r}")
-    try:
-        n = operator.index(value)
-    except TypeError:
-        raise MarchingCubesTypeError(f"{name} must be an int, not {value!r}") from None
-    if n < 2:
-        raise MarchingCubesError(f"{name} must be at least 2 nodes (one cell), not {n}")
-    return n
+    if n() < least:
+        raise MarchingCubesError(f"{name} must be {what}, not {value!r}")
+    return n()
 
 
 def check_node_counts(nx: Any, ny: Any, nz: Any) -> tuple[int, int, int]:
     """``(nx, ny, nz)`` as ints of at least 2 whose grid fits int32 edge indices."""
-    dims = (_node_count("nx", nx), _node_count("ny", ny), _node_count("nz", nz))
+    dims = tuple(_int_at_least(name, v, 2, "at least 2 nodes (one cell)")
+                 for name, v in (("nx", nx), ("ny", ny), ("nz", nz)))  # fmt: skip
     check_dims(*dims)
     return dims
 
@@ -125,6 +123,23 @@ def _deprecated(old: str, new: str) -> None:
 _UNSET = object()
 
 
+def _bound_alias(old: str, new: str, warn: bool) -> property:
+    """A property ``old`` that reads and writes attribute ``new`` (warning that ``old``
+    is deprecated when ``warn``)."""
+
+    def get(self: Any) -> Bounds:
+        if warn:
+            _deprecated(old, new)
+        return getattr(self, new)
+
+    def put(self: Any, value: Bounds) -> None:
+        if warn:
+            _deprecated(old, new)
+        setattr(self, new, value)
+
+    return property(get, put, doc=f"``{new}``" + (" (deprecated)" if warn else ""))
+
+
 class IsoSurfaceMarchingCubes(IsoSurfaceBase):
     """Marching cubes, as ``warp.geometry.IsoSurfaceMarchingCubes``: one vertex per grid
     edge the surface crosses, shared by the triangles around it (a closed surface is
@@ -150,27 +165,8 @@ class IsoSurfaceMarchingCubes(IsoSurfaceBase):
         super().__init__(nx, ny, nz, lower=lower, upper=upper)
         self._scratch: Scratch | None = None
 
-    @property
-    def domain_bounds_lower_corner(self) -> Bounds:
-        """Deprecated: ``lower``."""
-        _deprecated("domain_bounds_lower_corner", "lower")
-        return self.lower
-
-    @domain_bounds_lower_corner.setter
-    def domain_bounds_lower_corner(self, value: Bounds) -> None:
-        _deprecated("domain_bounds_lower_corner", "lower")
-        self.lower = value
-
-    @property
-    def domain_bounds_upper_corner(self) -> Bounds:
-        """Deprecated: ``upper``."""
-        _deprecated("domain_bounds_upper_corner", "upper")
-        return self.upper
-
-    @domain_bounds_upper_corner.setter
-    def domain_bounds_upper_corner(self, value: Bounds) -> None:
-        _deprecated("domain_bounds_upper_corner", "upper")
-        self.upper = value
+    domain_bounds_lower_corner = _bound_alias("domain_bounds_lower_corner", "lower", warn=True)
+    domain_bounds_upper_corner = _bound_alias("domain_bounds_upper_corner", "upper", warn=True)
 
     def surface(self, field: array, threshold: float) -> None:
         """Extract the ``threshold`` iso-surface of ``field`` (shape ``(nx, ny, nz)``)
@@ -214,18 +210,6 @@ def _merge_bound(name: str, value: Bounds, old: str, old_value: Bounds) -> Bound
     return value if old_value is None else old_value
 
 
-def _max_count(name: str, value: Any) -> int:
-    try:
-        n = operator.index(value)
-    except TypeError:
-        raise MarchingCubesTypeError(
-            f"MarchingCubes {name} must be an int, not {value!r}"
-        ) from None
-    if n < 0 or isinstance(value, bool):
-        raise MarchingCubesError(f"MarchingCubes {name} must be a count >= 0, not {value!r}")
-    return n
-
-
 class MarchingCubes(IsoSurfaceMarchingCubes):
     """Marching cubes with Warp's ``wp.MarchingCubes`` constructor: ``(nx, ny, nz,
     max_verts=0, max_tris=0, device=None, domain_bounds_lower_corner=None,
@@ -252,8 +236,8 @@ class MarchingCubes(IsoSurfaceMarchingCubes):
             nx, ny, nz, lower if lower is not None else domain_bounds_lower_corner,
             upper if upper is not None else domain_bounds_upper_corner,
         )  # fmt: skip
-        self.max_verts = _max_count("max_verts", max_verts)
-        self.max_tris = _max_count("max_tris", max_tris)
+        self.max_verts = _int_at_least("max_verts", max_verts, 0, "a count >= 0")
+        self.max_tris = _int_at_least("max_tris", max_tris, 0, "a count >= 0")
         #: The device given (the default device for None), as Warp's attribute.
         self.device = get_device(device)
         self._device_given = device is not None
@@ -261,21 +245,15 @@ class MarchingCubes(IsoSurfaceMarchingCubes):
         self.id = 0
 
     # The older API's own attributes: plain aliases of lower/upper, no warning.
-    domain_bounds_lower_corner = property(
-        lambda self: self.lower, lambda self, v: setattr(self, "lower", v),
-        doc="Where node (0, 0, 0) maps (``lower``).",
-    )  # fmt: skip
-    domain_bounds_upper_corner = property(
-        lambda self: self.upper, lambda self, v: setattr(self, "upper", v),
-        doc="Where the last node maps (``upper``).",
-    )  # fmt: skip
+    domain_bounds_lower_corner = _bound_alias("domain_bounds_lower_corner", "lower", warn=False)
+    domain_bounds_upper_corner = _bound_alias("domain_bounds_upper_corner", "upper", warn=False)
 
     def resize(self, nx: int, ny: int, nz: int, max_verts: int = 0, max_tris: int = 0) -> None:
         """Take fields of ``nx * ny * nz`` nodes from the next ``surface`` on
         (``max_verts``/``max_tris`` are recorded and bound nothing, as in Warp)."""
         super().resize(nx, ny, nz)
-        self.max_verts = _max_count("max_verts", max_verts)
-        self.max_tris = _max_count("max_tris", max_tris)
+        self.max_verts = _int_at_least("max_verts", max_verts, 0, "a count >= 0")
+        self.max_tris = _int_at_least("max_tris", max_tris, 0, "a count >= 0")
 
     def surface(self, field: array, threshold: float) -> None:
         """Extract the ``threshold`` iso-surface of ``field`` (shape ``(nx, ny, nz)``,

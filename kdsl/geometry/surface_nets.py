@@ -214,23 +214,33 @@ def _vertex(flags: array(dtype=int32), groups_table: array(dtype=int32),
 
 
 @func
-def _write_face(indices: array(dtype=int32), quads: bool, q: int32, v0: int32, v1: int32,
-                v2: int32, v3: int32, reverse: bool):  # fmt: skip
-    a, b, c, d = v0, v1, v2, v3
+def _write_quad(
+    indices: array(dtype=int32), quads: bool, q: int32, flags: array(dtype=int32),
+    groups_table: array(dtype=int32), offsets: array(dtype=int64), cell: int32, da: int32,
+    db: int32, columns: int32, reverse: bool,
+):  # fmt: skip
+    """Write quad ``q`` around a crossing edge: the vertices of ``cell``, ``cell - da``,
+    ``cell - da - db`` and ``cell - db`` on the edge (their table columns: 4 bits each
+    of ``columns``, first cell lowest), as 4 indices or two triangles split along the
+    first diagonal, reversed when ``reverse``."""
+    v0 = _vertex(flags, groups_table, offsets, cell, columns & 15)
+    v1 = _vertex(flags, groups_table, offsets, cell - da, (columns >> 4) & 15)
+    v2 = _vertex(flags, groups_table, offsets, cell - da - db, (columns >> 8) & 15)
+    v3 = _vertex(flags, groups_table, offsets, cell - db, columns >> 12)
     if reverse:
-        a, b, c, d = v3, v2, v1, v0
+        v0, v1, v2, v3 = v3, v2, v1, v0
     if quads:
-        indices[4 * q] = a
-        indices[4 * q + 1] = b
-        indices[4 * q + 2] = c
-        indices[4 * q + 3] = d
-    else:  # split along the first diagonal
-        indices[6 * q] = a
-        indices[6 * q + 1] = b
-        indices[6 * q + 2] = c
-        indices[6 * q + 3] = a
-        indices[6 * q + 4] = c
-        indices[6 * q + 5] = d
+        indices[4 * q] = v0
+        indices[4 * q + 1] = v1
+        indices[4 * q + 2] = v2
+        indices[4 * q + 3] = v3
+    else:
+        indices[6 * q] = v0
+        indices[6 * q + 1] = v1
+        indices[6 * q + 2] = v2
+        indices[6 * q + 3] = v0
+        indices[6 * q + 4] = v2
+        indices[6 * q + 5] = v3
 
 
 @kernel
@@ -249,27 +259,19 @@ def _cell_faces(
         # The scan's low half ends after this cell's quads.
         q = int32(offsets[cell] & int64(_LOW32)) - where(x, 1, 0) - where(y, 1, 0) - where(z, 1, 0)
         dx, dy, dz = ny * nz, nz, 1
-        # Winding: counter-clockwise seen from outside a field that is negative inside.
+        # OpenVDB's quads, wound counter-clockwise seen from outside a field that is
+        # negative inside; each cell's table column is a hex digit, the first cell's lowest.
         if x:
-            _write_face(indices, quads, q,
-                        _vertex(flags, groups_table, offsets, cell, 1),
-                        _vertex(flags, groups_table, offsets, cell - dy, 5),
-                        _vertex(flags, groups_table, offsets, cell - dy - dz, 7),
-                        _vertex(flags, groups_table, offsets, cell - dz, 3), not inside)  # fmt: skip
+            _write_quad(indices, quads, q, flags, groups_table, offsets, cell, dy, dz, 0x3751,
+                        not inside)  # fmt: skip
             q += 1
         if y:
-            _write_face(indices, quads, q,
-                        _vertex(flags, groups_table, offsets, cell, 9),
-                        _vertex(flags, groups_table, offsets, cell - dz, 12),
-                        _vertex(flags, groups_table, offsets, cell - dx - dz, 11),
-                        _vertex(flags, groups_table, offsets, cell - dx, 10), not inside)  # fmt: skip
+            _write_quad(indices, quads, q, flags, groups_table, offsets, cell, dz, dx, 0xABC9,
+                        not inside)  # fmt: skip
             q += 1
         if z:
-            _write_face(indices, quads, q,
-                        _vertex(flags, groups_table, offsets, cell, 4),
-                        _vertex(flags, groups_table, offsets, cell - dy, 8),
-                        _vertex(flags, groups_table, offsets, cell - dx - dy, 6),
-                        _vertex(flags, groups_table, offsets, cell - dx, 2), inside)  # fmt: skip
+            _write_quad(indices, quads, q, flags, groups_table, offsets, cell, dy, dx, 0x2684,
+                        inside)  # fmt: skip
 
 
 def _packed_edges() -> np.ndarray:

@@ -11,18 +11,17 @@ that corner's value is below the threshold (inside). Edge ``e`` (a table column 
 
 from __future__ import annotations
 
+from kdsl.geometry import marching_cubes_tables
+
 #: The ``(x, y, z)`` offset of each of a cell's 8 corners from its lowest node.
 CORNER_OFFSETS: tuple[tuple[int, int, int], ...] = (
     (0, 0, 0), (1, 0, 0), (1, 0, 1), (0, 0, 1),
     (0, 1, 0), (1, 1, 0), (1, 1, 1), (0, 1, 1),
 )  # fmt: skip
 
-#: The two corners each of a cell's 12 edges joins, in the edge-group table's column order.
-EDGE_TO_CORNERS: tuple[tuple[int, int], ...] = (
-    (0, 1), (1, 2), (3, 2), (0, 3),
-    (4, 5), (5, 6), (7, 6), (4, 7),
-    (0, 4), (1, 5), (2, 6), (3, 7),
-)  # fmt: skip
+#: The two corners each of a cell's 12 edges joins, in the edge-group table's column
+#: order: marching cubes' pairs, read in this numbering.
+EDGE_TO_CORNERS: tuple[tuple[int, int], ...] = marching_cubes_tables.EDGE_TO_CORNERS
 
 # fmt: off
 #: Per sign configuration: 0, or the face (1-6) whose neighbour decides an ambiguous
