@@ -68,6 +68,24 @@ class Job:
     notes: dict[str, Any] = field(default_factory=dict)
 
 
+@dataclass
+class SupportCode:
+    """Native code a backend needs besides its kernels (a runtime), cached like a kernel.
+
+    The compile driver (``kdsl.compiler.load_support``) keys it on ``text`` (its source),
+    the backend's name and code version and ``target``, calls ``build()`` on a cache miss
+    and ``load(payload)`` once per process. ``optional``: a failure to build or load is
+    a warning, and the backend works without it.
+    """
+
+    name: str
+    text: str
+    target: str
+    build: Callable[[], bytes]
+    load: Callable[[bytes], Any]
+    optional: bool = True
+
+
 class Backend(ABC):
     """A code generator plus launcher for some devices. Subclass it in a plugin.
 
@@ -171,6 +189,10 @@ class Backend(ABC):
         them. None (the default) means the backend packs every launch afresh.
         """
         return None
+
+    def support(self) -> list[SupportCode]:
+        """Native support code to load before the first launch (none by default)."""
+        return []
 
     def __repr__(self) -> str:
         return f"<kdsl backend {self.name!r} v{self.version}>"

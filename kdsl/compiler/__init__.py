@@ -5,7 +5,7 @@ below the runtime, which asks it for compiled kernels.
 
 from kdsl.compiler import python_scope
 from kdsl.compiler.adjoint import adjoint_module
-from kdsl.compiler.driver import compile_kernel, lower, prepare_module
+from kdsl.compiler.driver import compile_kernel, load_support, lower, prepare_module
 from kdsl.compiler.pipelines import check_pipeline
 from kdsl.compiler.records import CompileRecord, record_compiles
 from kdsl.types import register_python_scope
@@ -19,6 +19,7 @@ __all__ = [
     "adjoint_module",
     "check_pipeline",
     "compile_kernel",
+    "load_support",
     "lower",
     "prepare_module",
     "record_compiles",

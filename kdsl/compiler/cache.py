@@ -387,19 +387,26 @@ class Stats:
 
 
 STATS = Stats()
+#: The same counters for backends' support code (``kdsl.compiler.load_support``).
+SUPPORT_STATS = Stats()
 
 
-def get_or_build(key: str, build: Callable[[], bytes], load: Callable[[bytes], T]) -> T:
+def get_or_build(
+    key: str, build: Callable[[], bytes], load: Callable[[bytes], T], stats: Stats | None = None
+) -> T:
     """The loaded value of ``key``: from memory, else from disk, else built and stored.
 
     ``build()`` makes the payload (object code); ``load(payload)`` turns it into the
     value kept in memory (e.g. a function address). A disk payload that ``load``
-    rejects by raising is discarded and rebuilt.
+    rejects by raising is discarded and rebuilt. Lookups count in ``stats`` (default
+    ``STATS``, the kernels' counters).
     """
+    if stats is None:
+        stats = STATS
     value = MEMORY.get(key)
     aot = _aot.get()
     if value is not None and (aot is None or not aot.build):
-        STATS.memory_hits += 1
+        stats.memory_hits += 1
         return value
     if value is not None:  # compile_aot_module: loaded here, but the directory needs it
         disk = DiskCache(aot.directory)  # type: ignore[union-attr]
@@ -409,16 +416,16 @@ def get_or_build(key: str, build: Callable[[], bytes], load: Callable[[bytes], T
     with MEMORY.lock(key):
         value = MEMORY.get(key)
         if value is not None:
-            STATS.memory_hits += 1
+            stats.memory_hits += 1
             return value
         disk = default_cache()
         payload = disk.load(key) if disk is not None else None
         if payload is not None:
             try:
                 value = load(payload)
-                STATS.disk_hits += 1
+                stats.disk_hits += 1
             except Exception:
-                STATS.discarded += 1
+                stats.discarded += 1
                 disk.discard(key)  # type: ignore[union-attr]
                 value = None
         if value is None and aot is not None and not aot.build:
@@ -429,7 +436,7 @@ def get_or_build(key: str, build: Callable[[], bytes], load: Callable[[bytes], T
             )
         if value is None:
             payload = build()
-            STATS.builds += 1
+            stats.builds += 1
             if disk is not None and not disk.store(key, payload):
                 warnings.warn(f"kdsl kernel cache: could not write to {disk.directory}",
                               CacheWarning, stacklevel=2)  # fmt: skip

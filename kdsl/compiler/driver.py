@@ -18,7 +18,9 @@ A backend never runs passes, never touches the cache, and never imports the runt
 
 from __future__ import annotations
 
+import threading
 import time
+import warnings
 from collections.abc import Callable, Mapping
 from typing import Any
 
@@ -122,6 +124,41 @@ def compile_kernel(
         seconds = time.perf_counter() - start
         records.add_record(symbol, backend.name, seconds, module, binaries.built)
     return compiled
+
+
+_SUPPORT_LOADED: set[tuple[str, str]] = set()
+_SUPPORT_LOCK = threading.Lock()
+
+
+def load_support(backend: Backend) -> None:
+    """Load ``backend``'s support code (``Backend.support``) once per process.
+
+    Each piece goes through the kernel cache like a kernel, keyed on its source, the
+    backend's name and code version and its target, so a warm start loads it without
+    building it. An optional piece that fails to build or load is a warning.
+    """
+    ident = (backend.name, backend.code_version())
+    if ident in _SUPPORT_LOADED:
+        return
+    with _SUPPORT_LOCK:
+        if ident in _SUPPORT_LOADED:
+            return
+        _SUPPORT_LOADED.add(ident)
+        for code in backend.support():
+            key = kernel_cache.kernel_key(
+                code.text, backend.name, backend.code_version(), {"support": code.name},
+                backend.cache_target(code.target),
+            )  # fmt: skip
+            try:
+                kernel_cache.get_or_build(key, code.build, code.load, kernel_cache.SUPPORT_STATS)
+            except Exception as e:
+                if not code.optional:
+                    raise
+                warnings.warn(
+                    f"kdsl: the {backend.name} backend's {code.name} could not be loaded "
+                    f"({type(e).__name__}: {e}); continuing without it",
+                    RuntimeWarning, stacklevel=2,
+                )  # fmt: skip
 
 
 def lower(

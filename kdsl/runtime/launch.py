@@ -20,7 +20,7 @@ import numpy as np
 from kdsl import config
 from kdsl.backends.base import Backend, CompiledKernel
 from kdsl.backends.registry import get_backend, is_registered
-from kdsl.compiler import compile_kernel
+from kdsl.compiler import compile_kernel, load_support
 from kdsl.errors import KdslError, KdslLaunchError, hide_internal_frames
 from kdsl.ir import types as T
 from kdsl.ir.core import Loc
@@ -140,6 +140,7 @@ class _Plan:
         # process-wide debug settings (kdsl.config) resolve into them: they key the cache.
         self.options = _modules.kernel_options(kernel)
         self.compiled = _compiled(kernel, backend, config.compile_options(self.options))
+        load_support(backend)  # once per process: e.g. the cpu backend's native pool
         self.converters = [
             _converter(kernel, i, n, t, device)
             for i, (n, t) in enumerate(zip(kernel.arg_names, kernel.arg_types))

@@ -327,7 +327,8 @@ def _start(program: Path, at: float) -> subprocess.Popen:
     # run with PYTHONPATH=., as on the GPU machine).
     paths = [str(program), *filter(None, os.environ.get("PYTHONPATH", "").split(os.pathsep))]
     paths.append(str(Path(wp.__file__).resolve().parents[1]))
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join(paths)}
+    # The Python thread pool: the native pool's runtime would be a second cache entry.
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(paths), "KDSL_CPU_POOL": "python"}
     return subprocess.Popen([sys.executable, str(program / "run.py"), str(at)], cwd=program,
                             env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)  # fmt: skip
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import ctypes
 import functools
+import os
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -11,8 +12,17 @@ from typing import Any
 import llvmlite  # the package only (its version); the binding is imported on a miss
 
 from kdsl.backends import checks_common
-from kdsl.backends.base import Args, Backend, CompiledKernel, Dims, Job, launch_size, source_version
-from kdsl.backends.cpu import host, pool, print_order, shared_object
+from kdsl.backends.base import (
+    Args,
+    Backend,
+    CompiledKernel,
+    Dims,
+    Job,
+    SupportCode,
+    launch_size,
+    source_version,
+)
+from kdsl.backends.cpu import host, native_pool, pool, print_order, shared_object
 from kdsl.backends.cpu.abi import ArgPacker, Packed
 from kdsl.backends.cpu.kernel_facts import kernel_names, kernel_symbol, tid_ndims, uses_print
 from kdsl.ir.core import Module
@@ -42,8 +52,13 @@ def _llvm_name(job: Job, target: str) -> str:
 class CpuKernel:
     """The payload of a compiled cpu kernel: the native range function and its facts."""
 
-    def __init__(self, fn: Any, arg_types: list, tid_ndims: set[int], llvm_name: str) -> None:
+    def __init__(
+        self, fn: Any, arg_types: list, tid_ndims: set[int], llvm_name: str, address: int | None
+    ) -> None:
         self.fn = fn
+        #: The range function's native address, for the native pool (None: the Python
+        #: pool runs it, e.g. a kernel that prints and must flush around its run).
+        self.address = address
         self.arg_types = arg_types
         self.tid_ndims = tid_ndims
         self.llvm_name = llvm_name
@@ -93,7 +108,6 @@ class CpuBackend(Backend):
     def build(self, job: Job, target: str) -> bytes:
         """The kernel for the host (the only target) at -O3 (-O0 with ``optimize=False``):
         a shared object where a linker is found (``shared_object``), else object code."""
-        from kdsl.backends.cpu import jit
         from kdsl.backends.cpu.lower import lower_kernels
 
         opts = job.options
@@ -101,33 +115,39 @@ class CpuBackend(Backend):
             job.module, [job.symbol], {job.symbol: _llvm_name(job, target)}, debug=job.checked,
             fast_math=bool(opts.get("fast_math", False)),
         )  # fmt: skip
-        mod = jit.parse(str(state.llmod))
-        jit.optimize(mod, 3 if opts.get("optimize", True) else 0)
-        if shared_object.linker() is not None:
-            linked = shared_object.link(jit.emit_object(mod, shared=True))
-            if linked is not None:
-                return linked
-        return jit.emit_object(mod)
+        return _binary(str(state.llmod), 3 if opts.get("optimize", True) else 0)
 
     def load_artifact(self, job: Job, target: str, data: bytes) -> int:
-        """The address of the kernel's range function: a shared object is loaded with
-        ``ctypes`` (no llvmlite), object code is added to llvmlite's JIT."""
+        """The address of the kernel's range function (see ``_load_binary``)."""
         name = _llvm_name(job, target)
-        if shared_object.is_shared_object(data):
-            return shared_object.load(data, name)
-        from kdsl.backends.cpu import jit
+        return _load_binary(data, [name])[name]
 
-        return jit.add_object(data, [name])[name]
+    def support(self) -> list[SupportCode]:
+        """The native thread pool's runtime (``native_pool``), where this host has one and
+        ``KDSL_CPU_POOL`` is not ``python``."""
+        text = native_pool.source()
+        if text is None or os.environ.get("KDSL_CPU_POOL", "").strip().lower() == "python":
+            return []
+        names = native_pool.symbols(text)
+
+        def load(data: bytes) -> dict[str, int]:
+            found = _load_binary(data, list(names.values()))
+            addresses = {role: found[symbol] for role, symbol in names.items()}
+            pool.install_native(native_pool.NativePool(addresses))
+            return addresses
+
+        return [SupportCode("native-pool", text, host.target_id(), lambda: _binary(text), load)]
 
     def load(self, job: Job) -> CompiledKernel:
         target = host.target_id()
-        fn = RANGE_FN(job.artifact(target))
+        address = job.artifact(target)
+        fn = RANGE_FN(address)
         module, symbol = job.module, job.symbol
         if uses_print(module):  # keep C's and Python's stdout in order
-            fn = print_order.flushing(fn)
+            fn, address = print_order.flushing(fn), None
         func = module.get_func(symbol)
         payload = CpuKernel(fn, [a.type for a in func.regions[0].block.args], tid_ndims(func),
-                            _llvm_name(job, target))  # fmt: skip
+                            _llvm_name(job, target), address)  # fmt: skip
         if job.checked:
             payload.sites = debug_sites(module)
         meta = {"tid_ndims": sorted(payload.tid_ndims), "cache_key": job.key(target)}
@@ -149,7 +169,8 @@ class CpuBackend(Backend):
             keep = Packed(k.arg_types, args)
             argp = keep.address
         extents = (ctypes.c_int64 * len(dims))(*dims)
-        pool.run_range(k.fn, total, argp, ctypes.addressof(extents), cost=k.cost)
+        pool.run_range(k.fn, total, argp, ctypes.addressof(extents), cost=k.cost,
+                       address=k.address)  # fmt: skip
 
     def prepare(
         self, compiled: CompiledKernel, dims: Dims, args: Args, stream: Any = None
@@ -188,10 +209,10 @@ class CpuBackend(Backend):
             argp = keep.address
         extents = (ctypes.c_int64 * len(dims))(*dims)
         dimp = ctypes.addressof(extents)
-        fn, run_range, cost = k.fn, pool.run_range, k.cost
+        fn, run_range, cost, address = k.fn, pool.run_range, k.cost, k.address
 
         def run() -> None:
-            run_range(fn, total, argp, dimp, cost=cost)
+            run_range(fn, total, argp, dimp, cost=cost, address=address)
 
         run.keep = (keep, extents)  # type: ignore[attr-defined]
         return run
@@ -206,9 +227,34 @@ class CpuBackend(Backend):
         record = checks_common.new_record()
         packed = Packed(k.arg_types, args, (record.ctypes.data,))
         extents = (ctypes.c_int64 * len(dims))(*dims)
-        pool.run_range(k.fn, total, packed.address, ctypes.addressof(extents))
+        pool.run_range(k.fn, total, packed.address, ctypes.addressof(extents),
+                       address=k.address)  # fmt: skip
         name = compiled.metadata.get("name") or compiled.symbol
         checks_common.raise_for_record(record, k.sites, name, compiled.symbol, dims)
+
+
+def _binary(llvm_ir: str, level: int = 3) -> bytes:
+    """LLVM IR text at -O``level`` as a shared object where a linker is found
+    (``shared_object``), else as object code for llvmlite's JIT."""
+    from kdsl.backends.cpu import jit
+
+    mod = jit.parse(llvm_ir)
+    jit.optimize(mod, level)
+    if shared_object.linker() is not None:
+        linked = shared_object.link(jit.emit_object(mod, shared=True))
+        if linked is not None:
+            return linked
+    return jit.emit_object(mod)
+
+
+def _load_binary(data: bytes, symbols: list[str]) -> dict[str, int]:
+    """The addresses of ``symbols`` in ``data``: a shared object is loaded with ``ctypes``
+    (no llvmlite), object code is added to llvmlite's JIT."""
+    if shared_object.is_shared_object(data):
+        return shared_object.load(data, symbols)
+    from kdsl.backends.cpu import jit
+
+    return jit.add_object(data, symbols)
 
 
 def _nothing() -> None:

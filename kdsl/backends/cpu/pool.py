@@ -25,11 +25,16 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+from kdsl.backends.cpu.native_pool import NativePool
+
 RangeFn = Callable[[int, int], None]
 
 _lock = threading.Lock()
 _workers: list[_Worker] = []
 _num_threads: int | None = None
+#: The native pool (``native_pool``), once its runtime is loaded; else launches use the
+#: Python workers.
+_native: NativePool | None = None
 
 #: Kernels whose cost is not measured yet run inline below this many threads; with
 #: ``adaptive = False`` it is the only rule.
@@ -105,6 +110,8 @@ def set_num_threads(n: int | None) -> None:
     global _num_threads, _dispatch_seconds
     if n is not None and n < 1:
         raise ValueError(f"the number of threads must be at least 1, got {n}")
+    if _native is not None:
+        _native.stop()
     with _lock:
         _num_threads = n if n is not None else default_num_threads()
         _dispatch_seconds = None  # measured again for the new thread count
@@ -121,6 +128,19 @@ def _pool(count: int) -> list[_Worker]:
         return _workers
 
 
+def _after_fork_in_child() -> None:
+    """The child of a ``fork`` has none of the parent's worker threads: start afresh."""
+    global _lock
+    _lock = threading.Lock()
+    _workers.clear()
+    if _native is not None:
+        _native.forget_threads()
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_after_fork_in_child)
+
+
 def chunks(total: int, parts: int) -> list[tuple[int, int]]:
     """``[0, total)`` split into ``parts`` contiguous near-equal ranges (none empty)."""
     parts = max(1, min(parts, total))
@@ -133,6 +153,20 @@ def chunks(total: int, parts: int) -> list[tuple[int, int]]:
     return out
 
 
+def install_native(pool: NativePool | None) -> None:
+    """Hand native-code launches to ``pool`` from now on (None: the Python workers)."""
+    global _native, _dispatch_seconds
+    old, _native = _native, pool
+    _dispatch_seconds = None  # measured again for the new pool
+    if old is not None and old is not pool:
+        old.stop()
+
+
+def native() -> NativePool | None:
+    """The native pool launches use, or None (the Python workers)."""
+    return _native
+
+
 def dispatch_seconds() -> float:
     """The measured time to hand a launch to the pool and collect it (median of 7)."""
     global _dispatch_seconds
@@ -141,7 +175,10 @@ def dispatch_seconds() -> float:
         samples = []
         for _ in range(7):
             t0 = time.perf_counter()
-            run(_nothing, n, n, force=True)
+            if _native is not None:
+                _native.run(_native.noop, n, 0, 0, n)
+            else:
+                run(_nothing, n, n, force=True)
             samples.append(time.perf_counter() - t0)
         _dispatch_seconds = sorted(samples)[len(samples) // 2]
     return _dispatch_seconds
@@ -152,12 +189,18 @@ def _nothing(start: int, end: int) -> None:
 
 
 def run_range(
-    fn: Callable[..., None], total: int, *args: Any, cost: RangeCost | None = None
+    fn: Callable[..., None],
+    total: int,
+    *args: Any,
+    cost: RangeCost | None = None,
+    address: int | None = None,
 ) -> None:
     """Run the native range function ``fn(start, end, *args)`` over ``[0, total)``.
 
     The launch path's entry: a launch that stays on the calling thread calls ``fn``
-    directly, timed into ``cost`` (the kernel's measured cost) when given.
+    directly, timed into ``cost`` (the kernel's measured cost) when given. ``address``
+    is ``fn``'s native address (``args`` then being its two pointers): with it a launch
+    split over threads goes to the native pool when there is one.
     """
     n = num_threads()
     if n == 1 or total < 2:
@@ -169,7 +212,8 @@ def run_range(
     else:
         inline = per * total <= dispatch_seconds() * n / (n - 1)
     if not inline:
-        run(lambda s, e: fn(s, e, *args), total, force=True)
+        if address is None or _native is None or not _native.run(address, total, *args, n):
+            run(lambda s, e: fn(s, e, *args), total, force=True)
     elif cost is None:
         fn(0, total, *args)
     else:

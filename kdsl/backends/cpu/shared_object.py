@@ -103,24 +103,25 @@ def link(obj: bytes) -> bytes | None:
     return None
 
 
-def load(data: bytes, symbol: str) -> int:
-    """Load the shared object ``data``; gives the address of ``symbol``.
+def load(data: bytes, symbols: list[str]) -> dict[str, int]:
+    """Load the shared object ``data``; gives the address of each of ``symbols``.
 
-    Raises ``ValueError`` when ``data`` is not a shared object of this host or lacks
-    ``symbol`` (the kernel cache then discards the entry and rebuilds it).
+    Raises ``ValueError`` when ``data`` is not a shared object of this host or lacks a
+    symbol (the kernel cache then discards the entry and rebuilds it).
     """
     if not is_shared_object(data):
         raise ValueError("not a shared object")
     try:
         lib = _dlopen(data)
-        address = ctypes.cast(getattr(lib, symbol), ctypes.c_void_p).value
+        out = {s: ctypes.cast(getattr(lib, s), ctypes.c_void_p).value for s in symbols}
     except (OSError, AttributeError) as e:
-        raise ValueError(f"cannot load the kernel's shared object: {e}") from None
-    if not address:
-        raise ValueError(f"the shared object lacks {symbol}")
+        raise ValueError(f"cannot load the shared object: {e}") from None
+    missing = [s for s, address in out.items() if not address]
+    if missing:
+        raise ValueError(f"the shared object lacks {missing}")
     with _LOCK:
         _LOADED.append(lib)
-    return address
+    return out  # type: ignore[return-value]
 
 
 def _dlopen(data: bytes) -> ctypes.CDLL:
