@@ -1,8 +1,8 @@
 """Geometry queries, kdsl beside Warp: BVH builds and queries, triangle meshes.
 
-    python benchmarks/bench_geometry.py [--section bvh|mesh|marching_cubes] [--boxes 200000]
-        [--tris 200000] [--queries 1000000] [--mc-nodes 256] [--reps 3]
-        [--device cpu|cuda:0] [--json PATH]
+    python benchmarks/bench_geometry.py [--section bvh|mesh|marching_cubes|volume]
+        [--boxes 200000] [--tris 200000] [--queries 1000000] [--mc-nodes 256]
+        [--samples 10000000] [--stores 1000000] [--reps 3] [--device cpu|cuda:0] [--json PATH]
 
 Each section is a function returning rows; ``main`` runs the sections asked for, prints
 one table per section and writes every row to benchmarks/results/geometry.json.
@@ -21,6 +21,9 @@ cube-sphere of about ``--tris`` triangles, ``--queries`` closest points and rays
 
 Marching cubes section (``bench_geometry_mc.py``): two 256^3 fields (a bumpy sphere,
 a gyroid), ``surface(field, 0.0)`` with a reusable context; kdsl beside Warp.
+
+Volume section (``bench_geometry_volume.py``): a 256^3 sphere SDF narrow band,
+``--samples`` trilinear samples (in the box, in the band) and ``--stores`` stores.
 """
 
 from __future__ import annotations
@@ -41,6 +44,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_geometry_mc import marching_cubes_section, print_marching_cubes
 from bench_geometry_mesh import mesh_section, print_mesh
+from bench_geometry_volume import print_volume, volume_section
 
 RESULTS = Path(__file__).resolve().parent / "results" / "geometry.json"
 
@@ -198,6 +202,7 @@ SECTIONS = {
     "bvh": (bvh_section, _print_bvh),
     "mesh": (mesh_section, print_mesh),
     "marching_cubes": (marching_cubes_section, print_marching_cubes),
+    "volume": (volume_section, print_volume),
 }
 
 
@@ -208,6 +213,8 @@ def main() -> None:
     p.add_argument("--tris", type=int, default=200_000, help="the mesh section's triangles")
     p.add_argument("--queries", type=int, default=1_000_000)
     p.add_argument("--mc-nodes", type=int, default=256, help="marching_cubes: nodes per axis")
+    p.add_argument("--samples", type=int, default=10_000_000, help="volume: trilinear samples")
+    p.add_argument("--stores", type=int, default=1_000_000, help="volume: volume_store calls")
     p.add_argument("--constructors", default="lbvh,median,sah")
     p.add_argument("--reps", type=int, default=3)
     p.add_argument("--device", default="cpu")

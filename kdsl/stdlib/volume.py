@@ -439,16 +439,12 @@ def _read(
 
 
 @func
-def _corner(
-    id: wp.uint64, rec: VolumeRecord, base: wp.vec2i, moved: bool, i: int, j: int, k: int,
-    src: Any, extra: Any,
-):  # fmt: skip
-    """A trilinear corner's value: found at ``base`` unless it ``moved`` to another leaf
-    region, where the tree is descended again."""
-    loc = base
+def _region(id: wp.uint64, moved: bool, i: int, j: int, k: int, same: wp.vec2i) -> wp.vec2i:
+    """Where voxel ``(i, j, k)`` is found: a new descent when it ``moved`` to another leaf
+    region than the corner whose ``_locate`` is ``same``, else that."""
     if moved:
-        loc = _locate(id, i, j, k)
-    return _read(rec, loc, i, j, k, src, extra)
+        return _locate(id, i, j, k)
+    return same
 
 
 @func
@@ -477,34 +473,43 @@ def _trilinear(id: wp.uint64, uvw: wp.vec3, src: Any, extra: Any):
     x0 = 1.0 - x1
     y0 = 1.0 - y1
     z0 = 1.0 - z1
-    base = _locate(id, i, j, k)
     # A corner one voxel up an axis leaves the base's 8^3 leaf region when the base is
-    # the region's last voxel on that axis.
+    # the region's last voxel on that axis. Each region is descended once: a corner's
+    # region is the one of the corner that moves only along the axes that cross.
     mx = (i & 7) == 7
     my = (j & 7) == 7
     mz = (k & 7) == 7
-    v = _corner(id, rec, base, False, i, j, k, src, extra)
+    r000 = _locate(id, i, j, k)
+    r001 = _region(id, mz, i, j, k + 1, r000)
+    r010 = _region(id, my, i, j + 1, k, r000)
+    r100 = _region(id, mx, i + 1, j, k, r000)
+    r011 = _region(id, my and mz, i, j + 1, k + 1, wp.where(my, r010, r001))
+    r101 = _region(id, mx and mz, i + 1, j, k + 1, wp.where(mx, r100, r001))
+    r110 = _region(id, mx and my, i + 1, j + 1, k, wp.where(mx, r100, r010))
+    r111 = _region(id, mx and my and mz, i + 1, j + 1, k + 1,
+                   wp.where(mx, wp.where(my, r110, r101), wp.where(my, r011, r001)))  # fmt: skip
+    v = _read(rec, r000, i, j, k, src, extra)
     val = _scaled(x0 * y0 * z0, v)
     grad = _outer(v, wp.vec3(-y0 * z0, -x0 * z0, -x0 * y0))
-    v = _corner(id, rec, base, mz, i, j, k + 1, src, extra)
+    v = _read(rec, r001, i, j, k + 1, src, extra)
     val = val + _scaled(x0 * y0 * z1, v)
     grad = grad + _outer(v, wp.vec3(-y0 * z1, -x0 * z1, x0 * y0))
-    v = _corner(id, rec, base, my, i, j + 1, k, src, extra)
+    v = _read(rec, r010, i, j + 1, k, src, extra)
     val = val + _scaled(x0 * y1 * z0, v)
     grad = grad + _outer(v, wp.vec3(-y1 * z0, x0 * z0, -x0 * y1))
-    v = _corner(id, rec, base, my or mz, i, j + 1, k + 1, src, extra)
+    v = _read(rec, r011, i, j + 1, k + 1, src, extra)
     val = val + _scaled(x0 * y1 * z1, v)
     grad = grad + _outer(v, wp.vec3(-y1 * z1, x0 * z1, x0 * y1))
-    v = _corner(id, rec, base, mx, i + 1, j, k, src, extra)
+    v = _read(rec, r100, i + 1, j, k, src, extra)
     val = val + _scaled(x1 * y0 * z0, v)
     grad = grad + _outer(v, wp.vec3(y0 * z0, -x1 * z0, -x1 * y0))
-    v = _corner(id, rec, base, mx or mz, i + 1, j, k + 1, src, extra)
+    v = _read(rec, r101, i + 1, j, k + 1, src, extra)
     val = val + _scaled(x1 * y0 * z1, v)
     grad = grad + _outer(v, wp.vec3(y0 * z1, -x1 * z1, x1 * y0))
-    v = _corner(id, rec, base, mx or my, i + 1, j + 1, k, src, extra)
+    v = _read(rec, r110, i + 1, j + 1, k, src, extra)
     val = val + _scaled(x1 * y1 * z0, v)
     grad = grad + _outer(v, wp.vec3(y1 * z0, x1 * z0, -x1 * y1))
-    v = _corner(id, rec, base, mx or my or mz, i + 1, j + 1, k + 1, src, extra)
+    v = _read(rec, r111, i + 1, j + 1, k + 1, src, extra)
     val = val + _scaled(x1 * y1 * z1, v)
     grad = grad + _outer(v, wp.vec3(y1 * z1, x1 * z1, x1 * y1))
     return val, grad
