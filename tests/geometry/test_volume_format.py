@@ -323,10 +323,12 @@ def test_warp_bytes_load_in_kdsl(warp, tmp_path):
     a = _field((13, 9, 5), seed=3)
     theirs = warp.Volume.load_from_numpy(a, (0.5, -1.0, 2.0), 0.25, -1.0, device="cpu")
     ours = wp.Volume.load_from_numpy(a, (0.5, -1.0, 2.0), 0.25, -1.0)
-    from_raw = wp.Volume.load_from_nvdb(theirs.array().numpy().tobytes())
-    path = str(tmp_path / "w.nvdb")
-    theirs.save_to_nvdb(path, codec="zip")
-    for v in (from_raw, wp.Volume.load_from_nvdb(path)):
+    loaded = [wp.Volume.load_from_nvdb(theirs.array().numpy().tobytes())]
+    for codec in ["none", "zip"] + (["blosc"] if HAS_BLOSC else []):
+        path = str(tmp_path / f"w_{codec}.nvdb")
+        theirs.save_to_nvdb(path, codec=codec)  # Warp's writer, its file sizes and all
+        loaded.append(wp.Volume.load_from_nvdb(path))
+    for v in loaded:
         assert v.get_tiles().numpy().tolist() == ours.get_tiles().numpy().tolist()
         assert _voxel_values(v) == _voxel_values(ours)
         assert v.get_grid_info()[2:] == ours.get_grid_info()[2:]
