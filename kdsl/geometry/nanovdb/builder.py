@@ -81,6 +81,13 @@ def _check_coords(coords: np.ndarray, what: str) -> np.ndarray:
     return coords
 
 
+def tree_order(origins: np.ndarray) -> np.ndarray:
+    """The permutation putting leaf ``origins`` in breadth-first tree order: by upper
+    node (x, y, z of the 4096^3 region), then lower node, then leaf, each x-major."""
+    o = origins
+    return np.lexsort(tuple((o[:, a] >> s) for s in (3, 7, 12) for a in (2, 1, 0)))
+
+
 def _unique_rows(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Sorted unique rows of multiples of 8 and each row's position among them. Rows are
     packed into one int64 (21 bits per axis of ``row >> 3``) when their span allows:
@@ -141,10 +148,15 @@ def leaves_from_dense(array: np.ndarray, origin: Sequence[int], background) -> L
     tail = array.shape[3:]
     extra = tuple(range(6, 6 + len(tail)))
     tiles = array.reshape(tx, 8, ty, 8, tz, 8, *tail).transpose(0, 2, 4, 1, 3, 5, *extra)
-    values = tiles.reshape(tx * ty * tz, 512, *tail)
     grid = np.stack(np.meshgrid(np.arange(tx), np.arange(ty), np.arange(tz), indexing="ij"), -1)
-    origins = _check_coords(grid.reshape(-1, 3) * 8 + np.asarray(origin, dtype=np.int64),
+    grid = grid.reshape(-1, 3)
+    origins = _check_coords(grid * 8 + np.asarray(origin, dtype=np.int64),
                             "the array's voxel coordinates")  # fmt: skip
+    # Gather the tiles in the tree's order: one copy, and build_grid need not reorder.
+    order = tree_order(origins)
+    ix, iy, iz = grid[order].T
+    values = tiles[ix, iy, iz].reshape(len(order), 512, *tail)
+    origins = origins[order]
     return Leaves(origins, np.ones((len(origins), 512), dtype=bool), values)
 
 
@@ -254,7 +266,7 @@ def build_grid(
     vec = np.asarray(translation, dtype=np.float64).reshape(3)
 
     o = leaves.origins
-    order = np.lexsort(tuple((o[:, a] >> s) for s in (3, 7, 12) for a in (2, 1, 0)))
+    order = tree_order(o)
     active, values = leaves.active, leaves.values
     if (order != np.arange(len(order))).any():  # dense arrays and tiles often come sorted
         o, active = o[order], active[order]
