@@ -34,7 +34,6 @@ from typing import Any
 import kdsl as wp
 from kdsl.frontend.inout import inout
 from kdsl.frontend.kernel import func
-from kdsl.stdlib.hash_grid import hash_grid_cell_coord
 
 __kdsl_group__ = "geometry"
 
@@ -136,14 +135,15 @@ def _locate(id: wp.uint64, i: int, j: int, k: int) -> wp.vec2i:
     ku = wp.uint32(k) >> wp.uint32(12)
     key_lo = ku | (ju << wp.uint32(21))
     key_hi = (ju >> wp.uint32(11)) | (iu << wp.uint32(10))
-    tile = -1
-    t = rec.first_tile
-    for _n in range(rec.tile_count):
-        if words[t] == key_lo and words[t + 1] == key_hi:
-            tile = t
-            break
-        t = t + rec.tile_words
-    if tile < 0:
+    tile = rec.first_tile
+    left = rec.tile_count  # -1 once found
+    while left > 0:
+        if words[tile] == key_lo and words[tile + 1] == key_hi:
+            left = -1
+        else:
+            tile = tile + rec.tile_words
+            left = left - 1
+    if left == 0:
         return wp.vec2i(rec.background, BACKGROUND)
     child_lo = words[tile + 2]
     child_hi = words[tile + 3]
@@ -451,9 +451,10 @@ def _region(id: wp.uint64, moved: bool, i: int, j: int, k: int, same: wp.vec2i) 
 def _closest(id: wp.uint64, uvw: wp.vec3, src: Any, extra: Any):
     """The value of the voxel nearest ``uvw`` (halfway rounds away from zero)."""
     rec = wp.object_record(id, VolumeRecord)
-    i = hash_grid_cell_coord(wp.round(uvw[0]))
-    j = hash_grid_cell_coord(wp.round(uvw[1]))
-    k = hash_grid_cell_coord(wp.round(uvw[2]))
+    # Float-to-int casts saturate (NaN gives 0) on every backend (docs/semantics.md).
+    i = int(wp.round(uvw[0]))
+    j = int(wp.round(uvw[1]))
+    k = int(wp.round(uvw[2]))
     return _read(rec, _locate(id, i, j, k), i, j, k, src, extra)
 
 
@@ -464,9 +465,9 @@ def _trilinear(id: wp.uint64, uvw: wp.vec3, src: Any, extra: Any):
     cells the gradient is the positive side's."""
     rec = wp.object_record(id, VolumeRecord)
     f = wp.floor(uvw)
-    i = hash_grid_cell_coord(f[0])
-    j = hash_grid_cell_coord(f[1])
-    k = hash_grid_cell_coord(f[2])
+    i = int(f[0])
+    j = int(f[1])
+    k = int(f[2])
     x1 = uvw[0] - f[0]
     y1 = uvw[1] - f[1]
     z1 = uvw[2] - f[2]

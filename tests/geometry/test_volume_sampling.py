@@ -465,3 +465,87 @@ def test_samples_equal_warps_on_the_same_bytes(float_grid):
               backend="cpu")  # fmt: skip
     np.testing.assert_allclose(out.numpy(), wout.numpy(), rtol=1e-6, atol=1e-6)
     np.testing.assert_allclose(grad.numpy(), wgrad.numpy(), rtol=1e-5, atol=1e-5)
+
+
+@wp.kernel
+def warp_doc_examples(vid: wp.uint64, out: wp.array(dtype=float)):
+    # The examples of Warp 1.19's volume builtin docstrings, on a kdsl.Volume.
+    p = wp.volume_world_to_index(vid, wp.vec3(0.5, 0.0, 0.0))
+    out[0] = wp.volume_sample(vid, p, wp.Volume.LINEAR, dtype=float)
+    grad = wp.vec3()
+    out[1] = wp.volume_sample_grad(vid, wp.vec3(0.5, 0.0, 0.0), wp.Volume.LINEAR, grad, dtype=float)
+    out[2] = grad[0]
+    out[3] = wp.volume_lookup(vid, 1, 0, 0, dtype=float)
+    wp.volume_store(vid, 1, 2, 3, 4.0)
+    out[4] = wp.volume_lookup(vid, 1, 2, 3, dtype=float)
+
+
+@wp.kernel
+def fill_index(vid: wp.uint64, d: wp.array(dtype=wp.float32)):
+    i, j, k = wp.tid()
+    idx = wp.volume_lookup_index(vid, i, j, k)
+    if idx >= 0:
+        d[idx] = wp.float32(i) * 10.0
+
+
+@wp.kernel
+def index_doc_examples(vid: wp.uint64, d: wp.array(dtype=wp.float32), out: wp.array(dtype=float)):
+    out[0] = wp.volume_sample_index(vid, wp.vec3(0.5, 0.0, 0.0), wp.Volume.LINEAR, d, 0.0)
+    grad = wp.vec3()
+    out[1] = wp.volume_sample_grad_index(vid, wp.vec3(0.5, 0.0, 0.0), wp.Volume.LINEAR, d, 0.0,
+                                         grad)  # fmt: skip
+    out[2] = grad[0]
+    out[3] = float(wp.volume_lookup_index(vid, 1, 0, 0))
+    out[4] = float(wp.volume_voxel_count(vid))
+    w = wp.volume_index_to_world(vid, wp.vec3(2.0, 0.0, 0.0))
+    out[5] = w[0]
+
+
+@pytest.mark.parametrize("backend", ["interp", "cpu"])
+def test_warps_docstring_examples_on_a_kdsl_volume(backend):
+    values = np.zeros((2, 2, 2), dtype=np.float32)
+    values[1, :, :] = 1.0  # f(i, j, k) = i
+    volume = wp.Volume.load_from_numpy(values, voxel_size=1.0, bg_value=0.0)
+    out = wp.zeros(5, dtype=float)
+    wp.launch(warp_doc_examples, 1, inputs=[volume.id, out], backend=backend)
+    np.testing.assert_allclose(out.numpy(), [0.5, 0.5, 1.0, 1.0, 4.0])
+    voxels = wp.array([[0, 0, 0], [1, 0, 0]], dtype=wp.vec3i)
+    index = wp.Volume.allocate_by_voxels(voxels, voxel_size=1.0)
+    data = wp.zeros(index.get_voxel_count(), dtype=wp.float32)
+    wp.launch(fill_index, (2, 1, 1), inputs=[index.id, data], backend=backend)
+    out = wp.zeros(6, dtype=float)
+    wp.launch(index_doc_examples, 1, inputs=[index.id, data, out], backend=backend)
+    np.testing.assert_allclose(out.numpy(), [5.0, 5.0, 10.0, 1.0, 2.0, 2.0])
+
+
+@wp.kernel
+def sample_sum(vid: wp.uint64, p: wp.array(dtype=wp.vec3), loss: wp.array(dtype=float)):
+    t = wp.tid()
+    wp.atomic_add(loss, 0, wp.volume_sample_f(vid, p[t], LINEAR))
+
+
+@pytest.mark.parametrize("backend", ["interp", "cpu"])
+def test_tape_gradient_by_uvw_matches_finite_differences(float_grid, backend):
+    data, dense = float_grid
+    grid = GridHandle(data, tiles=TILE)
+    pts = sample_points(np.random.default_rng(21), dense, 40)
+    pts = pts[np.all(abs(pts - np.round(pts)) > 0.03, axis=1)]  # FD inside one cell
+    pa = wp.array(pts, dtype=wp.vec3, requires_grad=True)
+    loss = wp.zeros(1, dtype=float, requires_grad=True)
+    tape = wp.Tape()
+    with tape:
+        wp.launch(sample_sum, len(pts), inputs=[grid.id, pa, loss], backend=backend)
+    tape.backward(loss)
+    h = 1e-2
+    fd = np.zeros_like(pts, dtype=np.float64)
+    for a in range(3):
+        step = np.zeros(3, np.float32)
+        step[a] = h
+        both = []
+        for q in (pts + step, pts - step):
+            out = wp.zeros((len(pts), 6), dtype=float)
+            wp.launch(sample_float, len(pts), inputs=[grid.id, wp.array(q, dtype=wp.vec3), out,
+                      wp.zeros(len(pts), dtype=wp.vec3)], backend=backend)  # fmt: skip
+            both.append(out.numpy()[:, 1].astype(np.float64))
+        fd[:, a] = (both[0] - both[1]) / (2 * h)
+    np.testing.assert_allclose(pa.grad.numpy(), fd, rtol=5e-3, atol=5e-3)

@@ -121,7 +121,17 @@ def load_record(em: Emitter, ptr: ir.Value, t: T.Type) -> Any:
 
 def _record(em: Emitter, op: Operation) -> Any:
     ptr = em.b.inttoptr(em.get(op.operands[0]), LT.PTR)
-    return load_record(em, ptr, op.results[0].type)
+    block = em.b.block
+    first = len(block.instructions)
+    fields = load_record(em, ptr, op.results[0].type)
+    # Records do not change while a kernel runs (kdsl.ir.records): marking their loads
+    # invariant lets LLVM hoist them out of the thread loop instead of reloading every
+    # field per thread (stores to arrays may alias them otherwise).
+    invariant = block.module.add_metadata([])
+    for ins in block.instructions[first:]:
+        if isinstance(ins, ir.LoadInstr):
+            ins.set_metadata("invariant.load", invariant)
+    return fields
 
 
 def store_value(em: Emitter, value: Any, ptr: ir.Value, t: T.Type) -> None:
