@@ -12,11 +12,11 @@ operations, which every rank calls in the same order:
 ``SingleStrip`` is the whole grid in one strip (nothing to exchange). ``DeviceTeam``
 runs the strips in one process, one thread and one kdsl device each (several GPUs,
 or several strips on the CPU), with ``kdsl.copy`` between devices (peer to peer where
-enabled) for the ghost rows. ``TorchHalo``
-runs the exchange through ``torch.distributed`` point-to-point operations on torch
-views of the kdsl arrays (no copies: gloo on the CPU, NCCL on GPUs); on a GPU make
-kdsl launch on torch's stream (``kdsl.ScopedStream(kdsl.stream_from_torch(device))``)
-so the exchange and the kernels are ordered on one stream.
+enabled) for the ghost rows. ``TorchHalo`` runs the exchange through
+``torch.distributed`` point-to-point operations on torch views of the kdsl arrays (no
+copies: gloo on the CPU, NCCL on GPUs); on a GPU make kdsl launch on torch's stream
+(``kdsl.ScopedStream(kdsl.stream_from_torch(device))``) so the exchange and the kernels
+are ordered on one stream.
 """
 
 from __future__ import annotations
@@ -33,6 +33,10 @@ from kdsl.scenes.binding import SceneError
 
 class HaloError(SceneError):
     """A collective between strips failed: a rank died, stalled past the timeout, or broke."""
+
+
+class HaloAborted(HaloError):
+    """Raised in a ``DeviceTeam`` strip stopped because another strip failed or timed out."""
 
 
 class SingleStrip:
@@ -94,8 +98,8 @@ class DeviceTeam:
             t.join(self.timeout_s)
         if any(t.is_alive() for t in threads):
             self._barrier.abort()
-            raise SceneError(f"a strip's thread did not finish within {self.timeout_s} s")
-        first = next((e for e in errors if e is not None and not _broken(e)), None)
+            raise HaloError(f"a strip's thread did not finish within {self.timeout_s} s")
+        first = next((e for e in errors if e is not None and not isinstance(e, HaloAborted)), None)
         first = first or next((e for e in errors if e is not None), None)
         self._barrier.reset()
         if first is not None:
@@ -106,7 +110,7 @@ class DeviceTeam:
         try:
             self._barrier.wait()
         except threading.BrokenBarrierError:
-            raise SceneError("another strip failed or timed out; this one stops") from None
+            raise HaloAborted("another strip failed or timed out; this one stops") from None
 
     def _publish(self, rank: int, value: Any) -> list[Any]:
         """Every strip's ``value``, once all have given one. The caller must ``_meet``
@@ -120,10 +124,6 @@ class DeviceTeam:
         shared = self._publish(rank, value)
         self._meet()
         return shared
-
-
-def _broken(e: BaseException) -> bool:
-    return isinstance(e, SceneError) and "another strip failed" in str(e)
 
 
 class TeamHalo:
