@@ -8,7 +8,8 @@ or ``cuda:LOCAL_RANK`` (NCCL, kdsl launching on torch's stream so kernels and NC
 transfers are ordered). ``--check`` also runs the undivided scene on rank 0 and
 compares the gathered state with it bit for bit. Rank 0 prints one summary line and
 writes ``--json``. Every collective has the process group's timeout (``--timeout``):
-a rank that dies or stalls makes the others fail with torch's error, never hang.
+a rank that dies or stalls makes the others fail with a ``HaloError`` carrying torch's
+message, never hang.
 """
 
 from __future__ import annotations
@@ -126,6 +127,8 @@ def main(argv: list[str] | None = None) -> int:
     from kdsl.scenes.strips import strip_scene_class
 
     args = _parser().parse_args(argv)
+    if args.steps < 2:
+        raise SceneError(f"--steps must be at least 2 (the first is not timed), not {args.steps}")
     cls = strip_scene_class(args.scene)
     device = init_process_group(args.device, args.timeout)
     halo = TorchHalo()
