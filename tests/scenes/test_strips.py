@@ -194,3 +194,10 @@ def test_the_runner_outside_torchrun_is_a_short_error():
     assert proc.stderr.startswith("kdsl.scenes.distributed: error: scene 'cloth' has no"), (
         proc.stderr
     )
+
+
+def test_the_runner_refuses_too_few_steps():
+    from kdsl.scenes.distributed import main
+
+    with pytest.raises(SceneError, match="--steps must be at least 2"):
+        main(["--steps", "1"])
