@@ -187,9 +187,15 @@ class Volume:
         """The number of tiles (NanoVDB leaf nodes, 8^3 voxels each)."""
         return self._info.leaf_count
 
+    def _indexes_active_only(self) -> bool:
+        return self._info.grid_type in (GridType.ONINDEX, GridType.ONINDEXMASK)
+
     def get_voxel_count(self) -> int:
-        """The number of active voxels."""
-        return self._info.active_voxel_count
+        """The number of voxels kernels index, as Warp counts them: the active voxels of
+        an OnIndex grid, every voxel of every leaf (512 a tile) of any other grid."""
+        if self._indexes_active_only():
+            return self._info.active_voxel_count
+        return 512 * self._info.leaf_count
 
     class ActiveStats(NamedTuple):
         """Active topology counts, as ``warp.Volume.ActiveStats``."""
@@ -200,9 +206,9 @@ class Volume:
         upper_node_count: int
 
     def get_active_stats(self) -> Volume.ActiveStats:
-        """The active voxel count and the leaf, lower and upper node counts."""
+        """``get_voxel_count()`` and the leaf, lower and upper node counts."""
         g = self._info
-        return Volume.ActiveStats(g.active_voxel_count, g.leaf_count, g.lower_count,
+        return Volume.ActiveStats(self.get_voxel_count(), g.leaf_count, g.lower_count,
                                   g.upper_count)  # fmt: skip
 
     @property
@@ -225,10 +231,15 @@ class Volume:
         return self._output(self._tile_origins(), out, "get_tiles")
 
     def get_voxels(self, out: array | None = None) -> array:
-        """The index coordinates of every active voxel (leaf order, then x-major in each
-        leaf) as a ``(voxel_count, 3)`` int32 array (or into ``out``)."""
-        masks = self._leaf_bytes()[:, LEAF_OFF_VALUE_MASK : LEAF_OFF_VALUE_MASK + 64]
-        leaf, slot = np.nonzero(np.unpackbits(masks, axis=1, bitorder="little"))
+        """The index coordinates of the ``get_voxel_count()`` voxels (an OnIndex grid's
+        active voxels, any other grid's leaf voxels, active or not, as Warp lists them),
+        leaf by leaf and x-major within a leaf, as a ``(voxel_count, 3)`` int32 array (or
+        into ``out``)."""
+        if self._indexes_active_only():
+            masks = self._leaf_bytes()[:, LEAF_OFF_VALUE_MASK : LEAF_OFF_VALUE_MASK + 64]
+            leaf, slot = np.nonzero(np.unpackbits(masks, axis=1, bitorder="little"))
+        else:
+            leaf, slot = np.divmod(np.arange(512 * self._info.leaf_count), 512)
         local = np.stack([slot >> 6, (slot >> 3) & 7, slot & 7], axis=1)
         return self._output(self._tile_origins()[leaf] + local, out, "get_voxels")
 

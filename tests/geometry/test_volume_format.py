@@ -595,8 +595,11 @@ def test_reads_nanovdb_level_set(codec):
         wp.float32,
     )
     expected = _nanovdb_voxels("sphere")
-    assert [tuple(c) for c in v.get_voxels().numpy().tolist()] == list(expected)
     values = _voxel_values(v)
+    assert list(values) == list(expected)  # the active voxels, in NanoVDB's order
+    # get_voxels lists every leaf voxel, active or not, as Warp's does
+    assert v.get_voxel_count() == 512 * v.get_tile_count() == len(v.get_voxels().numpy())
+    assert set(expected) <= {tuple(c) for c in v.get_voxels().numpy().tolist()}
     assert all(np.float32(values[k]) == np.float32(e[0]) for k, e in expected.items())
     assert v.get_voxel_size() == (0.5, 0.5, 0.5)
     assert list(v.get_grid_info().translation) == [0.25, 0.0, 0.0]
@@ -736,3 +739,34 @@ def test_vec3_and_int_files_look_up_the_same_in_warp(warp):
             _warp_run(warp, kernel, ours, ijk, warp.vec3i, out),
             _warp_run(warp, kernel, theirs, ijk, warp.vec3i, out),
         )
+
+
+def test_reads_warps_rocks_asset_with_its_32_6_checksum(warp):
+    """Warp's example asset: a NanoVDB 32.6 level set whose half checksum covers the
+    head up to the first upper node (the pre-32.7 rule)."""
+    import os
+
+    path = os.path.join(os.path.dirname(warp.__file__), "examples", "assets", "rocks.nvdb")
+    if not os.path.exists(path):
+        pytest.skip("warp-lang ships no rocks.nvdb")
+    with open(path, "rb") as f:
+        data = f.read()
+    v = wp.Volume.load_from_nvdb(data)
+    assert (v.info.version >> 10, v.get_grid_info().name, v.dtype) == (
+        (32 << 11) | 6,
+        "surface",
+        wp.float32,
+    )
+    assert v.info.checksum >> 32 == 0xFFFFFFFF  # a half checksum: the head only
+    theirs = warp.Volume.load_from_nvdb(data, device="cpu")
+    assert v.get_voxel_count() == theirs.get_voxel_count() == 512 * v.get_tile_count()
+    assert v.get_tiles().numpy().tolist() == theirs.get_tiles().numpy().tolist()
+    assert v.get_voxels().numpy().tolist() == theirs.get_voxels().numpy().tolist()
+    assert v.get_active_stats().voxel_count == theirs.get_active_stats().voxel_count
+    # the file is ZIP-compressed: change a byte of the head (its world bbox) and repack
+    start = 16 + 176 + struct.unpack_from("<I", data, 16 + 136)[0]
+    (size,) = struct.unpack_from("<q", data, start)
+    grid = _patch(zlib.decompress(data[start + 8 : start + 8 + size]), 600, "<d", 123.0)
+    packed = zlib.compress(grid)
+    with pytest.raises(NanoVDBError, match="bad checksum"):
+        read_grids(data[:start] + struct.pack("<q", len(packed)) + packed)
