@@ -2,14 +2,15 @@
 (``bench_geometry.py --section volume``).
 
 Workload (issue 16): the signed distance to a sphere of radius 100 voxels in a 256^3
-index box, stored as a narrow band (the voxels within 3 voxels of the surface, about
-0.75M in 2.4k leaves; everything else is the background 3.0), one float32 NanoVDB grid
+index box, stored as a narrow band (the voxels within 4 voxels of the surface, about
+1.0M; everything else is the background 4.0), one float32 NanoVDB grid
 built with kdsl's builder and loaded by both sides from the same bytes. Timed:
 
 - ``sample``: ``--samples`` (10M) ``volume_sample_f(..., LINEAR)`` at points uniform in
   the 256^3 box (``box``: most fall outside the band, where the descent stops at an
   internal node) and at points within the band (``band``: every sample reads leaves);
-- ``store``: ``volume_store_f`` of ``--stores`` (1M) distinct band voxels.
+- ``store``: ``volume_store_f`` of ``--stores`` (1M) distinct band voxels (at most
+  the band's voxel count).
 
 Times are medians of ``--reps`` runs after a warm-up (compiles excluded). Warp's CPU
 kernels run on one core, kdsl's on every core the process may run on (pin with
@@ -30,7 +31,7 @@ from kdsl.geometry.nanovdb.layout import GridType
 from kdsl.geometry.nanovdb.reader import read_grids
 from kdsl.geometry.volume_record import make_volume_record
 
-SIDE, RADIUS, BAND = 256, 100.0, 3.0
+SIDE, RADIUS, BAND = 256, 100.0, 4.0
 
 
 def sphere_band() -> tuple[bytes, np.ndarray]:
