@@ -27,6 +27,7 @@ from kdsl.geometry.nanovdb.builder import (
 )
 from kdsl.geometry.nanovdb.checksum import grid_checksum
 from kdsl.geometry.nanovdb.codecs import parse_codec
+from kdsl.geometry.nanovdb.errors import NanoVDBError
 from kdsl.geometry.nanovdb.grid_info import GridInfo
 from kdsl.geometry.nanovdb.grid_validation import parse_grid
 from kdsl.geometry.nanovdb.layout import (
@@ -337,9 +338,12 @@ class Volume:
         data = write_nvdb(self._current_grids(), parse_codec(codec), str(path))
         if hasattr(path, "write"):
             path.write(data)
-        else:
+            return path
+        try:
             with open(path, "wb") as f:
                 f.write(data)
+        except OSError as err:
+            raise NanoVDBError(f"{path}: cannot write NanoVDB file: {err.strerror}") from None
         return path
 
     # --- construction -----------------------------------------------------------------

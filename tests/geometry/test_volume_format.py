@@ -770,3 +770,60 @@ def test_reads_warps_rocks_asset_with_its_32_6_checksum(warp):
     packed = zlib.compress(grid)
     with pytest.raises(NanoVDBError, match="bad checksum"):
         read_grids(data[:start] + struct.pack("<q", len(packed)) + packed)
+
+
+@pytest.fixture(scope="module")
+def unsummed_grids():
+    """Raw grids with their checksums disabled: a float grid, an OnIndex grid and one
+    with a feature array, so each structural fault is what the reader reports."""
+    pts = wp.array(np.array([[1, 2, 3], [9, 0, 0]], np.int32), dtype=wp.vec3i)
+    index = wp.Volume.allocate_by_voxels(pts, 1.0)
+    feature = wp.Volume.from_index_grid(index, {"f": np.zeros(3, np.float32)})
+    dense = wp.Volume.load_from_numpy(_field((4, 4, 4)))
+    return {"dense": dense.info, "index": index.info, "feature": feature.info}
+
+
+@pytest.mark.parametrize(
+    ("grid", "field", "fmt", "value", "match"),
+    [
+        ("dense", 24, "<I", 5, "grid index 5 of a count of 1"),
+        ("dense", 632, "<I", 99, "unknown grid class 99"),
+        ("dense", GRID_SIZE + 8, "<q", 64 + 64 + 32, "overlap or are out of order"),
+        ("index", "leaf+80", "<Q", 7, "beyond the grid's 3"),
+        ("index", "leaf+88", "<Q", 1, "prefix sums disagree"),
+        ("dense", "upper_child", "<q", 8, "upper node's child offset"),
+        ("dense", "lower_child", "<q", -64, "lower node's child offset"),
+        ("feature", 648, "<I", 1 << 20, "blind data records at byte"),
+        ("feature", "blind+0", "<q", 1 << 40, "lies outside the grid"),
+        ("feature", "blind+32", "256s", b"n" * 256, "blind data 0 is not NUL"),
+    ],
+)
+def test_structural_faults_in_raw_grids(unsummed_grids, grid, field, fmt, value, match):
+    info = unsummed_grids[grid]
+    lay = info.layout
+    where = {
+        "leaf+80": info.leaf_offset + 80,
+        "leaf+88": info.leaf_offset + 88,
+        "upper_child": info.upper_offset + lay.upper_off_table,
+        "lower_child": info.lower_offset + lay.lower_off_table,
+        "blind+0": info.blind_metadata_offset,
+        "blind+32": info.blind_metadata_offset + 32,
+    }.get(field, field)
+    with pytest.raises(NanoVDBError, match=match):
+        read_grids(_patch(info.data, where, fmt, value))
+
+
+def test_file_segment_faults(small_file, tmp_path):
+    meta = small_file[16 : 16 + 176]
+    for bad, match in [
+        (_patch(small_file, 12, "<H", 0), "holds no grid"),
+        (small_file[:100], "truncated: grid metadata"),
+        (small_file[:16] + _patch(meta, 0, "<Q", 5) + small_file[192:], "has a size of 5"),
+        (_patch(small_file, 14, "<H", 1)[:_GRID] + b"\0\0", "before its chunk size"),
+    ]:
+        with pytest.raises(NanoVDBError, match=match):
+            read_grids(bad)
+    with pytest.raises(NanoVDBCodecError, match="unsupported NanoVDB codec 9"):
+        wp.Volume.load_from_numpy(_field((2, 2, 2))).save_to_nvdb(io.BytesIO(), codec=9)
+    with pytest.raises(NanoVDBError, match="cannot write NanoVDB file"):
+        wp.Volume.load_from_numpy(_field((2, 2, 2))).save_to_nvdb(tmp_path / "no" / "f.nvdb")
