@@ -313,6 +313,17 @@ def aot_directory(directory: Path, build: bool) -> Iterator[None]:
         _aot.reset(token)
 
 
+@contextlib.contextmanager
+def outside_aot_directory() -> Iterator[None]:
+    """Inside the block the disk layer is the kernel cache again, even within
+    ``aot_directory`` (for backends' support code, which ahead-of-time modules leave out)."""
+    token = _aot.set(None)
+    try:
+        yield
+    finally:
+        _aot.reset(token)
+
+
 def default_cache() -> DiskCache | None:
     """The disk cache of the current environment, or None when it is off or unsafe.
 

@@ -150,7 +150,10 @@ def load_support(backend: Backend) -> None:
                 backend.cache_target(code.target),
             )  # fmt: skip
             try:
-                kernel_cache.get_or_build(key, code.build, code.load, kernel_cache.SUPPORT_STATS)
+                with kernel_cache.outside_aot_directory():  # runtimes are not a module's kernels
+                    kernel_cache.get_or_build(
+                        key, code.build, code.load, kernel_cache.SUPPORT_STATS
+                    )
             except Exception as e:
                 if not code.optional:
                     raise

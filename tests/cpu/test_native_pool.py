@@ -89,6 +89,7 @@ def test_launching_threads_share_the_pool_or_run_inline(forced_pool):
 
 @needs_native
 @pytest.mark.skipif(not hasattr(os, "fork"), reason="no fork")
+@pytest.mark.filterwarnings("ignore:os.fork")  # other tests' libraries (JAX) start threads
 def test_a_forked_child_starts_its_own_workers(forced_pool):
     _launch(64)
     pid = os.fork()

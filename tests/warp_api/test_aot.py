@@ -32,7 +32,10 @@ print(json.dumps({"y": y.numpy().tolist(), "builds": cache.STATS.builds,
 
 
 def _run(tmp_path, code, cache_dir):
-    env = {**os.environ, "KDSL_CACHE_DIR": str(cache_dir), "PYTHONPATH": str(tmp_path)}
+    # The Python thread pool: the native pool's runtime (support code, kept in the kernel
+    # cache, not in module directories) would be an entry of the process's own cache.
+    env = {**os.environ, "KDSL_CACHE_DIR": str(cache_dir), "PYTHONPATH": str(tmp_path),
+           "KDSL_CPU_POOL": "python"}  # fmt: skip
     return subprocess.run([sys.executable, "-c", textwrap.dedent(code)], cwd=tmp_path, env=env,
                           capture_output=True, text=True, timeout=300)  # fmt: skip
 
