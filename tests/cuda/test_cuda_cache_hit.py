@@ -11,24 +11,15 @@ import pytest
 
 pytest.importorskip("cupy_backends.cuda.libs.nvrtc")
 
-import kdsl as wp
 from kdsl.backends.cuda import BACKEND, nvrtc
 from kdsl.backends.cuda import backend as cuda_backend
 from kdsl.backends.cuda.lower import entry_name, generate
 from kdsl.compiler import cache, compile_kernel
 from kdsl.passes import DEFAULT_PIPELINE, run_pipeline
+from kdsl.testing.cases.programs import make_programs
 
-
-@wp.kernel
-def scale_add(x: wp.array(dtype=float), y: wp.array(dtype=float), a: float):
-    i = wp.tid()
-    y[i] = a * x[i] + y[i]
-
-
-@wp.kernel
-def twice(v: wp.array(dtype=wp.vec3)):
-    i = wp.tid()
-    v[i] = v[i] * 2.0
+PROGRAMS = make_programs()  # fresh kernel objects: saxpy, integrate (vec3), nbody...
+scale_add = PROGRAMS["saxpy"]
 
 
 def _refuse(*args, **kwargs):
@@ -51,7 +42,7 @@ def test_a_cache_hit_neither_lowers_nor_compiles(tmp_path, monkeypatch):
     assert warm.payload.cubin("sm_90") == cold.payload.cubin("sm_90")
 
 
-@pytest.mark.parametrize("kernel", [scale_add, twice])
+@pytest.mark.parametrize("kernel", [PROGRAMS["saxpy"], PROGRAMS["integrate"], PROGRAMS["nbody"]])
 def test_the_entry_name_is_the_one_generate_gives(kernel):
     module = kernel.build_module()
     run_pipeline(module, DEFAULT_PIPELINE)

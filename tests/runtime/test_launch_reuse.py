@@ -11,14 +11,13 @@ from kdsl.backends.base import CompiledKernel
 from kdsl.ir import types as T
 from kdsl.runtime.launch import launch_plan
 from kdsl.runtime.launch_reuse import LaunchReuse
+from kdsl.testing.cases.programs import make_programs
 
 BACKENDS = ["cpu", "interp"]
 
 
-@wp.kernel
-def axpy(x: wp.array(dtype=float), y: wp.array(dtype=float), a: float):
-    i = wp.tid()
-    y[i] = a * x[i] + y[i]
+#: y = a * x + y (the seed programs' saxpy, a fresh kernel object for this module).
+axpy = make_programs()["saxpy"]
 
 
 @wp.kernel

@@ -12,6 +12,7 @@ import ctypes
 import ctypes.util
 import threading
 from functools import cache
+from typing import Any
 
 import llvmlite
 import llvmlite.binding as llvm
@@ -67,18 +68,22 @@ def _register_libm() -> None:
                 llvm.add_symbol(name, ctypes.cast(fn, ctypes.c_void_p).value)
 
 
-@cache
-def target_machine() -> llvm.TargetMachine:
-    """A target machine for this host's CPU and features, optimizing at -O3."""
+def _host_machine(**kwargs: Any) -> llvm.TargetMachine:
+    """A target machine for this host's CPU and features at -O3, with ``kwargs``."""
     _init()
     target = llvm.Target.from_default_triple()
     return target.create_target_machine(
         cpu=llvm.get_host_cpu_name(),
         features=llvm.get_host_cpu_features().flatten(),
         opt=3,
-        codemodel="jitdefault",
-        jit=True,
+        **kwargs,
     )
+
+
+@cache
+def target_machine() -> llvm.TargetMachine:
+    """A target machine for this host's CPU and features, optimizing at -O3 (for the JIT)."""
+    return _host_machine(codemodel="jitdefault", jit=True)
 
 
 @cache
@@ -88,15 +93,7 @@ def shared_target_machine() -> llvm.TargetMachine:
     The JIT's machine keeps its own code model: MCJIT places sections wherever it
     maps them, which the small code model of shared objects does not allow for.
     """
-    _init()
-    target = llvm.Target.from_default_triple()
-    return target.create_target_machine(
-        cpu=llvm.get_host_cpu_name(),
-        features=llvm.get_host_cpu_features().flatten(),
-        opt=3,
-        reloc="pic",
-        codemodel="default",
-    )
+    return _host_machine(reloc="pic", codemodel="default")
 
 
 def parse(text: str) -> llvm.ModuleRef:

@@ -50,7 +50,12 @@ _PAUSE_DECL = "declare void @llvm.x86.sse2.pause()"
 # (i32) | 192 launcher waiting (i32) | 200 worker spin | 208 launcher spin. The two futex
 # words sit on their own cache lines.
 POOL_BYTES = 256
-_WORKER_SPIN_WORD, _LAUNCHER_SPIN_WORD = 200 // 8, 208 // 8
+
+#: Byte offsets of the pool's fields (see the layout above), as the IR names them.
+_FIELDS = {
+    "genp": 0, "pendp": 64, "fnp": 128, "totp": 136, "argp": 144, "dimp": 152, "ncp": 160,
+    "stopp": 168, "sleepp": 176, "waitp": 192, "wspinp": 200, "lspinp": 208,
+}  # fmt: skip
 
 _IR = """
 declare i64 @syscall(i64, ...)
@@ -66,63 +71,71 @@ define internal void @futex_wake(ptr %addr, i32 %n) {
   ret void
 }
 
-define void @kdsl_pool_worker_@TAG@(ptr %pool, i64 %index) {
+; Returns once *word != value: spins up to *spinp pauses, then sleeps on the futex.
+; Announces a sleep in *sleepers, then looks again: whoever changes the word does so
+; before reading the sleepers (both sequentially consistent), so one of the two sees
+; the other and no wake-up is lost.
+define internal void @wait_while_equal(ptr %word, i32 %value, ptr %sleepers, ptr %spinp) {
 entry:
-  %genp = getelementptr i8, ptr %pool, i64 0
-  %pendp = getelementptr i8, ptr %pool, i64 64
-  %fnp = getelementptr i8, ptr %pool, i64 128
-  %totp = getelementptr i8, ptr %pool, i64 136
-  %argp = getelementptr i8, ptr %pool, i64 144
-  %dimp = getelementptr i8, ptr %pool, i64 152
-  %ncp = getelementptr i8, ptr %pool, i64 160
-  %stopp = getelementptr i8, ptr %pool, i64 168
-  %sleepp = getelementptr i8, ptr %pool, i64 176
-  %waitp = getelementptr i8, ptr %pool, i64 192
-  %spinp = getelementptr i8, ptr %pool, i64 200
-  %seenv = alloca i32
-  %iv = alloca i64
-  ; Fresh pool memory starts at generation 0. Not a load: the first launch may bump the
-  ; generation before this thread gets here, and must not be missed.
-  store i32 0, ptr %seenv
-  br label %loop
-loop:
-  store i64 0, ptr %iv
-  br label %spin
-spin:
-  %seen = load i32, ptr %seenv
-  %g = load atomic i32, ptr %genp acquire, align 4
-  %changed = icmp ne i32 %g, %seen
-  br i1 %changed, label %got, label %more
+  %spin = load atomic i64, ptr %spinp monotonic, align 8
+  br label %check
+check:
+  %i = phi i64 [0, %entry], [%i1, %pause], [0, %woke]
+  %now = load atomic i32, ptr %word acquire, align 4
+  %changed = icmp ne i32 %now, %value
+  br i1 %changed, label %done, label %more
 more:
-  %i = load i64, ptr %iv
   %i1 = add i64 %i, 1
-  store i64 %i1, ptr %iv
-  %spinmax = load atomic i64, ptr %spinp monotonic, align 8
-  %keep = icmp slt i64 %i, %spinmax
+  %keep = icmp slt i64 %i, %spin
   br i1 %keep, label %pause, label %sleep
 pause:
   @PAUSE@
-  br label %spin
+  br label %check
 sleep:
-  ; Announce the sleep, then look again: the launcher bumps the generation before it
-  ; reads the sleepers (both sequentially consistent), so one of the two sees the other.
-  atomicrmw add ptr %sleepp, i32 1 seq_cst
-  %g2 = load atomic i32, ptr %genp seq_cst, align 4
-  %same = icmp eq i32 %g2, %seen
+  atomicrmw add ptr %sleepers, i32 1 seq_cst
+  %again = load atomic i32, ptr %word seq_cst, align 4
+  %same = icmp eq i32 %again, %value
   br i1 %same, label %dosleep, label %woke
 dosleep:
-  call void @futex_wait(ptr %genp, i32 %seen)
+  call void @futex_wait(ptr %word, i32 %value)
   br label %woke
 woke:
-  atomicrmw sub ptr %sleepp, i32 1 seq_cst
-  store i64 0, ptr %iv
-  br label %spin
-got:
-  store i32 %g, ptr %seenv
+  atomicrmw sub ptr %sleepers, i32 1 seq_cst
+  br label %check
+done:
+  ret void
+}
+
+; Wakes up to %n threads sleeping on *word, if *sleepers says any are: called right
+; after changing *word (the other half of wait_while_equal's handshake).
+define internal void @wake_sleepers(ptr %word, ptr %sleepers, i32 %n) {
+entry:
+  %s = load atomic i32, ptr %sleepers seq_cst, align 4
+  %any = icmp ne i32 %s, 0
+  br i1 %any, label %wake, label %done
+wake:
+  call void @futex_wake(ptr %word, i32 %n)
+  br label %done
+done:
+  ret void
+}
+
+define void @kdsl_pool_worker_@TAG@(ptr %pool, i64 %index) {
+entry:
+@FIELDS@
+  br label %loop
+loop:
+  ; Fresh pool memory starts at generation 0. Not a load at entry: the first launch may
+  ; bump the generation before this thread gets here, and must not be missed.
+  %seen = phi i32 [0, %entry], [%g, %got], [%g, %run], [%g, %last]
+  call void @wait_while_equal(ptr %genp, i32 %seen, ptr %sleepp, ptr %wspinp)
+  br label %got0
+got0:
+  %g = load atomic i32, ptr %genp acquire, align 4
   %stop = load atomic i64, ptr %stopp acquire, align 8
   %isstop = icmp ne i64 %stop, 0
-  br i1 %isstop, label %exit, label %work
-work:
+  br i1 %isstop, label %exit, label %got
+got:
   %n = load i64, ptr %ncp
   %k = add i64 %index, 1
   %mine = icmp slt i64 %k, %n
@@ -139,14 +152,10 @@ run:
   %end = sdiv i64 %b, %n
   call void %fn(i64 %start, i64 %end, ptr %args, ptr %dims)
   %old = atomicrmw sub ptr %pendp, i32 1 seq_cst
-  %last = icmp eq i32 %old, 1
-  br i1 %last, label %maybewake, label %loop
-maybewake:
-  %w = load atomic i32, ptr %waitp seq_cst, align 4
-  %sleeping = icmp ne i32 %w, 0
-  br i1 %sleeping, label %wake, label %loop
-wake:
-  call void @futex_wake(ptr %pendp, i32 1)
+  %islast = icmp eq i32 %old, 1
+  br i1 %islast, label %last, label %loop
+last:
+  call void @wake_sleepers(ptr %pendp, ptr %waitp, i32 1)
   br label %loop
 exit:
   ret void
@@ -154,17 +163,7 @@ exit:
 
 define void @kdsl_pool_run_@TAG@(ptr %pool, ptr %fn, i64 %total, ptr %args, ptr %dims, i64 %n) {
 entry:
-  %genp = getelementptr i8, ptr %pool, i64 0
-  %pendp = getelementptr i8, ptr %pool, i64 64
-  %fnp = getelementptr i8, ptr %pool, i64 128
-  %totp = getelementptr i8, ptr %pool, i64 136
-  %argp = getelementptr i8, ptr %pool, i64 144
-  %dimp = getelementptr i8, ptr %pool, i64 152
-  %ncp = getelementptr i8, ptr %pool, i64 160
-  %sleepp = getelementptr i8, ptr %pool, i64 176
-  %waitp = getelementptr i8, ptr %pool, i64 192
-  %spinp = getelementptr i8, ptr %pool, i64 208
-  %iv = alloca i64
+@FIELDS@
   store ptr %fn, ptr %fnp
   store i64 %total, ptr %totp
   store ptr %args, ptr %argp
@@ -174,42 +173,17 @@ entry:
   %p32 = trunc i64 %nm1 to i32
   store atomic i32 %p32, ptr %pendp release, align 4
   atomicrmw add ptr %genp, i32 1 seq_cst
-  %s = load atomic i32, ptr %sleepp seq_cst, align 4
-  %any = icmp ne i32 %s, 0
-  br i1 %any, label %wakeall, label %mine
-wakeall:
-  call void @futex_wake(ptr %genp, i32 2147483647)
-  br label %mine
-mine:
+  call void @wake_sleepers(ptr %genp, ptr %sleepp, i32 2147483647)
   %end0 = sdiv i64 %total, %n
   call void %fn(i64 0, i64 %end0, ptr %args, ptr %dims)
-  store i64 0, ptr %iv
-  br label %wspin
-wspin:
+  br label %wait
+wait:
   %p = load atomic i32, ptr %pendp acquire, align 4
   %done = icmp eq i32 %p, 0
-  br i1 %done, label %exit, label %wmore
-wmore:
-  %i = load i64, ptr %iv
-  %i1 = add i64 %i, 1
-  store i64 %i1, ptr %iv
-  %spinmax = load atomic i64, ptr %spinp monotonic, align 8
-  %keep = icmp slt i64 %i, %spinmax
-  br i1 %keep, label %wpause, label %wsleep
-wpause:
-  @PAUSE@
-  br label %wspin
-wsleep:
-  store atomic i32 1, ptr %waitp seq_cst, align 4
-  %p2 = load atomic i32, ptr %pendp seq_cst, align 4
-  %still = icmp ne i32 %p2, 0
-  br i1 %still, label %dowait, label %wwoke
-dowait:
-  call void @futex_wait(ptr %pendp, i32 %p2)
-  br label %wwoke
-wwoke:
-  store atomic i32 0, ptr %waitp seq_cst, align 4
-  br label %wspin
+  br i1 %done, label %exit, label %sleep
+sleep:
+  call void @wait_while_equal(ptr %pendp, i32 %p, ptr %waitp, ptr %lspinp)
+  br label %wait
 exit:
   ret void
 }
@@ -232,6 +206,10 @@ def source() -> str | None:
     text = _IR.replace("@FUTEX@", str(_FUTEX_SYSCALL[machine]))
     text = text.replace("@PAUSE_DECL@", _PAUSE_DECL if machine in _PAUSE else "")
     text = text.replace("@PAUSE@", _PAUSE.get(machine, ""))
+    fields = "\n".join(
+        f"  %{name} = getelementptr i8, ptr %pool, i64 {offset}" for name, offset in _FIELDS.items()
+    )
+    text = text.replace("@FIELDS@", fields)
     # Symbols named after the text: two versions of the runtime never clash in the JIT.
     tag = hashlib.sha256(text.encode()).hexdigest()[:12]
     return text.replace("@TAG@", tag)
@@ -265,8 +243,8 @@ class NativePool:
         if self._memory is None or len(self._threads) != workers:
             self._stop_workers()
             self._memory = (ctypes.c_int64 * (POOL_BYTES // 8))()
-            self._memory[_WORKER_SPIN_WORD] = WORKER_SPIN
-            self._memory[_LAUNCHER_SPIN_WORD] = LAUNCHER_SPIN
+            self._memory[_FIELDS["wspinp"] // 8] = WORKER_SPIN
+            self._memory[_FIELDS["lspinp"] // 8] = LAUNCHER_SPIN
             address = ctypes.addressof(self._memory)
             self._threads = [
                 threading.Thread(
@@ -300,7 +278,7 @@ class NativePool:
         if self._memory is None:
             return
         memory, threads = self._memory, self._threads
-        memory[168 // 8] = 1
+        memory[_FIELDS["stopp"] // 8] = 1
         # A launch with no chunk for anyone: workers see the generation change and stop.
         self._run(ctypes.addressof(memory), self.noop, 0, None, None, 1)
         for t in threads:
