@@ -12,11 +12,9 @@ from __future__ import annotations
 
 from typing import Any
 
-import numpy as np
-
 from kdsl.errors import KdslTypeError
 from kdsl.geometry.bvh import Bvh
-from kdsl.geometry.mesh_refit import face_boxes, first_non_finite
+from kdsl.geometry.mesh_refit import face_boxes, first_index_out_of_range, first_non_finite
 from kdsl.ir import types as T
 from kdsl.runtime.alloc import empty, zeros
 from kdsl.runtime.array import array
@@ -104,24 +102,23 @@ class Mesh:
                     f"Mesh velocities must match the points ({pts.shape[0]} on {self.device}),"
                     f" not {vel.shape[0]} on {vel.device}"
                 )
-        host_idx = idx.numpy()
-        if len(host_idx) and (host_idx.min() < 0 or host_idx.max() >= pts.shape[0]):
-            bad = host_idx[(host_idx < 0) | (host_idx >= pts.shape[0])][0]
-            raise KdslTypeError(f"Mesh indices out of range: {int(bad)} for {pts.shape[0]} points")
-        if groups is not None and (
-            not isinstance(groups, array) or groups.shape != (len(host_idx) // 3,)
-        ):
+        scratch = empty(1, dtype=int32, device=self.device)  # the device checks' answer
+        bad = first_index_out_of_range(idx, pts.shape[0], scratch)
+        if bad >= 0:
+            value = int(idx[bad : bad + 1].numpy()[0])
+            raise KdslTypeError(f"Mesh indices out of range: {value} for {pts.shape[0]} points")
+        num_tris = idx.shape[0] // 3
+        if groups is not None and (not isinstance(groups, array) or groups.shape != (num_tris,)):
             raise KdslTypeError("Mesh groups must be an int32 array with one entry per face")
         self._points, self.indices, self.velocities = pts, idx, vel
         self.support_winding_number = bool(support_winding_number)
-        self._num_tris = len(host_idx) // 3
-        self._first_bad = empty(1, dtype=int32, device=self.device)  # the finite check's
+        self._num_tris = num_tris
+        self._first_bad = scratch
         self._check_points()
-        n = self._num_tris
-        self._lowers = array(np.zeros((n, 3), np.float32), dtype=VEC3, device=self.device)
-        self._uppers = array(np.zeros((n, 3), np.float32), dtype=VEC3, device=self.device)
-        self._no_velocities = array(np.zeros((0, 3), np.float32), dtype=VEC3, device=self.device)
-        self._edges = empty(n, dtype=float32, device=self.device)
+        self._lowers = empty(num_tris, dtype=VEC3, device=self.device)  # face_boxes fills them
+        self._uppers = empty(num_tris, dtype=VEC3, device=self.device)
+        self._no_velocities = empty(0, dtype=VEC3, device=self.device)
+        self._edges = empty(num_tris, dtype=float32, device=self.device)
         self._edge_sum = zeros(1, dtype=float32, device=self.device)
         self._recorded: tuple | None = None
         self._write_boxes()

@@ -37,6 +37,27 @@ def _first_non_finite(points: array(dtype=vec3), first: array(dtype=int32)):
         atomic_min(first, 0, i)
 
 
+@kernel
+def _first_out_of_range(indices: array(dtype=int32), bound: int32, first: array(dtype=int32)):
+    i = tid()
+    k = indices[i]
+    if k < 0 or k >= bound:
+        atomic_min(first, 0, i)
+
+
+def first_index_out_of_range(indices: array, num_points: int, first: array) -> int:
+    """The position of the first index outside ``[0, num_points)``, or -1; ``first`` is
+    a one-element int32 scratch array on the indices' device."""
+    n = indices.shape[0]
+    if n == 0:
+        return -1
+    first.fill_(n)
+    launch(_first_out_of_range, dim=n, inputs=[indices, num_points, first],
+           device=indices.device)  # fmt: skip
+    i = int(first.numpy()[0])
+    return -1 if i == n else i
+
+
 def first_non_finite(points: array, first: array) -> int:
     """The index of the first point with a NaN or infinite coordinate, or -1; ``first``
     is a one-element int32 scratch array on the points' device."""
