@@ -74,8 +74,11 @@ def marching_cubes_section(args) -> list[dict]:
         if not np.array_equal(mc.indices.numpy(), iso.indices.numpy()):
             sys.exit(f"{name}: kdsl's triangles differ from Warp's ({row['tris']} vs "
                      f"{wrow['tris']})")  # fmt: skip
-        err = np.abs(mc.verts.numpy() - iso.verts.numpy()).max(initial=0.0)
-        if err > 1e-5:
+        kv, wv = mc.verts.numpy(), iso.verts.numpy()
+        err = np.abs(kv - wv).max(initial=0.0)
+        # A few float32 ulps of the largest coordinate: a GPU contracts a * b + c into one
+        # rounding (FMA) where the other compiler may not.
+        if err > 4 * np.finfo(np.float32).eps * max(1.0, float(np.abs(wv).max(initial=0.0))):
             sys.exit(f"{name}: kdsl's vertices differ from Warp's by up to {err}")
     return rows
 
