@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import inspect
 import sys
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -53,8 +54,9 @@ def _resolve_backend(backend: Any, device: Device) -> Backend:
         try:
             b = get_backend(name)
         except KdslError as e:
-            if backend is None and name == "cpu":  # a broken cpu plugin: fall back
+            if backend is None and name == "cpu":  # a broken cpu plugin: fall back, loudly
                 b = get_backend("interp")
+                _warn_interp_fallback(e.message)
             elif backend is not None:  # the caller's backend= argument: a launch mistake
                 raise KdslLaunchError(f"launch(backend={backend!r}): {e.message}") from None
             else:
@@ -64,6 +66,22 @@ def _resolve_backend(backend: Any, device: Device) -> Backend:
             f"backend '{b.name}' cannot run on device '{device}' (it serves {b.devices()})"
         )
     return b
+
+
+_warned_fallback = False
+
+
+def _warn_interp_fallback(reason: str) -> None:
+    """Say once per process that cpu launches run on the interpreter, and why: a benchmark
+    or a simulation would otherwise just run hundreds of times slower."""
+    global _warned_fallback
+    if not _warned_fallback:
+        _warned_fallback = True
+        warnings.warn(
+            f"kdsl: launches on 'cpu' run on the interp backend (a reference interpreter, "
+            f"hundreds of times slower) because the cpu backend did not load: {reason}",
+            RuntimeWarning, stacklevel=4,
+        )  # fmt: skip
 
 
 def normalize_dim(dim: Any, kernel_name: str = "?") -> tuple[int, ...]:

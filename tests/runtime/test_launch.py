@@ -179,3 +179,23 @@ def test_record_cmd_relaunch(saxpy):
         cmd.set_param_at_index(2, "x")
     with pytest.raises(KdslLaunchError, match="no index 9"):
         cmd.set_param_at_index(9, 1.0)
+
+
+def test_a_cpu_backend_that_fails_to_load_falls_back_to_interp_loudly(monkeypatch, saxpy):
+    from kdsl.backends.registry import BackendRegistryError
+    from kdsl.runtime import launch as launch_mod
+
+    real = launch_mod.get_backend
+
+    def broken_cpu(name):
+        if name == "cpu":
+            raise BackendRegistryError("kdsl backend 'cpu' failed to load: ImportError: boom")
+        return real(name)
+
+    monkeypatch.setattr(launch_mod, "get_backend", broken_cpu)
+    monkeypatch.setattr(launch_mod, "_warned_fallback", False)
+    monkeypatch.setattr(launch_mod, "default_backend_for", lambda device: "cpu")
+    y = wp.zeros(2)
+    with pytest.warns(RuntimeWarning, match="run on the interp backend.*boom"):
+        wp.launch(saxpy, dim=2, inputs=[wp.array([1.0, 2.0], dtype=float), y, 2.0])
+    np.testing.assert_array_equal(y.numpy(), [2.0, 4.0])
