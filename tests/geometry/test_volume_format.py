@@ -8,6 +8,7 @@ import io
 import struct
 import sys
 import zlib
+from typing import Any
 
 import numpy as np
 import pytest
@@ -235,12 +236,17 @@ def _warp_kernels(warp):
     if not _WARP_KERNELS:
 
         @warp.kernel
-        def lookup(
-            vol: warp.uint64, ijk: warp.array(dtype=warp.vec3i), out: warp.array(dtype=float)
-        ):
-            i = warp.tid()
+        def lookup(vol: warp.uint64, ijk: warp.array(dtype=warp.vec3i), out: warp.array(dtype=Any)):
+            i = warp.tid()  # one kernel for every value type: Warp's generic volume_lookup
             p = ijk[i]
-            out[i] = warp.volume_lookup_f(vol, p[0], p[1], p[2])
+            out[i] = warp.volume_lookup(vol, p[0], p[1], p[2], dtype=out.dtype)
+
+        @warp.kernel
+        def lookup_index(
+            vol: warp.uint64, ijk: warp.array(dtype=warp.vec3i), out: warp.array(dtype=warp.int64)
+        ):
+            p = ijk[warp.tid()]
+            out[warp.tid()] = warp.int64(warp.volume_lookup_index(vol, p[0], p[1], p[2]))
 
         @warp.kernel
         def sample(vol: warp.uint64, xs: warp.array(dtype=warp.vec3), out: warp.array(dtype=float)):
@@ -248,37 +254,7 @@ def _warp_kernels(warp):
             q = warp.volume_world_to_index(vol, xs[i])
             out[i] = warp.volume_sample_f(vol, q, warp.Volume.LINEAR)
 
-        @warp.kernel
-        def lookup_index(
-            vol: warp.uint64, ijk: warp.array(dtype=warp.vec3i), out: warp.array(dtype=warp.int32)
-        ):
-            i = warp.tid()
-            p = ijk[i]
-            out[i] = warp.int32(warp.volume_lookup_index(vol, p[0], p[1], p[2]))
-
-        @warp.kernel
-        def lookup_v(
-            vol: warp.uint64, ijk: warp.array(dtype=warp.vec3i), out: warp.array(dtype=warp.vec3)
-        ):
-            i = warp.tid()
-            p = ijk[i]
-            out[i] = warp.volume_lookup_v(vol, p[0], p[1], p[2])
-
-        @warp.kernel
-        def lookup_i(
-            vol: warp.uint64, ijk: warp.array(dtype=warp.vec3i), out: warp.array(dtype=warp.int32)
-        ):
-            i = warp.tid()
-            p = ijk[i]
-            out[i] = warp.volume_lookup_i(vol, p[0], p[1], p[2])
-
-        _WARP_KERNELS.update(
-            lookup=lookup,
-            sample=sample,
-            lookup_index=lookup_index,
-            lookup_v=lookup_v,
-            lookup_i=lookup_i,
-        )
+        _WARP_KERNELS.update(lookup=lookup, sample=sample, lookup_index=lookup_index)
     return _WARP_KERNELS
 
 
@@ -286,7 +262,10 @@ def _warp_run(warp, kernel, vol, points, dtype, out_dtype=float):
     pts = warp.array(points, dtype=dtype, device="cpu")
     out = warp.zeros(len(points), dtype=out_dtype, device="cpu")
     warp.launch(
-        _warp_kernels(warp)[kernel], dim=len(points), inputs=[vol.id, pts, out], device="cpu"
+        _warp_kernels(warp)[kernel],
+        dim=len(points),
+        inputs=[warp.uint64(vol.id), pts, out],
+        device="cpu",
     )
     return out.numpy()
 
@@ -385,8 +364,8 @@ def test_allocations_match_warp(warp):
     ijk = np.concatenate([ipts, ipts + 1])
     mine = warp.Volume.load_from_nvdb(_saved(ours), device="cpu")
     assert np.array_equal(
-        _warp_run(warp, "lookup_index", mine, ijk, warp.vec3i, warp.int32),
-        _warp_run(warp, "lookup_index", theirs, ijk, warp.vec3i, warp.int32),
+        _warp_run(warp, "lookup_index", mine, ijk, warp.vec3i, warp.int64),
+        _warp_run(warp, "lookup_index", theirs, ijk, warp.vec3i, warp.int64),
     )
 
 
@@ -727,17 +706,14 @@ def test_vec3_and_int_files_look_up_the_same_in_warp(warp):
     ijk = ijk.astype(np.int32)
     vec = _field((9, 10, 3), seed=6, vec=True)
     ints = np.random.default_rng(7).integers(-100, 100, (9, 10, 3)).astype(np.int32)
-    for a, bg, kernel, out in [
-        (vec, (1.0, 2.0, 3.0), "lookup_v", warp.vec3),
-        (ints, -5, "lookup_i", warp.int32),
-    ]:
+    for a, bg, out in [(vec, (1.0, 2.0, 3.0), warp.vec3), (ints, -5, warp.int32)]:
         ours = warp.Volume.load_from_nvdb(
             _saved(wp.Volume.load_from_numpy(a, bg_value=bg)), device="cpu"
         )
         theirs = warp.Volume.load_from_numpy(a, bg_value=bg, device="cpu")
         assert np.array_equal(
-            _warp_run(warp, kernel, ours, ijk, warp.vec3i, out),
-            _warp_run(warp, kernel, theirs, ijk, warp.vec3i, out),
+            _warp_run(warp, "lookup", ours, ijk, warp.vec3i, out),
+            _warp_run(warp, "lookup", theirs, ijk, warp.vec3i, out),
         )
 
 
