@@ -1,7 +1,11 @@
 """A persistent thread pool that runs a kernel's thread range in chunks.
 
-The kernel is a ctypes function pointer; ctypes releases the GIL around the
-call, so chunks run truly in parallel. The worker count defaults to the CPUs this
+Two pools serve it: the native pool (``native_pool``: workers parked in native code,
+a launch handed over without Python), used for native range functions once its
+runtime is loaded (``install_native``), and Python worker threads fed through queues,
+used otherwise (``KDSL_CPU_POOL=python``, a kernel that prints, a launch made while
+another thread's holds the native pool). The kernel is a ctypes function pointer;
+ctypes releases the GIL around the call, so chunks run truly in parallel. The worker count defaults to the CPUs this
 process may use and can be set with ``set_num_threads`` or the
 ``KDSL_CPU_THREADS`` environment variable.
 
