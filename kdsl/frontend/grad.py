@@ -42,7 +42,7 @@ class GradOf:
                 f"grad() takes a @kdsl.func or a kernel builtin, not {type(fn).__name__}"
             )
         self.fn = fn
-        self.name = f"grad({fn.name})"
+        self.name = self.__name__ = f"grad({fn.name})"
 
     # Equal for one ``f``: Python scope caches compiled calls by callee.
     def __eq__(self, other: object) -> bool:

@@ -358,9 +358,13 @@ class array:
             data = src._buf if src._device == self._device else src.to(self._device)._buf
         elif mem.is_cuda_buffer(src):
             data, where = mem.wrap_cuda(src)
+            if self._t is T.BF16 and data.dtype != np.uint16:  # only bits copy as they are
+                raise KdslError(f"cannot assign device data of {data.dtype} to a bfloat16 "
+                                "array: pass uint16 bits, or host data to be rounded")  # fmt: skip
             if where != self._device:
                 data = mem.transfer(data, where, self._device)
         else:
+            src = host_value(self._t, src)  # struct instances, bfloat16 bits
             data = src if isinstance(src, np.ndarray) else np.asarray(src, dtype=self._buf.dtype)
             if self._device.is_cuda:
                 with mem.scope(self._device):

@@ -19,7 +19,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Sequence
 from typing import Any
 
-from kdsl.passes.array_access import ParamAccess, array_param_access
+from kdsl.ir.array_access import ParamAccess, array_param_access
 from kdsl.runtime.array import array
 from kdsl.runtime.logger import log_warning
 

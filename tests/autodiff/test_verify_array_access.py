@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import kdsl as wp
-from kdsl.passes.array_access import ParamAccess, array_param_access
+from kdsl.ir.array_access import ParamAccess, array_param_access
 
 BACKENDS = ["interp", "cpu"]
 cuda = pytest.mark.skipif(not wp.is_cuda_available(), reason="needs a CUDA device")

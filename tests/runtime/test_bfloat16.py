@@ -48,6 +48,13 @@ def test_arrays_and_python_values():
     # uint16 data is taken as bits (as in Warp); ml_dtypes data as its values
     assert wp.array(np.array([0x3F80, 0x4040], np.uint16), dtype=wp.bfloat16).list() == [1, 3]
     assert wp.full(2, 1.25, dtype=wp.bfloat16).list() == [1.25, 1.25]
+    assert wp.ones_like(a).list() == [1.0] * 3 and wp.clone(a).list() == a.list()
+    c = wp.empty(2, dtype=wp.bfloat16)
+    for src in ([3.0, 4.0], np.array([3.0, 4.0]), wp.array([3.0, 4.0], dtype=wp.bfloat16)):
+        c.zero_()
+        assert c.assign(src).list() == [3.0, 4.0]
+    c[1] = 0.5
+    assert c.list() == [3.0, 0.5]
     z = wp.zeros((2, 2), dtype=wp.bfloat16)
     z.fill_(0.1)
     bits = np.asarray(z.numpy()).view(np.uint16)

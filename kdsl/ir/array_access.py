@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from kdsl.ir import Module, Value
+from kdsl.ir.core import Module, Value
 from kdsl.ir.types import ArrayType
 
 _WRITES = frozenset({"kd.store", "kd.atomic_rmw", "kd.atomic_cas"})
