@@ -18,7 +18,7 @@ constant in the kernel's backward pass), a kernel's adjoint differentiates throu
 from __future__ import annotations
 
 import ast
-import itertools
+import hashlib
 from typing import Any
 
 from kdsl.errors import KdslTypeError
@@ -27,8 +27,6 @@ from kdsl.ir import Module, Operation, Value, new_func
 from kdsl.ir.rewrite import clone_op
 from kdsl.passes.adjoint.function_vjp import build_function_vjp
 from kdsl.passes.inline import InlinePass
-
-_counter = itertools.count()
 
 
 class GradOf:
@@ -66,23 +64,30 @@ class GradOf:
             raise em.error(KdslTypeError, f"{self.name}() takes no keyword arguments", node)
         if isinstance(self.fn, Builtin):
             values = [em.value(a, node) for a in args]
+            ident = self.fn.name
         else:
-            _, values = em.pick_overload(self.fn, args, node, {})
+            overload, values = em.pick_overload(self.fn, args, node, {})
+            ident = overload.key  # unique per function and overload
         module = em.unit.module
-        primal = self._primal(em, module, values, node)
-        sym = f"{primal.attrs['sym_name']}__grad"
-        try:
-            grad = build_function_vjp(_inlined(module, primal), module, sym, self.name)
-        finally:
-            primal.erase()
-        types = grad.attrs["res_types"]
+        # Named by f and the argument types, so a kernel's IR (and its cache key) does not
+        # depend on compile order, and a second call with the same types reuses it.
+        tag = hashlib.sha1(repr([str(v.type) for v in values]).encode()).hexdigest()[:8]
+        sym = f"grad_{ident}_{tag}"
+        if not module.has_func(sym):
+            primal = self._primal(em, module, values, node, sym + "__primal")
+            try:
+                build_function_vjp(_inlined(module, primal), module, sym, self.name)
+            finally:
+                primal.erase()
+        types = module.get_func(sym).attrs["res_types"]
         call = em.b.create("func.call", values, list(types), {"callee": sym}, loc=em.loc(node))
         results = list(call.results)
         return results[0] if len(results) == 1 else tuple(results)
 
-    def _primal(self, em: Any, module: Module, values: list[Value], node: ast.Call) -> Operation:
-        """``def p(args): return f(args)``, compiled into ``module``."""
-        sym = f"grad_{self.fn.name}_{next(_counter)}"
+    def _primal(
+        self, em: Any, module: Module, values: list[Value], node: ast.Call, sym: str
+    ) -> Operation:
+        """``def sym(args): return f(args)``, compiled into ``module``."""
         types = [v.type for v in values]
         func = new_func(module, sym, types, [f"a{k}" for k in range(len(types))], [], "func",
                         em.loc(node))  # fmt: skip

@@ -159,3 +159,23 @@ def test_misuse_is_a_located_error():
         KdslTypeError, match="expected a value here, got the Python object 'grad\\(_cube\\)'"
     ):
         _compile(bound_to_a_name)
+
+
+@wp.func
+def _square(x: float):
+    return x * x
+
+
+@wp.kernel
+def _two_gradients(x: wp.array(dtype=float), out: wp.array(dtype=float)):
+    out[0] = wp.grad(_square)(x[0])
+    out[1] = wp.grad(_cube)(x[0])  # same argument types, another function
+    out[2] = wp.grad(_square)(x[0] * 2.0)  # the same gradient function, called again
+
+
+def test_each_function_gets_its_own_gradient_function_once():
+    out = wp.zeros(3)
+    wp.launch(_two_gradients, 1, [wp.array([1.5], dtype=float), out], backend="interp")
+    np.testing.assert_allclose(out.numpy(), [3.0, 6.75, 6.0])
+    grads = [f for f in _two_gradients.build_module().funcs if "grad_" in f.attrs["sym_name"]]
+    assert len(grads) == 2
