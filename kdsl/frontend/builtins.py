@@ -72,7 +72,6 @@ def merge_tables(tables: tuple[BuiltinTable, ...]) -> tuple[dict[str, Builtin], 
 BUILTINS, PYTHON_ALIASES = merge_tables(TABLES)
 
 
-
 def register_host_alias(python: Any, builtin: Builtin) -> None:
     """In kernels, calling the host function ``python`` calls ``builtin``.
 

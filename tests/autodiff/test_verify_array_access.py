@@ -42,7 +42,10 @@ def _mixed(m: wp.array2d(dtype=float), c: wp.array(dtype=float), n: int, s: wp.a
 def test_the_analysis_follows_views_and_calls():
     access = array_param_access(_mixed.build_module(), _mixed.key)
     assert access == [
-        ParamAccess(read=True), ParamAccess(write=True), ParamAccess(), ParamAccess(write=True)
+        ParamAccess(read=True),
+        ParamAccess(write=True),
+        ParamAccess(),
+        ParamAccess(write=True),
     ]
 
 
