@@ -55,28 +55,19 @@ class _KdslGrid:
         self.id = make_volume_record(self, self.words, self.info, device).id
 
 
-@wp.kernel
-def kd_sample(vid: wp.uint64, p: wp.array(dtype=wp.vec3), out: wp.array(dtype=float)):
-    t = wp.tid()
-    out[t] = wp.volume_sample_f(vid, p[t], 1)
+def volume_kernels(m):
+    """The sample and store kernels in module ``m``'s API: kdsl's, or Warp's (the same
+    source, as a Warp program ported by ``import kdsl as wp``)."""
 
+    @m.kernel
+    def sample(vid: m.uint64, p: m.array(dtype=m.vec3), out: m.array(dtype=float)):
+        t = m.tid()
+        out[t] = m.volume_sample_f(vid, p[t], 1)
 
-@wp.kernel
-def kd_store(vid: wp.uint64, ijk: wp.array(dtype=wp.vec3i), v: wp.array(dtype=float)):
-    t = wp.tid()
-    wp.volume_store_f(vid, ijk[t][0], ijk[t][1], ijk[t][2], v[t])
-
-
-def _warp_kernels(warp):
-    @warp.kernel
-    def sample(vid: warp.uint64, p: warp.array(dtype=warp.vec3), out: warp.array(dtype=float)):
-        t = warp.tid()
-        out[t] = warp.volume_sample_f(vid, p[t], 1)
-
-    @warp.kernel
-    def store(vid: warp.uint64, ijk: warp.array(dtype=warp.vec3i), v: warp.array(dtype=float)):
-        t = warp.tid()
-        warp.volume_store_f(vid, ijk[t][0], ijk[t][1], ijk[t][2], v[t])
+    @m.kernel
+    def store(vid: m.uint64, ijk: m.array(dtype=m.vec3i), v: m.array(dtype=float)):
+        t = m.tid()
+        m.volume_store_f(vid, ijk[t][0], ijk[t][1], ijk[t][2], v[t])
 
     return sample, store
 
@@ -104,9 +95,10 @@ def volume_section(args) -> list[dict]:
     data, active = sphere_band()
     rng = np.random.default_rng(0)
     grid = _KdslGrid(data, dev)
+    kd_sample, kd_store = volume_kernels(wp)
     warp = _warp()
     if warp is not None:
-        w_sample, w_store = _warp_kernels(warp)
+        w_sample, w_store = volume_kernels(warp)
         wvol = warp.Volume(warp.array(np.frombuffer(data, np.uint8), dtype=warp.uint8, device=dev))
     rows = []
     base = {"section": "volume", "device": dev, "voxels": len(active), "bytes": len(data)}

@@ -285,53 +285,31 @@ def _put(words: wp.array(dtype=wp.uint32), w: int, bits: wp.uint64):
     words[w + 1] = wp.uint32(bits >> wp.uint64(32))
 
 
-@func
-def _store(words: wp.array(dtype=wp.uint32), w: int, value: wp.float32):
-    _put(words, w, wp.cast(value, wp.uint32))
+def _define_stores(value: Any, bits: Any, parts: int, stride: int) -> Any:
+    """The ``_store`` overload for ``value``: scalars as their bits (``bits``, one or two
+    words), vectors as ``parts`` scalars ``stride`` words apart."""
+    if parts == 1:
+
+        @func
+        def _store(words: wp.array(dtype=wp.uint32), w: int, value: value):
+            _put(words, w, wp.cast(value, bits))
+
+    else:
+
+        @func
+        def _store(words: wp.array(dtype=wp.uint32), w: int, value: value):
+            for c in range(parts):
+                _store(words, w + stride * c, value[c])
+
+    return _store
 
 
-@func
-def _store(words: wp.array(dtype=wp.uint32), w: int, value: wp.int32):
-    _put(words, w, wp.cast(value, wp.uint32))
-
-
-@func
-def _store(words: wp.array(dtype=wp.uint32), w: int, value: wp.uint32):
-    _put(words, w, value)
-
-
-@func
-def _store(words: wp.array(dtype=wp.uint32), w: int, value: wp.float64):
-    _put(words, w, wp.cast(value, wp.uint64))
-
-
-@func
-def _store(words: wp.array(dtype=wp.uint32), w: int, value: wp.int64):
-    _put(words, w, wp.cast(value, wp.uint64))
-
-
-@func
-def _store(words: wp.array(dtype=wp.uint32), w: int, value: wp.vec3):
-    for c in range(3):
-        _store(words, w + c, value[c])
-
-
-@func
-def _store(words: wp.array(dtype=wp.uint32), w: int, value: wp.vec3d):
-    for c in range(3):
-        _store(words, w + 2 * c, value[c])
-
-
-@func
-def _store(words: wp.array(dtype=wp.uint32), w: int, value: wp.vec4):
-    for c in range(4):
-        _store(words, w + c, value[c])
-
-
-@func
-def _store(words: wp.array(dtype=wp.uint32), w: int, value: wp.vec4d):
-    for c in range(4):
-        _store(words, w + 2 * c, value[c])
+for _value, _bits, _parts, _stride in (
+    (wp.float32, wp.uint32, 1, 1), (wp.int32, wp.uint32, 1, 1), (wp.uint32, wp.uint32, 1, 1),
+    (wp.float64, wp.uint64, 1, 2), (wp.int64, wp.uint64, 1, 2), (wp.vec3, None, 3, 1),
+    (wp.vec3d, None, 3, 2), (wp.vec4, None, 4, 1), (wp.vec4d, None, 4, 2),
+):  # fmt: skip
+    _store = _define_stores(_value, _bits, _parts, _stride)
 
 
 @wp.struct
@@ -704,55 +682,50 @@ def volume_voxel_count(id: wp.uint64) -> int:
 
 
 @func
-def volume_index_to_world(id: wp.uint64, uvw: wp.vec3) -> wp.vec3:
-    """Index-space point ``uvw`` of volume ``id`` in world space."""
-    rec = wp.object_record(id, VolumeRecord)
-    return rec.matf * uvw + rec.vecf
+def _map(rec: VolumeRecord, like: wp.vec3):
+    """The grid's float32 map: index-to-world matrix, its inverse, the translation."""
+    return rec.matf, rec.invmatf, rec.vecf
 
 
 @func
-def volume_index_to_world(id: wp.uint64, uvw: wp.vec3d) -> wp.vec3d:  # noqa: F811
-    """Index-space point ``uvw`` of volume ``id`` in world space, in float64."""
-    rec = wp.object_record(id, VolumeRecord)
-    return rec.matd * uvw + rec.vecd
+def _map(rec: VolumeRecord, like: wp.vec3d):
+    """The grid's float64 map (the same three parts)."""
+    return rec.matd, rec.invmatd, rec.vecd
 
 
-@func
-def volume_world_to_index(id: wp.uint64, xyz: wp.vec3) -> wp.vec3:
-    """World-space point ``xyz`` in volume ``id``'s index space."""
-    rec = wp.object_record(id, VolumeRecord)
-    return rec.invmatf * (xyz - rec.vecf)
+def _define_maps(vec: Any) -> tuple:
+    """The map builtins for points of type ``vec`` (vec3: float32, computed with the
+    grid's float32 matrices; vec3d: float64)."""
+
+    @func
+    def volume_index_to_world(id: wp.uint64, uvw: vec) -> vec:
+        """Index-space point ``uvw`` of volume ``id`` in world space."""
+        mat, _inv, t = _map(wp.object_record(id, VolumeRecord), uvw)
+        return mat * uvw + t
+
+    @func
+    def volume_world_to_index(id: wp.uint64, xyz: vec) -> vec:
+        """World-space point ``xyz`` in volume ``id``'s index space."""
+        _mat, inv, t = _map(wp.object_record(id, VolumeRecord), xyz)
+        return inv * (xyz - t)
+
+    @func
+    def volume_index_to_world_dir(id: wp.uint64, uvw: vec) -> vec:
+        """Index-space direction ``uvw`` of volume ``id`` in world space (no translation)."""
+        return _map(wp.object_record(id, VolumeRecord), uvw)[0] * uvw
+
+    @func
+    def volume_world_to_index_dir(id: wp.uint64, xyz: vec) -> vec:
+        """World-space direction ``xyz`` in volume ``id``'s index space (no translation)."""
+        return _map(wp.object_record(id, VolumeRecord), xyz)[1] * xyz
+
+    return (volume_index_to_world, volume_world_to_index, volume_index_to_world_dir,
+            volume_world_to_index_dir)  # fmt: skip
 
 
-@func
-def volume_world_to_index(id: wp.uint64, xyz: wp.vec3d) -> wp.vec3d:  # noqa: F811
-    """World-space point ``xyz`` in volume ``id``'s index space, in float64."""
-    rec = wp.object_record(id, VolumeRecord)
-    return rec.invmatd * (xyz - rec.vecd)
-
-
-@func
-def volume_index_to_world_dir(id: wp.uint64, uvw: wp.vec3) -> wp.vec3:
-    """Index-space direction ``uvw`` of volume ``id`` in world space (no translation)."""
-    return wp.object_record(id, VolumeRecord).matf * uvw
-
-
-@func
-def volume_index_to_world_dir(id: wp.uint64, uvw: wp.vec3d) -> wp.vec3d:  # noqa: F811
-    """Index-space direction ``uvw`` in world space, in float64."""
-    return wp.object_record(id, VolumeRecord).matd * uvw
-
-
-@func
-def volume_world_to_index_dir(id: wp.uint64, xyz: wp.vec3) -> wp.vec3:
-    """World-space direction ``xyz`` in volume ``id``'s index space (no translation)."""
-    return wp.object_record(id, VolumeRecord).invmatf * xyz
-
-
-@func
-def volume_world_to_index_dir(id: wp.uint64, xyz: wp.vec3d) -> wp.vec3d:  # noqa: F811
-    """World-space direction ``xyz`` in index space, in float64."""
-    return wp.object_record(id, VolumeRecord).invmatd * xyz
+for _vec in (wp.vec3, wp.vec3d):
+    (volume_index_to_world, volume_world_to_index, volume_index_to_world_dir,
+     volume_world_to_index_dir) = _define_maps(_vec)  # fmt: skip
 
 
 # -- the seeds' older names -------------------------------------------------------------------

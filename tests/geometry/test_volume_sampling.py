@@ -36,18 +36,26 @@ def float_grid():
     return data, dense
 
 
-@wp.kernel
-def sample_float(vid: wp.uint64, p: wp.array(dtype=wp.vec3), out: wp.array2d(dtype=float),
-                 grad: wp.array(dtype=wp.vec3)):  # fmt: skip
-    t = wp.tid()
-    g = wp.vec3()
-    out[t, 0] = wp.volume_sample_f(vid, p[t], CLOSEST)
-    out[t, 1] = wp.volume_sample_f(vid, p[t], LINEAR)
-    out[t, 2] = wp.volume_sample_grad_f(vid, p[t], LINEAR, g)
-    out[t, 3] = wp.volume_sample(vid, p[t], LINEAR, dtype=float)
-    out[t, 4] = wp.volume_sample_local(vid, p[t], LINEAR)
-    out[t, 5] = wp.volume_lookup_f(vid, int(p[t][0]), int(p[t][1]), int(p[t][2]))
-    grad[t] = g
+def float_sampler(m):
+    """The float sampling kernel in module ``m``'s API (kdsl, or warp for the comparison)."""
+
+    @m.kernel
+    def sample_float(vid: m.uint64, p: m.array(dtype=m.vec3), out: m.array2d(dtype=float),
+                     grad: m.array(dtype=m.vec3)):  # fmt: skip
+        t = m.tid()
+        g = m.vec3()
+        out[t, 0] = m.volume_sample_f(vid, p[t], CLOSEST)
+        out[t, 1] = m.volume_sample_f(vid, p[t], LINEAR)
+        out[t, 2] = m.volume_sample_grad_f(vid, p[t], LINEAR, g)
+        out[t, 3] = m.volume_sample(vid, p[t], LINEAR, dtype=float)
+        out[t, 4] = m.volume_sample_f(vid, p[t] + m.vec3(0.0), LINEAR)
+        out[t, 5] = m.volume_lookup_f(vid, int(p[t][0]), int(p[t][1]), int(p[t][2]))
+        grad[t] = g
+
+    return sample_float
+
+
+sample_float = float_sampler(wp)
 
 
 @pytest.mark.parametrize("backend,device", BACKENDS)
@@ -260,24 +268,34 @@ def _affine_grid(rng):
     return data, DenseGrid(dense.lo, np.where(keep, dense.values, 0.25), dense.background), mat
 
 
+def tape_grad_by_points(kernel, vid: int, points: np.ndarray, backend: str) -> np.ndarray:
+    """The Tape gradient of ``kernel``'s loss (its last argument) by its points (the second)."""
+    pa = wp.array(points, dtype=wp.vec3, requires_grad=True)
+    loss = wp.zeros(1, dtype=float, requires_grad=True)
+    tape = wp.Tape()
+    with tape:
+        wp.launch(kernel, len(points), inputs=[vid, pa, loss], backend=backend)
+    tape.backward(loss)
+    return pa.grad.numpy()
+
+
+def off_faces(p: np.ndarray, margin: float) -> np.ndarray:
+    """The points of ``p`` at least ``margin`` from every integer plane (inside one cell)."""
+    return p[np.all(abs(p - np.round(p)) > margin, axis=1)]
+
+
 @pytest.mark.parametrize("backend", ["interp", "cpu"])
 def test_gradient_by_world_position_matches_the_reference(backend):
     data, dense, mat = _affine_grid(np.random.default_rng(9))
     grid = GridHandle(data)
-    uvw = sample_points(np.random.default_rng(3), dense, 60)
-    uvw = uvw[np.all(abs(uvw - np.round(uvw)) > 0.01, axis=1)]  # away from the cell faces
+    uvw = off_faces(sample_points(np.random.default_rng(3), dense, 60), 0.01)
     x = (uvw.astype(np.float64) @ mat.T + [1.0, -2.0, 0.5]).astype(np.float32)
-    xa = wp.array(x, dtype=wp.vec3, requires_grad=True)
-    loss = wp.zeros(1, dtype=float, requires_grad=True)
-    tape = wp.Tape()
-    with tape:
-        wp.launch(world_loss, len(x), inputs=[grid.id, xa, loss], backend=backend)
-    tape.backward(loss)
+    grad = tape_grad_by_points(world_loss, grid.id, x, backend)
     w = (np.arange(len(x)) % 3 + 1)[:, None]
     # d sample / d x = (d sample / d uvw) @ world_to_index: the true transpose (Warp's float32
     # adjoint multiplies by the matrix itself).
     _, g = dense.linear(np.linalg.solve(mat, (x - [1.0, -2.0, 0.5]).T).T)
-    np.testing.assert_allclose(xa.grad.numpy(), w * g @ np.linalg.inv(mat), rtol=2e-3, atol=2e-3)
+    np.testing.assert_allclose(grad, w * g @ np.linalg.inv(mat), rtol=2e-3, atol=2e-3)
 
 
 @pytest.mark.parametrize("backend", ["interp", "cpu"])
@@ -342,9 +360,10 @@ def transforms(vid: wp.uint64, p: wp.array(dtype=wp.vec3), out: wp.array2d(dtype
 
 
 @wp.kernel
-def sample_world(vid: wp.uint64, x: wp.array(dtype=wp.vec3), out: wp.array(dtype=float)):
+def sample_world(vid: wp.uint64, x: wp.array(dtype=wp.vec3), out: wp.array2d(dtype=float)):
     t = wp.tid()
-    out[t] = wp.volume_sample_world(vid, x[t], LINEAR)
+    out[t, 0] = wp.volume_sample_world(vid, x[t], LINEAR)
+    out[t, 1] = wp.volume_sample_local(vid, wp.volume_world_to_index(vid, x[t]), LINEAR)
 
 
 @pytest.mark.parametrize("backend,device", BACKENDS)
@@ -366,13 +385,13 @@ def test_transforms_and_older_names(backend, device):
     np.testing.assert_array_equal(got[:, 4], got[:, 0])
     np.testing.assert_array_equal(got[:, 5], got[:, 1])
     # volume_sample_world samples at the index point of a world point.
-    uvw = sample_points(np.random.default_rng(5), dense, 50).astype(np.float64)
-    uvw = uvw[np.all(abs(uvw - np.round(uvw)) > 0.01, axis=1)]
+    uvw = off_faces(sample_points(np.random.default_rng(5), dense, 50), 0.01).astype(np.float64)
     x = (uvw @ mat.T + t).astype(np.float32)
-    s = wp.zeros(len(x), dtype=float, device=device)
+    s = wp.zeros((len(x), 2), dtype=float, device=device)
     wp.launch(sample_world, len(x), inputs=[grid.id, wp.array(x, dtype=wp.vec3, device=device), s],
               backend=backend, device=device)  # fmt: skip
-    np.testing.assert_allclose(s.numpy(), dense.linear(uvw)[0], rtol=1e-4, atol=1e-4)
+    np.testing.assert_allclose(s.numpy()[:, 0], dense.linear(uvw)[0], rtol=1e-4, atol=1e-4)
+    np.testing.assert_array_equal(s.numpy()[:, 1], s.numpy()[:, 0])
 
 
 @wp.kernel(debug=True)
@@ -441,19 +460,7 @@ def test_samples_equal_warps_on_the_same_bytes(float_grid):
     raw = grid.words.numpy().view(np.uint8)
     wvol = warp.Volume(warp.array(raw, dtype=warp.uint8, device="cpu"))
 
-    @warp.kernel
-    def warp_samples(vid: warp.uint64, p: warp.array(dtype=warp.vec3),
-                     out: warp.array2d(dtype=float), grad: warp.array(dtype=warp.vec3)):  # fmt: skip
-        t = warp.tid()
-        g = warp.vec3()
-        out[t, 0] = warp.volume_sample_f(vid, p[t], CLOSEST)
-        out[t, 1] = warp.volume_sample_f(vid, p[t], LINEAR)
-        out[t, 2] = warp.volume_sample_grad_f(vid, p[t], LINEAR, g)
-        out[t, 3] = warp.volume_sample(vid, p[t], LINEAR, dtype=float)
-        out[t, 4] = warp.volume_sample_f(vid, p[t], LINEAR)
-        out[t, 5] = warp.volume_lookup_f(vid, int(p[t][0]), int(p[t][1]), int(p[t][2]))
-        grad[t] = g
-
+    warp_samples = float_sampler(warp)
     pts = sample_points(np.random.default_rng(8), dense, 300)
     wout = warp.zeros((len(pts), 6), dtype=float, device="cpu")
     wgrad = warp.zeros(len(pts), dtype=warp.vec3, device="cpu")
@@ -528,14 +535,8 @@ def sample_sum(vid: wp.uint64, p: wp.array(dtype=wp.vec3), loss: wp.array(dtype=
 def test_tape_gradient_by_uvw_matches_finite_differences(float_grid, backend):
     data, dense = float_grid
     grid = GridHandle(data, tiles=TILE)
-    pts = sample_points(np.random.default_rng(21), dense, 40)
-    pts = pts[np.all(abs(pts - np.round(pts)) > 0.03, axis=1)]  # FD inside one cell
-    pa = wp.array(pts, dtype=wp.vec3, requires_grad=True)
-    loss = wp.zeros(1, dtype=float, requires_grad=True)
-    tape = wp.Tape()
-    with tape:
-        wp.launch(sample_sum, len(pts), inputs=[grid.id, pa, loss], backend=backend)
-    tape.backward(loss)
+    pts = off_faces(sample_points(np.random.default_rng(21), dense, 40), 0.03)
+    grad = tape_grad_by_points(sample_sum, grid.id, pts, backend)
     h = 1e-2
     fd = np.zeros_like(pts, dtype=np.float64)
     for a in range(3):
@@ -548,4 +549,4 @@ def test_tape_gradient_by_uvw_matches_finite_differences(float_grid, backend):
                       wp.zeros(len(pts), dtype=wp.vec3)], backend=backend)  # fmt: skip
             both.append(out.numpy()[:, 1].astype(np.float64))
         fd[:, a] = (both[0] - both[1]) / (2 * h)
-    np.testing.assert_allclose(pa.grad.numpy(), fd, rtol=5e-3, atol=5e-3)
+    np.testing.assert_allclose(grad, fd, rtol=5e-3, atol=5e-3)
