@@ -13,10 +13,10 @@ node has no child there takes that node's tile value, one outside every root til
 the background. ``_locate`` gives the word of the value (or of the leaf) and the level
 it was found at.
 
-Trilinear sampling reads the 8 voxels around a point. When all 8 lie in the same
-8^3 leaf region (the low 3 bits of the base voxel are not 7 on any axis, 7 in 8
-samples of a smooth field's interior) the tree is descended once and the 8 values
-read at fixed offsets; each corner in another region descends on its own.
+Trilinear sampling reads the 8 voxels around a point. The tree is descended once for
+the base voxel and once more for each other 8^3 leaf region the corners reach (a
+corner one voxel up an axis is in the next region when the base is the last voxel of
+its region on that axis): one descent for about 2 samples in 3 ((7/8)^3), at most 8.
 
 Value types (Warp's): int32, int64, uint32, float32, float64, vec3f, vec3d, vec4f,
 vec4d. Each sampling function is generic over the value type through a *witness*
