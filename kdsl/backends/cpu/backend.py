@@ -210,11 +210,15 @@ class CpuBackend(Backend):
         extents = (ctypes.c_int64 * len(dims))(*dims)
         dimp = ctypes.addressof(extents)
         fn, run_range, cost, address = k.fn, pool.run_range, k.cost, k.address
+        native, record, whole = pool.native(), None, None
+        if native is not None and address is not None:  # one ctypes argument, not four
+            record = native_pool.record(address, total, argp, dimp)
+            whole = functools.partial(native.call, ctypes.addressof(record))
 
         def run() -> None:
-            run_range(fn, total, argp, dimp, cost=cost, address=address)
+            run_range(fn, total, argp, dimp, cost=cost, address=address, whole=whole)
 
-        run.keep = (keep, extents)  # type: ignore[attr-defined]
+        run.keep = (keep, extents, record)  # type: ignore[attr-defined]
         return run
 
     def _check_dims(self, compiled: CompiledKernel, dims: Dims) -> int:

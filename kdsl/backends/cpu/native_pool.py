@@ -188,6 +188,21 @@ exit:
   ret void
 }
 
+; A whole launch on the calling thread from one record {fn, total, args, dims}: a
+; ctypes call with one argument costs half one with four.
+define void @kdsl_pool_call_@TAG@(ptr %rec) {
+entry:
+  %fn = load ptr, ptr %rec
+  %tp = getelementptr i8, ptr %rec, i64 8
+  %total = load i64, ptr %tp
+  %ap = getelementptr i8, ptr %rec, i64 16
+  %args = load ptr, ptr %ap
+  %dp = getelementptr i8, ptr %rec, i64 24
+  %dims = load ptr, ptr %dp
+  call void %fn(i64 0, i64 %total, ptr %args, ptr %dims)
+  ret void
+}
+
 define void @kdsl_pool_noop_@TAG@(i64 %s, i64 %e, ptr %a, ptr %d) {
   ret void
 }
@@ -218,11 +233,17 @@ def source() -> str | None:
 def symbols(text: str) -> dict[str, str]:
     """The runtime's entry points in ``text``: role -> symbol."""
     tag = text.split("@kdsl_pool_noop_", 1)[1].split("(", 1)[0]
-    return {role: f"kdsl_pool_{role}_{tag}" for role in ("worker", "run", "noop")}
+    return {role: f"kdsl_pool_{role}_{tag}" for role in ("worker", "run", "noop", "call")}
 
 
 _WORKER = ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.c_int64)
 _RUN = ctypes.CFUNCTYPE(None, *([ctypes.c_void_p] * 6))
+_CALL = ctypes.CFUNCTYPE(None, ctypes.c_void_p)
+
+
+def record(fn: int, total: int, args: int, dims: int) -> Any:
+    """The four-word launch record ``NativePool.call`` reads (keep it alive while used)."""
+    return (ctypes.c_void_p * 4)(fn, total, args, dims)
 
 
 class NativePool:
@@ -233,6 +254,9 @@ class NativePool:
         self._run = _RUN(addresses["run"])
         #: A native range function doing nothing (what ``pool.dispatch_seconds`` times).
         self.noop = addresses["noop"]
+        #: ``call(record)`` runs ``fn(0, total, args, dims)`` from a record of those four
+        #: words on the calling thread (``record``).
+        self.call = _CALL(addresses["call"])
         self._memory: Any = None
         self._threads: list[threading.Thread] = []
         #: Held while a launch runs: a second launching thread runs inline instead.

@@ -198,17 +198,23 @@ def run_range(
     *args: Any,
     cost: RangeCost | None = None,
     address: int | None = None,
+    whole: Callable[[], None] | None = None,
 ) -> None:
     """Run the native range function ``fn(start, end, *args)`` over ``[0, total)``.
 
     The launch path's entry: a launch that stays on the calling thread calls ``fn``
     directly, timed into ``cost`` (the kernel's measured cost) when given. ``address``
     is ``fn``'s native address (``args`` then being its two pointers): with it a launch
-    split over threads goes to the native pool when there is one.
+    split over threads goes to the native pool when there is one. ``whole``, when
+    given, runs the whole range on the calling thread in place of ``fn(0, total, *args)``
+    (a prepared launch's one-argument native call).
     """
     n = num_threads()
     if n == 1 or total < 2:
-        fn(0, total, *args)
+        if whole is None:
+            fn(0, total, *args)
+        else:
+            whole()
         return
     per = cost.seconds_per_thread if cost is not None and adaptive else None
     if per is None:
@@ -218,6 +224,11 @@ def run_range(
     if not inline:
         if address is None or _native is None or not _native.run(address, total, *args, n):
             run(lambda s, e: fn(s, e, *args), total, force=True)
+    elif whole is not None:
+        t0 = time.perf_counter()
+        whole()
+        if cost is not None:
+            cost.record(time.perf_counter() - t0, total)
     elif cost is None:
         fn(0, total, *args)
     else:
