@@ -550,3 +550,24 @@ def test_tape_gradient_by_uvw_matches_finite_differences(float_grid, backend):
             both.append(out.numpy()[:, 1].astype(np.float64))
         fd[:, a] = (both[0] - both[1]) / (2 * h)
     np.testing.assert_allclose(grad, fd, rtol=5e-3, atol=5e-3)
+
+
+@wp.kernel
+def lookup_indices(vid: wp.uint64, ijk: wp.array(dtype=wp.vec3i), out: wp.array(dtype=int)):
+    t = wp.tid()
+    out[t] = wp.volume_lookup_index(vid, ijk[t][0], ijk[t][1], ijk[t][2])
+
+
+@pytest.mark.parametrize("backend", ["interp", "cpu"])
+def test_index_grid_of_whole_tiles_numbers_every_leaf_voxel(backend):
+    # allocate_by_tiles without a background makes an Index grid: each leaf's 512 voxels
+    # are numbered from the leaf's offset, leaves in get_tiles() order.
+    tiles = wp.array([[8, 0, -16], [-8, 24, 0]], dtype=wp.vec3i)
+    volume = wp.Volume.allocate_by_tiles(tiles, voxel_size=1.0, bg_value=None)
+    origins = volume.get_tiles().numpy()
+    ijk = np.concatenate([o + np.argwhere(np.ones((8, 8, 8), bool)) for o in origins])
+    ijk = np.concatenate([ijk, [[100, 100, 100], [7, 0, -16]]]).astype(np.int32)
+    out = wp.zeros(len(ijk), dtype=int)
+    wp.launch(lookup_indices, len(ijk), inputs=[volume.id, wp.array(ijk, dtype=wp.vec3i), out],
+              backend=backend)  # fmt: skip
+    np.testing.assert_array_equal(out.numpy(), [*range(512 * len(origins)), -1, -1])
