@@ -17,33 +17,35 @@ cache as one (``CpuBackend.support``, loaded by the compile driver), so a warm s
 loads it without llvmlite. Linux only (futexes), x86-64 and AArch64 (the futex
 system call's number); elsewhere the Python pool runs every launch.
 
-A worker spins a little after its share (``WORKER_SPIN`` pauses, about 0.1-0.2 ms)
-before it sleeps, and the launching thread a little while it waits (``LAUNCHER_SPIN``).
-Measured on the 2-core VM, quiet, back-to-back launches of a 64-thread kernel: 2.1 us
-per hand-off with the worker spinning, against 3.2 us or, in about half the runs,
-65 us without (an idle vCPU that sleeps takes tens of microseconds to wake, and a
-hand-off every few microseconds never lets the kernel learn to keep it awake); the
-Python pool took 65 to 75 us in the same runs.
+A worker keeps polling a little after its share (``WORKER_SPIN`` rounds) before it
+sleeps, and the launching thread a little while it waits (``LAUNCHER_SPIN``); each
+round yields the core (``sched_yield``). Measured on the 2-core VM: quiet, back-to-back
+launches of a 64-thread kernel took 2.1 us per hand-off with the worker polling (with
+``pause`` instead of a yield), against 3.2 us or, in about half the runs, 65 us without
+(an idle vCPU that sleeps takes tens of microseconds to wake); the Python pool took 65
+to 75 us. Under load (load average 7 on 2 cores), polling with ``pause`` made the
+100-kernel graph row 7x slower (7.07 ms launched against 1.02 ms without polling: the
+polling worker took the core the launching thread needed), yielding did not (0.97 ms).
 """
 
 from __future__ import annotations
 
 import ctypes
+import functools
 import hashlib
 import os
 import sys
 import threading
 from typing import Any
 
-#: ``pause`` iterations a worker spins, after its share of a launch, before sleeping
-#: (about 0.1 to 0.2 ms): launches that follow each other find it awake.
-WORKER_SPIN = 5000
-#: ``pause`` iterations the launching thread spins, after its share, before sleeping.
-LAUNCHER_SPIN = 200
+#: ``sched_yield`` calls a worker makes, after its share of a launch, before sleeping
+#: (well under a millisecond): launches that follow each other find it awake, and on a
+#: loaded host it gives its core away at each one.
+WORKER_SPIN = 200
+#: ``sched_yield`` calls the launching thread makes, after its share, before sleeping.
+LAUNCHER_SPIN = 20
 
 _FUTEX_SYSCALL = {"x86_64": 202, "amd64": 202, "aarch64": 98, "arm64": 98}
-_PAUSE = {"x86_64": "call void @llvm.x86.sse2.pause()", "amd64": "call void @llvm.x86.sse2.pause()"}
-_PAUSE_DECL = "declare void @llvm.x86.sse2.pause()"
 
 # The pool's memory (bytes): 0 generation (i32 futex word) | 64 pending (i32 futex word) |
 # 128 function | 136 total | 144 args | 152 dims | 160 chunks | 168 stop | 176 sleepers
@@ -59,7 +61,7 @@ _FIELDS = {
 
 _IR = """
 declare i64 @syscall(i64, ...)
-@PAUSE_DECL@
+declare i32 @sched_yield()
 
 define internal void @futex_wait(ptr %addr, i32 %val) {
   call i64 (i64, ...) @syscall(i64 @FUTEX@, ptr %addr, i32 128, i32 %val, ptr null)
@@ -71,7 +73,8 @@ define internal void @futex_wake(ptr %addr, i32 %n) {
   ret void
 }
 
-; Returns once *word != value: spins up to *spinp pauses, then sleeps on the futex.
+; Returns once *word != value: yields the core up to *spinp times, then sleeps on the
+; futex.
 ; Announces a sleep in *sleepers, then looks again: whoever changes the word does so
 ; before reading the sleepers (both sequentially consistent), so one of the two sees
 ; the other and no wake-up is lost.
@@ -80,16 +83,16 @@ entry:
   %spin = load atomic i64, ptr %spinp monotonic, align 8
   br label %check
 check:
-  %i = phi i64 [0, %entry], [%i1, %pause], [0, %woke]
+  %i = phi i64 [0, %entry], [%i1, %yield], [0, %woke]
   %now = load atomic i32, ptr %word acquire, align 4
   %changed = icmp ne i32 %now, %value
   br i1 %changed, label %done, label %more
 more:
   %i1 = add i64 %i, 1
   %keep = icmp slt i64 %i, %spin
-  br i1 %keep, label %pause, label %sleep
-pause:
-  @PAUSE@
+  br i1 %keep, label %yield, label %sleep
+yield:
+  call i32 @sched_yield()
   br label %check
 sleep:
   atomicrmw add ptr %sleepers, i32 1 seq_cst
@@ -219,8 +222,6 @@ def source() -> str | None:
     if not sys.platform.startswith("linux") or machine not in _FUTEX_SYSCALL:
         return None
     text = _IR.replace("@FUTEX@", str(_FUTEX_SYSCALL[machine]))
-    text = text.replace("@PAUSE_DECL@", _PAUSE_DECL if machine in _PAUSE else "")
-    text = text.replace("@PAUSE@", _PAUSE.get(machine, ""))
     fields = "\n".join(
         f"  %{name} = getelementptr i8, ptr %pool, i64 {offset}" for name, offset in _FIELDS.items()
     )
@@ -246,6 +247,37 @@ def record(fn: int, total: int, args: int, dims: int) -> Any:
     return (ctypes.c_void_p * 4)(fn, total, args, dims)
 
 
+@functools.cache
+def _libc() -> ctypes.CDLL:
+    return ctypes.CDLL(None)
+
+
+def _allocate() -> int:
+    """Zeroed pool memory from the C heap, aligned to a cache line.
+
+    Not a Python object: daemon workers may still read it while the interpreter shuts
+    down and frees its objects, so it is freed only after its workers have left.
+    """
+    calloc = _libc().calloc
+    calloc.restype = ctypes.c_void_p
+    raw = calloc(1, POOL_BYTES + 64)
+    if not raw:
+        raise MemoryError("cannot allocate the native pool's memory")
+    aligned = (raw + 63) // 64 * 64
+    _RAW[aligned] = raw
+    return aligned
+
+
+def _free(address: int) -> None:
+    free = _libc().free
+    free.argtypes = [ctypes.c_void_p]
+    free(_RAW.pop(address))
+
+
+#: Aligned pool memory -> the pointer calloc gave (for free).
+_RAW: dict[int, int] = {}
+
+
 class NativePool:
     """Worker threads parked in ``kdsl_pool_worker``; ``run`` hands them a launch."""
 
@@ -257,7 +289,8 @@ class NativePool:
         #: ``call(record)`` runs ``fn(0, total, args, dims)`` from a record of those four
         #: words on the calling thread (``record``).
         self.call = _CALL(addresses["call"])
-        self._memory: Any = None
+        #: The address of the pool's memory (None: no workers yet).
+        self._memory: int | None = None
         self._threads: list[threading.Thread] = []
         #: Held while a launch runs: a second launching thread runs inline instead.
         self.busy = threading.Lock()
@@ -266,10 +299,10 @@ class NativePool:
         """The pool's memory, with ``workers`` parked workers (started on first use)."""
         if self._memory is None or len(self._threads) != workers:
             self._stop_workers()
-            self._memory = (ctypes.c_int64 * (POOL_BYTES // 8))()
-            self._memory[_FIELDS["wspinp"] // 8] = WORKER_SPIN
-            self._memory[_FIELDS["lspinp"] // 8] = LAUNCHER_SPIN
-            address = ctypes.addressof(self._memory)
+            address = self._memory = _allocate()
+            words = (ctypes.c_int64 * (POOL_BYTES // 8)).from_address(address)
+            words[_FIELDS["wspinp"] // 8] = WORKER_SPIN
+            words[_FIELDS["lspinp"] // 8] = LAUNCHER_SPIN
             self._threads = [
                 threading.Thread(
                     target=self._worker, args=(address, i), daemon=True, name=f"kdsl-native-{i}"
@@ -278,7 +311,7 @@ class NativePool:
             ]
             for t in self._threads:
                 t.start()
-        return ctypes.addressof(self._memory)
+        return self._memory
 
     def run(self, fn: int, total: int, args: int, dims: int, threads: int) -> bool:
         """Run range function ``fn`` over ``[0, total)`` in ``threads`` chunks (the calling
@@ -302,11 +335,12 @@ class NativePool:
         if self._memory is None:
             return
         memory, threads = self._memory, self._threads
-        memory[_FIELDS["stopp"] // 8] = 1
+        ctypes.c_int64.from_address(memory + _FIELDS["stopp"]).value = 1
         # A launch with no chunk for anyone: workers see the generation change and stop.
-        self._run(ctypes.addressof(memory), self.noop, 0, None, None, 1)
+        self._run(memory, self.noop, 0, None, None, 1)
         for t in threads:
             t.join()
+        _free(memory)  # no thread reads it any more
         self._memory, self._threads = None, []
 
     def forget_threads(self) -> None:
