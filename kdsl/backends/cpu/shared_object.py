@@ -34,6 +34,9 @@ _ET_DYN = 3
 #: Handles of the loaded kernels: never closed, as JIT code is never freed.
 _LOADED: list[Any] = []
 _LOCK = threading.Lock()
+#: Shared objects ``link`` loaded to check them, by their bytes: the ``load`` that
+#: follows a build takes the handle instead of loading a second copy.
+_VERIFIED: dict[bytes, Any] = {}
 #: The longest a link may take (a linker that hangs must not hang the compile).
 LINK_TIMEOUT_S = 60
 
@@ -96,9 +99,11 @@ def link(obj: bytes) -> bytes | None:
                 continue
             data = out.read_bytes()
             try:
-                _dlopen(data)  # every symbol resolves (ctypes loads with RTLD_NOW)
+                lib = _dlopen(data)  # every symbol resolves (ctypes loads with RTLD_NOW)
             except OSError:
                 continue
+            with _LOCK:
+                _VERIFIED[data] = lib  # ``load`` of these very bytes uses this handle
             return data
     return None
 
@@ -111,8 +116,11 @@ def load(data: bytes, symbols: list[str]) -> dict[str, int]:
     """
     if not is_shared_object(data):
         raise ValueError("not a shared object")
+    with _LOCK:
+        lib = _VERIFIED.pop(data, None)
     try:
-        lib = _dlopen(data)
+        if lib is None:
+            lib = _dlopen(data)
         out = {s: ctypes.cast(getattr(lib, s), ctypes.c_void_p).value for s in symbols}
     except (OSError, AttributeError) as e:
         raise ValueError(f"cannot load the shared object: {e}") from None
