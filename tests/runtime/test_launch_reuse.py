@@ -188,3 +188,26 @@ def test_a_backend_without_prepare_reusable_launches_plainly():
     _launch_n(axpy, 2, [x, y, 1.0], "interp", n=4)
     assert interp.reuse.hits == 0 and not interp.reuse.entries
     np.testing.assert_array_equal(y.numpy(), np.full(2, 4.0))
+
+
+@pytest.mark.skipif(not wp.is_cuda_available(), reason="needs a CUDA device")
+def test_cuda_reuse_and_its_guards():
+    dev = "cuda:0"
+    x = wp.array(np.arange(4, dtype=np.float32), device=dev)
+    y = wp.zeros(4, dtype=float, device=dev)
+    for _ in range(3):  # the second and third launches reuse the packed parameters
+        wp.launch(axpy, dim=4, inputs=[x, y, 1.0], device=dev)
+    assert launch_plan(axpy, dev, None).reuse.hits >= 1
+    np.testing.assert_array_equal(y.numpy(), 3 * np.arange(4))
+    z = wp.zeros(4, dtype=float, device=dev)  # another array: packed afresh
+    wp.launch(axpy, dim=4, inputs=[x, z, -0.0], device=dev)
+    wp.launch(axpy, dim=4, inputs=[x, z, 2.0], device=dev)  # another scalar
+    np.testing.assert_array_equal(z.numpy(), 2 * np.arange(4))
+    s = wp.Stream(dev)  # another stream: another key, and the launch goes there
+    with wp.ScopedStream(s):
+        for _ in range(3):
+            wp.launch(axpy, dim=4, inputs=[x, z, 1.0], device=dev)
+    s.synchronize()
+    np.testing.assert_array_equal(z.numpy(), 5 * np.arange(4))
+    keys = launch_plan(axpy, dev, None).reuse.entries
+    assert any(k[1] is s or k[1] == s for k in keys)
