@@ -258,3 +258,33 @@ def test_the_pool_is_chosen_by_measured_cost():
     finally:
         pool.set_num_threads(old[0])
         pool.min_parallel, pool.adaptive = old[1:]
+
+
+def test_a_kernel_whose_pool_launches_cost_more_stays_inline():
+    # The first launch of an unmeasured kernel runs inline to be measured, even above
+    # min_parallel; a pool launch that costs more than the model's hand-off is recorded
+    # as the kernel's pool overhead, and the kernel then stays inline.
+    cost = pool.RangeCost()
+    calls = []
+
+    def fn(start, end, *args):
+        calls.append((start, end))
+
+    old = pool.num_threads(), pool.min_parallel, pool.adaptive
+    pool.set_num_threads(2)
+    pool.min_parallel, pool.adaptive = 4096, True
+    try:
+        pool.run_range(fn, 5000, cost=cost)  # not measured yet: inline, measured
+        assert calls == [(0, 5000)] and cost.seconds_per_thread is not None
+        cost.seconds_per_thread = 1e-3  # heavy: the pool
+        calls.clear()
+        pool.run_range(fn, 5000, cost=cost)
+        assert sorted(calls) == [(0, 2500), (2500, 5000)]
+        assert cost.pool_overhead is not None  # measured (0 here: the pool ran quickly)
+        cost.pool_overhead = 10.0  # pool launches of this kernel cost 10 s more
+        calls.clear()
+        pool.run_range(fn, 5000, cost=cost)
+        assert calls == [(0, 5000)]
+    finally:
+        pool.set_num_threads(old[0])
+        pool.min_parallel, pool.adaptive = old[1:]

@@ -14,8 +14,12 @@ handing a launch to the workers costs a fixed time (measured once, when the pool
 starts: ``dispatch_seconds``), and each kernel's cost per thread is measured on
 its own inline launches (``RangeCost``). A launch runs on the pool when its
 expected inline time exceeds what splitting it saves, ``t > overhead * n/(n-1)``
-for ``n`` threads. A kernel not measured yet runs inline below ``min_parallel``
-threads and on the pool above it. ``benchmarks/bench_launch.py`` shows the
+for ``n`` threads, where ``overhead`` is what the kernel's own pool launches were
+measured to cost beyond their share of the work (``dispatch_seconds`` until one
+ran): some kernels pay far more on the pool than the hand-off (4,096-thread adjoint
+kernels: about 100 us more than inline, cause not yet known). A kernel not measured
+yet runs inline (and is measured) up to ``measure_inline_up_to`` threads, and on
+the pool above it. ``benchmarks/bench_launch.py`` shows the
 crossover for a cheap and a heavy kernel. ``adaptive = False`` restores a plain
 size threshold (``min_parallel``), which tests use to force either path.
 """
@@ -48,19 +52,38 @@ adaptive = True
 _dispatch_seconds: float | None = None
 
 
-class RangeCost:
-    """The measured cost per thread of one kernel's inline launches (a running estimate)."""
+#: A kernel not measured yet runs inline once (to be measured) up to this many threads,
+#: even above ``min_parallel``: its pool launches are then chosen from its cost.
+measure_inline_up_to = 1 << 16
 
-    __slots__ = ("seconds_per_thread",)
+
+class RangeCost:
+    """The measured costs of one kernel (running estimates): per thread on its inline
+    launches, and what a launch on the pool costs beyond its share of that work."""
+
+    __slots__ = ("pool_overhead", "seconds_per_thread")
 
     def __init__(self) -> None:
         self.seconds_per_thread: float | None = None
+        #: Seconds a pool launch took beyond ``seconds_per_thread * threads / workers``;
+        #: None until a pool launch of a measured kernel (``dispatch_seconds`` stands in).
+        self.pool_overhead: float | None = None
 
     def record(self, seconds: float, threads: int) -> None:
         """Fold one inline launch of ``threads`` threads taking ``seconds`` into the estimate."""
         per = seconds / threads
         old = self.seconds_per_thread
         self.seconds_per_thread = per if old is None else 0.5 * (old + per)
+
+    def record_pool(self, seconds: float, threads: int, workers: int) -> None:
+        """Fold one pool launch over ``workers`` threads into ``pool_overhead``: a kernel
+        whose pool launches cost more than the model's hand-off (page faults, memory
+        traffic, the workers' wake-up) then stays inline where that is faster."""
+        if self.seconds_per_thread is None:
+            return
+        extra = max(0.0, seconds - self.seconds_per_thread * threads / workers)
+        old = self.pool_overhead
+        self.pool_overhead = extra if old is None else 0.5 * (old + extra)
 
 
 class _Worker:
@@ -216,14 +239,20 @@ def run_range(
         else:
             whole()
         return
-    per = cost.seconds_per_thread if cost is not None and adaptive else None
-    if per is None:
-        inline = total < min_parallel
+    measured = cost is not None and adaptive
+    per = cost.seconds_per_thread if measured else None
+    if per is None:  # not measured: small or first launches run inline (and are measured)
+        inline = total < min_parallel or (measured and total <= measure_inline_up_to)
     else:
-        inline = per * total <= dispatch_seconds() * n / (n - 1)
+        overhead = cost.pool_overhead
+        overhead = dispatch_seconds() if overhead is None else overhead
+        inline = per * total <= overhead * n / (n - 1)
     if not inline:
+        t0 = time.perf_counter()
         if address is None or _native is None or not _native.run(address, total, *args, n):
             run(lambda s, e: fn(s, e, *args), total, force=True)
+        if measured:
+            cost.record_pool(time.perf_counter() - t0, total, n)
     elif whole is not None:
         t0 = time.perf_counter()
         whole()
