@@ -17,7 +17,9 @@ expected inline time exceeds what splitting it saves, ``t > overhead * n/(n-1)``
 for ``n`` threads, where ``overhead`` is what the kernel's own pool launches were
 measured to cost beyond their share of the work (``dispatch_seconds`` until one
 ran): some kernels pay far more on the pool than the hand-off (4,096-thread adjoint
-kernels: about 100 us more than inline, cause not yet known). A kernel not measured
+kernels: about 100 us more than inline, cause not yet known); a kernel held inline
+that way tries the pool again every ``retry_pool_every`` launches, so one slow pool
+launch (the workers' start, a busy moment) does not decide for good. A kernel not measured
 yet runs inline (and is measured) up to ``measure_inline_up_to`` threads, and on
 the pool above it. ``benchmarks/bench_launch.py`` shows the
 crossover for a cheap and a heavy kernel. ``adaptive = False`` restores a plain
@@ -52,6 +54,9 @@ adaptive = True
 _dispatch_seconds: float | None = None
 
 
+#: A kernel held inline by its measured pool overhead tries the pool again on every
+#: this-many-th launch (the overhead is a running estimate: slow launches age out).
+retry_pool_every = 16
 #: A kernel not measured yet runs inline once (to be measured) up to this many threads,
 #: even above ``min_parallel``: its pool launches are then chosen from its cost.
 measure_inline_up_to = 1 << 16
@@ -61,13 +66,15 @@ class RangeCost:
     """The measured costs of one kernel (running estimates): per thread on its inline
     launches, and what a launch on the pool costs beyond its share of that work."""
 
-    __slots__ = ("pool_overhead", "seconds_per_thread")
+    __slots__ = ("held_inline", "pool_overhead", "seconds_per_thread")
 
     def __init__(self) -> None:
         self.seconds_per_thread: float | None = None
         #: Seconds a pool launch took beyond ``seconds_per_thread * threads / workers``;
         #: None until a pool launch of a measured kernel (``dispatch_seconds`` stands in).
         self.pool_overhead: float | None = None
+        #: Launches kept inline only by ``pool_overhead`` since the pool was last tried.
+        self.held_inline = 0
 
     def record(self, seconds: float, threads: int) -> None:
         """Fold one inline launch of ``threads`` threads taking ``seconds`` into the estimate."""
@@ -244,9 +251,14 @@ def run_range(
     if per is None:  # not measured: small or first launches run inline (and are measured)
         inline = total < min_parallel or (measured and total <= measure_inline_up_to)
     else:
-        overhead = cost.pool_overhead
-        overhead = dispatch_seconds() if overhead is None else overhead
-        inline = per * total <= overhead * n / (n - 1)
+        inline = per * total <= dispatch_seconds() * n / (n - 1)
+        if not inline and cost.pool_overhead is not None:
+            inline = per * total <= cost.pool_overhead * n / (n - 1)
+            # Held inline by a measured overhead: try the pool again now and then, so
+            # one slow pool launch (the workers' start, a busy host) is not final.
+            cost.held_inline = cost.held_inline + 1 if inline else 0
+            if cost.held_inline >= retry_pool_every:
+                inline, cost.held_inline = False, 0
     if not inline:
         t0 = time.perf_counter()
         if address is None or _native is None or not _native.run(address, total, *args, n):
