@@ -231,64 +231,61 @@ def test_nd_launches_split_mid_row_cover_every_index_once(threads):
     np.testing.assert_array_equal(out4.numpy(), ((i * 10 + j) * 10 + k) * 10 + m)
 
 
-def test_the_pool_is_chosen_by_measured_cost():
+@pytest.fixture
+def adaptive_two_threads():
+    """Two pool threads, the adaptive choice on, ``min_parallel`` 4096; a recording range
+    function: ``(fn, calls)``, ``calls`` the ``(start, end)`` chunks it ran."""
+    calls = []
+
+    def fn(start, end, *args):
+        calls.append((start, end))
+
+    old = pool.num_threads(), pool.min_parallel, pool.adaptive
+    pool.set_num_threads(2)
+    pool.min_parallel, pool.adaptive = 4096, True
+    try:
+        yield fn, calls
+    finally:
+        pool.set_num_threads(old[0])
+        pool.min_parallel, pool.adaptive = old[1:]
+
+
+def _runs(fn, calls, total, cost):
+    """The chunks one ``run_range`` of ``total`` threads ran, sorted."""
+    calls.clear()
+    pool.run_range(fn, total, cost=cost)
+    return sorted(calls)
+
+
+def test_the_pool_is_chosen_by_measured_cost(adaptive_two_threads):
     # A cheap kernel measured inline stays inline at a size where a heavy one goes to
     # the pool; neither decision changes the results.
+    fn, calls = adaptive_two_threads
     cost = pool.RangeCost()
-    calls = []
-
-    def fn(start, end, *args):
-        calls.append((start, end))
-
-    old = pool.num_threads(), pool.min_parallel, pool.adaptive
-    pool.set_num_threads(2)
-    pool.min_parallel, pool.adaptive = 4096, True
-    try:
-        pool.run_range(fn, 100, cost=cost)  # not measured yet, small: inline and timed
-        assert calls == [(0, 100)] and cost.seconds_per_thread is not None
-        cost.seconds_per_thread = 1e-12  # cheap: 5000 threads still far below the dispatch cost
-        calls.clear()
-        pool.run_range(fn, 5000, cost=cost)
-        assert calls == [(0, 5000)]
-        cost.seconds_per_thread = 1.0  # heavy: split over both threads
-        calls.clear()
-        pool.run_range(fn, 5000, cost=cost)
-        assert sorted(calls) == [(0, 2500), (2500, 5000)]
-        assert pool.dispatch_seconds() > 0
-    finally:
-        pool.set_num_threads(old[0])
-        pool.min_parallel, pool.adaptive = old[1:]
+    assert _runs(fn, calls, 100, cost) == [(0, 100)]  # not measured yet, small: inline
+    assert cost.seconds_per_thread is not None
+    cost.seconds_per_thread = 1e-12  # cheap: 5000 threads still far below the dispatch cost
+    assert _runs(fn, calls, 5000, cost) == [(0, 5000)]
+    cost.seconds_per_thread = 1.0  # heavy: split over both threads
+    assert _runs(fn, calls, 5000, cost) == [(0, 2500), (2500, 5000)]
+    assert pool.dispatch_seconds() > 0
 
 
-def test_a_kernel_whose_pool_launches_cost_more_stays_inline():
+def test_a_kernel_whose_pool_launches_cost_more_stays_inline(adaptive_two_threads):
     # The first launch of an unmeasured kernel runs inline to be measured, even above
     # min_parallel; a pool launch that costs more than the model's hand-off is recorded
-    # as the kernel's pool overhead, and the kernel then stays inline.
+    # as the kernel's pool overhead, and the kernel then stays inline, trying the pool
+    # again every retry_pool_every launches.
+    fn, calls = adaptive_two_threads
     cost = pool.RangeCost()
-    calls = []
-
-    def fn(start, end, *args):
-        calls.append((start, end))
-
-    old = pool.num_threads(), pool.min_parallel, pool.adaptive
-    pool.set_num_threads(2)
-    pool.min_parallel, pool.adaptive = 4096, True
-    try:
-        pool.run_range(fn, 5000, cost=cost)  # not measured yet: inline, measured
-        assert calls == [(0, 5000)] and cost.seconds_per_thread is not None
-        cost.seconds_per_thread = 1e-3  # heavy: the pool
-        calls.clear()
-        pool.run_range(fn, 5000, cost=cost)
-        assert sorted(calls) == [(0, 2500), (2500, 5000)]
-        assert cost.pool_overhead is not None  # measured (0 here: the pool ran quickly)
-        cost.pool_overhead = 10.0  # pool launches of this kernel cost 10 s more
-        for _ in range(pool.retry_pool_every - 1):
-            calls.clear()
-            pool.run_range(fn, 5000, cost=cost)
-            assert calls == [(0, 5000)]
-        calls.clear()  # then the pool is tried again, and its (fast) launch lowers the estimate
-        pool.run_range(fn, 5000, cost=cost)
-        assert sorted(calls) == [(0, 2500), (2500, 5000)] and cost.pool_overhead < 10.0
-    finally:
-        pool.set_num_threads(old[0])
-        pool.min_parallel, pool.adaptive = old[1:]
+    assert _runs(fn, calls, 5000, cost) == [(0, 5000)]  # not measured yet: inline
+    assert cost.seconds_per_thread is not None
+    cost.seconds_per_thread = 1e-3  # heavy: the pool
+    assert _runs(fn, calls, 5000, cost) == [(0, 2500), (2500, 5000)]
+    assert cost.pool_overhead is not None  # measured (0 here: the pool ran quickly)
+    cost.pool_overhead = 10.0  # pool launches of this kernel cost 10 s more
+    for _ in range(pool.retry_pool_every - 1):
+        assert _runs(fn, calls, 5000, cost) == [(0, 5000)]
+    # Then the pool is tried again, and its (fast) launch lowers the estimate.
+    assert _runs(fn, calls, 5000, cost) == [(0, 2500), (2500, 5000)]
+    assert cost.pool_overhead < 10.0
