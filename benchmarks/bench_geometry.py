@@ -31,9 +31,7 @@ from __future__ import annotations
 import argparse
 import json
 import platform
-import statistics
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -45,20 +43,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_geometry_mc import marching_cubes_section, print_marching_cubes
 from bench_geometry_mesh import mesh_section, print_mesh
 from bench_geometry_volume import print_volume, volume_section
+from suite.harness import median_seconds
 
 RESULTS = Path(__file__).resolve().parent / "results" / "geometry.json"
 
 
-def _median_s(fn, reps: int, sync) -> float:
-    fn()
-    sync()
-    times = []
-    for _ in range(reps):
-        t = time.perf_counter()
-        fn()
-        sync()
-        times.append(time.perf_counter() - t)
-    return statistics.median(times)
 
 
 @wp.kernel
@@ -136,14 +125,14 @@ def bvh_section(args) -> list[dict]:
     for cons in args.constructors:
         bvh = wp.Bvh(klo, khi, constructor=cons)
         row = {"section": "bvh", "side": "kdsl", "constructor": cons, "boxes": n, "queries": m}
-        row["build_s"] = _median_s(lambda cons=cons: wp.Bvh(klo, khi, constructor=cons),
+        row["build_s"] = median_seconds(lambda cons=cons: wp.Bvh(klo, khi, constructor=cons),
                                    args.reps, sync)  # fmt: skip
-        row["refit_s"] = _median_s(bvh.refit, args.reps, sync)
+        row["refit_s"] = median_seconds(bvh.refit, args.reps, sync)
         for name, kernel, inputs in (
             ("aabb", kd_box_hits, [bvh.id, kqlo, kqhi, out]),
             ("ray", kd_ray_hits, [bvh.id, krs, krd, max_t, out]),
         ):
-            row[f"{name}_s"] = _median_s(
+            row[f"{name}_s"] = median_seconds(
                 lambda k=kernel, i=inputs: wp.launch(k, dim=m, inputs=i, device=dev),
                 args.reps, sync,
             )  # fmt: skip
@@ -169,14 +158,14 @@ def bvh_section(args) -> list[dict]:
             wb = warp.Bvh(wlo, whi, constructor=cons)
             row = {"section": "bvh", "side": "warp", "constructor": cons, "boxes": n,
                    "queries": m}  # fmt: skip
-            row["build_s"] = _median_s(lambda cons=cons: warp.Bvh(wlo, whi, constructor=cons),
+            row["build_s"] = median_seconds(lambda cons=cons: warp.Bvh(wlo, whi, constructor=cons),
                                        args.reps, wsync)  # fmt: skip
-            row["refit_s"] = _median_s(wb.refit, args.reps, wsync)
+            row["refit_s"] = median_seconds(wb.refit, args.reps, wsync)
             for name, kernel, inputs in (
                 ("aabb", box_hits, [wb.id, wqlo, wqhi, wout]),
                 ("ray", ray_hits, [wb.id, wrs, wrd, max_t, wout]),
             ):
-                row[f"{name}_s"] = _median_s(
+                row[f"{name}_s"] = median_seconds(
                     lambda k=kernel, i=inputs: warp.launch(k, dim=m, inputs=i, device=wdev),
                     args.reps, wsync,
                 )  # fmt: skip

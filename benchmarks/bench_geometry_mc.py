@@ -22,7 +22,7 @@ import importlib.util
 import sys
 
 import numpy as np
-from bench_geometry_mesh import _median_s
+from suite.harness import median_seconds
 
 import kdsl as wp
 
@@ -58,7 +58,7 @@ def marching_cubes_section(args) -> list[dict]:
         mc = wp.MarchingCubes(n, n, n, device=dev)
         row = {"section": "marching_cubes", "side": "kdsl", "field": name, "nodes": n,
                "device": dev}  # fmt: skip
-        row["surface_s"] = _median_s(lambda mc=mc, field=field: mc.surface(field, 0.0),
+        row["surface_s"] = median_seconds(lambda mc=mc, field=field: mc.surface(field, 0.0),
                                      args.reps, wp.synchronize)  # fmt: skip
         row["verts"], row["tris"] = mc.verts.shape[0], mc.indices.shape[0] // 3
         rows.append(row)
@@ -67,7 +67,7 @@ def marching_cubes_section(args) -> list[dict]:
         wfield = warp.array(f, dtype=warp.float32, device=dev)
         iso = warp.geometry.IsoSurfaceMarchingCubes(n, n, n)
         wrow = {**row, "side": "warp"}
-        wrow["surface_s"] = _median_s(lambda iso=iso, wf=wfield: iso.surface(wf, 0.0),
+        wrow["surface_s"] = median_seconds(lambda iso=iso, wf=wfield: iso.surface(wf, 0.0),
                                       args.reps, warp.synchronize)  # fmt: skip
         wrow["verts"], wrow["tris"] = iso.verts.shape[0], iso.indices.shape[0] // 3
         rows.append(wrow)

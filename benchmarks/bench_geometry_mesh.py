@@ -31,14 +31,15 @@ import argparse
 import importlib.util
 import json
 import platform
-import statistics
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
 
 import kdsl as wp
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from suite.harness import median_seconds
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "benchmarks" / "results" / "geometry_mesh.json"
@@ -49,16 +50,6 @@ MAX_T = 1.0e6
 RAY_DISAGREEMENT = 1.0e-4
 
 
-def _median_s(fn, reps: int, sync) -> float:
-    fn()
-    sync()
-    times = []
-    for _ in range(reps):
-        t = time.perf_counter()
-        fn()
-        sync()
-        times.append(time.perf_counter() - t)
-    return statistics.median(times)
 
 
 def bumpy_cube_sphere(cells: int) -> tuple[np.ndarray, np.ndarray]:
@@ -147,7 +138,7 @@ def _run_side(m, name: str, data: dict, device: str, reps: int, sync) -> tuple[d
     hit = m.zeros(n, dtype=m.int32, device=device)
     row = {"section": "mesh", "side": name, "device": device, "tris": len(data["faces"]),
            "queries": n}  # fmt: skip
-    row["build_s"] = _median_s(lambda: m.Mesh(pts, idx), reps, sync)
+    row["build_s"] = median_seconds(lambda: m.Mesh(pts, idx), reps, sync)
     mesh = m.Mesh(pts, idx)
     launches = {
         "closest": (closest, [mesh.id, xs, face, dist]),
@@ -155,7 +146,7 @@ def _run_side(m, name: str, data: dict, device: str, reps: int, sync) -> tuple[d
         "anyhit": (anyhit, [mesh.id, rs, rd, hit]),
     }
     for key, (kernel, inputs) in launches.items():
-        row[f"{key}_s"] = _median_s(
+        row[f"{key}_s"] = median_seconds(
             lambda k=kernel, i=inputs: m.launch(k, dim=n, inputs=i, device=device), reps, sync
         )
     answers = {"face": face.numpy().copy(), "dist": dist.numpy().copy(),
@@ -169,7 +160,7 @@ def _run_side(m, name: str, data: dict, device: str, reps: int, sync) -> tuple[d
         m.launch(move, dim=npts, inputs=[moving, 1.0001], device=device)
         moved_mesh.refit()
 
-    row["refit_s"] = _median_s(move_refit, reps, sync)
+    row["refit_s"] = median_seconds(move_refit, reps, sync)
     return row, answers
 
 
@@ -189,7 +180,7 @@ def _embree_row(data: dict) -> tuple[dict, dict] | None:
         TriangleMesh(scene, data["points"], data["faces"])
         return scene
 
-    row["build_s"] = _median_s(build, 3, lambda: None)
+    row["build_s"] = median_seconds(build, 3, lambda: None)
     scene = build()
     start, d = data["ray_start"], data["ray_dir"]
     out = {}
@@ -200,8 +191,8 @@ def _embree_row(data: dict) -> tuple[dict, dict] | None:
     def any_hit():
         out["anyhit"] = scene.run(start, d, query="OCCLUDED")
 
-    row["ray_s"] = _median_s(closest, 1, lambda: None)
-    row["anyhit_s"] = _median_s(any_hit, 1, lambda: None)
+    row["ray_s"] = median_seconds(closest, 1, lambda: None)
+    row["anyhit_s"] = median_seconds(any_hit, 1, lambda: None)
     res = out["closest"]
     t = np.where(res["primID"] >= 0, res["tfar"], 0.0).astype(np.float32)
     return row, {"ray_face": res["primID"], "ray_t": t, "anyhit": (out["anyhit"] >= 0)}

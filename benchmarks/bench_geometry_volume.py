@@ -23,7 +23,7 @@ from __future__ import annotations
 import sys
 
 import numpy as np
-from bench_geometry_mesh import _median_s
+from suite.harness import median_seconds
 
 import kdsl as wp
 from kdsl.geometry.nanovdb.builder import build_grid, leaves_from_voxels
@@ -105,7 +105,7 @@ def volume_section(args) -> list[dict]:
     for name, pts in _points(rng, args.samples).items():
         kp, ko = wp.array(pts, dtype=wp.vec3, device=dev), wp.zeros(len(pts), device=dev)
         row = {**base, "side": "kdsl", "op": f"sample {name}", "n": len(pts)}
-        row["s"] = _median_s(lambda kp=kp, ko=ko: wp.launch(kd_sample, kp.shape[0], device=dev,
+        row["s"] = median_seconds(lambda kp=kp, ko=ko: wp.launch(kd_sample, kp.shape[0], device=dev,
                              inputs=[grid.id, kp, ko]), reps, wp.synchronize)  # fmt: skip
         rows.append(row)
         if warp is None:
@@ -113,7 +113,7 @@ def volume_section(args) -> list[dict]:
         wpts = warp.array(pts, dtype=warp.vec3, device=dev)
         wo = warp.zeros(len(pts), dtype=float, device=dev)
         wrow = {**row, "side": "warp"}
-        wrow["s"] = _median_s(lambda wpts=wpts, wo=wo: warp.launch(w_sample, wpts.shape[0],
+        wrow["s"] = median_seconds(lambda wpts=wpts, wo=wo: warp.launch(w_sample, wpts.shape[0],
                               device=dev, inputs=[wvol.id, wpts, wo]), reps, warp.synchronize)  # fmt: skip
         rows.append(wrow)
         err = np.abs(ko.numpy() - wo.numpy()).max(initial=0.0)
@@ -124,14 +124,14 @@ def volume_section(args) -> list[dict]:
     vals = rng.standard_normal(len(ijk)).astype(np.float32)
     ki, kv = wp.array(ijk, dtype=wp.vec3i, device=dev), wp.array(vals, device=dev)
     row = {**base, "side": "kdsl", "op": "store", "n": len(ijk)}
-    row["s"] = _median_s(lambda: wp.launch(kd_store, len(ijk), device=dev,
+    row["s"] = median_seconds(lambda: wp.launch(kd_store, len(ijk), device=dev,
                          inputs=[grid.id, ki, kv]), reps, wp.synchronize)  # fmt: skip
     rows.append(row)
     if warp is not None:
         wi = warp.array(ijk, dtype=warp.vec3i, device=dev)
         wv = warp.array(vals, dtype=float, device=dev)
         wrow = {**row, "side": "warp"}
-        wrow["s"] = _median_s(lambda: warp.launch(w_store, len(ijk), device=dev,
+        wrow["s"] = median_seconds(lambda: warp.launch(w_store, len(ijk), device=dev,
                               inputs=[wvol.id, wi, wv]), reps, warp.synchronize)  # fmt: skip
         rows.append(wrow)
         if not np.array_equal(grid.words.numpy().view(np.uint8), wvol.array().numpy()):

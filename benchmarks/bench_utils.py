@@ -13,27 +13,25 @@ is installed. Results go to benchmarks/results/utils.json.
 import argparse
 import json
 import platform
-import statistics
-import time
+import sys
 from pathlib import Path
 
 import numpy as np
 
 import kdsl as wp
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from suite.harness import median_seconds
+
+
+def median_ms(fn, reps: int, sync) -> float:
+    """``median_seconds`` in milliseconds."""
+    return 1e3 * median_seconds(fn, reps, sync)
+
+
 RESULTS = Path(__file__).resolve().parent / "results" / "utils.json"
 
 
-def _median_ms(fn, reps: int, sync) -> float:
-    fn()
-    sync()
-    times = []
-    for _ in range(reps):
-        t = time.perf_counter()
-        fn()
-        sync()
-        times.append(time.perf_counter() - t)
-    return 1e3 * statistics.median(times)
 
 
 def _workloads(n: int, device: str):
@@ -112,10 +110,10 @@ def main() -> None:
           f"{wp.utils.buffers.host_threads()} host threads)")  # fmt: skip
     print(f"{'primitive':<20} {'kdsl ms':>9} {ref_name + ' ms':>16} {'Warp ms':>9}")
     for name, (ours, ref, _) in data.items():
-        row = {"primitive": name, "kdsl_ms": _median_ms(ours, args.reps, sync),
-               "reference_ms": _median_ms(ref, args.reps, sync)}  # fmt: skip
+        row = {"primitive": name, "kdsl_ms": median_ms(ours, args.reps, sync),
+               "reference_ms": median_ms(ref, args.reps, sync)}  # fmt: skip
         if name in warp_calls:
-            row["warp_ms"] = _median_ms(warp_calls[name], args.reps, sync)
+            row["warp_ms"] = median_ms(warp_calls[name], args.reps, sync)
         rows.append(row)
         warp_ms = f"{row['warp_ms']:9.2f}" if "warp_ms" in row else f"{'-':>9}"
         print(f"{name:<20} {row['kdsl_ms']:9.2f} {row['reference_ms']:16.2f} {warp_ms}")

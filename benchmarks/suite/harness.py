@@ -94,6 +94,20 @@ def measure(
     return Stats.of(samples)
 
 
+def median_seconds(fn: Callable[[], Any], reps: int, sync: Callable[[], None]) -> float:
+    """The median seconds of ``reps`` calls of ``fn``, each followed by ``sync``, after
+    one untimed call (the compile)."""
+    fn()
+    sync()
+    times = []
+    for _ in range(reps):
+        t = time.perf_counter()
+        fn()
+        sync()
+        times.append(time.perf_counter() - t)
+    return statistics.median(times)
+
+
 def measure_device(
     step: Callable[[], None],
     sync: Callable[[], None],
