@@ -52,6 +52,8 @@ def _make(
         with mem.scope(dev):  # zeros: a memset on the device's stream, no upload
             buf.data.memset_async(0, buf.nbytes)
     elif init is not None:
+        if isinstance(t, T.StructType):  # padding too: the same bytes as on cuda
+            buf.view(np.uint8)[...] = 0
         try:
             value = np.asarray(host_value(t, init), dtype=buf.dtype)
         except ValueError as e:

@@ -216,6 +216,17 @@ def test_array_constructors_of_structs():
         wp.zeros(2, dtype=Particle)
 
 
+def test_struct_array_padding_bytes_are_zero():
+    # Records have padding (Rec: 80 bytes, fields 63); zeros and full write every byte,
+    # so a record array's bytes are the same on every device (the cuda test compares them).
+    np.full(1 << 16, 0xFF, np.uint8)  # leave non-zero bytes behind in freed memory
+    assert not any(wp.zeros(64, dtype=Rec).numpy().tobytes())
+    p = Rec(d=1.5)
+    expected = np.zeros(8, wp.zeros(1, dtype=Rec).numpy().dtype)
+    expected["d"] = 1.5
+    assert wp.full(8, p, dtype=Rec).numpy().tobytes() == expected.tobytes()
+
+
 def test_wrong_numpy_layout_is_refused():
     packed = np.zeros(2, np.dtype([("y", "f4"), ("k", "i1")]))  # 5 bytes, not 8
     with pytest.raises(KdslLaunchError, match="NumPy dtype"):
