@@ -28,6 +28,7 @@ VALUE_TYPES: tuple[Type, ...] = (
     I32, I64, U32, F32, F64, VectorType(3, F32), VectorType(3, F64), VectorType(4, F32),
     VectorType(4, F64),
 )  # fmt: skip
+_VEC3I = VectorType(3, I32)
 _NAMES = "int32, int64, uint32, float32, float64, vec3f, vec3d, vec4f or vec4d"
 
 #: The standard-library functions the lowerings call (``kdsl.stdlib.api`` registers them).
@@ -107,24 +108,49 @@ def _volume_sample_grad(em, args, node, **kwargs):
     return _call(em, "volume_sample_grad_value", [*args, em.zero(t, node)], node)
 
 
-@_define("volume_lookup", (4, 4), "``volume_lookup(id, i, j, k, dtype=float)``: the value "
+def _voxel(em, args: list[Any], name: str, node) -> list[Any]:
+    """The voxel arguments of a lookup or store: ``[i, j, k]``, or ``[ijk]`` (a vec3i, the
+    seeds' ``volume_lookup(vol, ijk)``)."""
+
+    def fits(a: Any, t: Type) -> bool:
+        if isinstance(a, Value):
+            return a.type == t
+        return t == I32 and isinstance(a, int) and not isinstance(a, bool)
+
+    want = [I32] * 3 if len(args) == 3 else [_VEC3I] if len(args) == 1 else None
+    if want is None:
+        got = f"{len(args)} arguments"
+    elif all(fits(a, t) for a, t in zip(args, want)):
+        return args
+    else:
+        got = "(" + ", ".join(str(a.type) if isinstance(a, Value) else repr(a) for a in args) + ")"
+    raise em.error(KdslTypeError, f"{name}(): a voxel is a vec3i or three int32s (i, j, k), "
+                   f"got {got}", node)  # fmt: skip
+
+
+@_define("volume_lookup", (2, 4), "``volume_lookup(id, i, j, k, dtype=float)``: the value "
          "(of type ``dtype``) of voxel ``(i, j, k)``: its leaf's, its tile's or the "
-         "background. Not differentiable.", ("dtype",))  # fmt: skip
+         "background. ``volume_lookup(id, ijk, dtype=float)`` takes the voxel as a vec3i. "
+         "Not differentiable.", ("dtype",))  # fmt: skip
 def _volume_lookup(em, args, node, **kwargs):
-    # ``dtype`` defaults to float32, as the seeds' older ``volume_lookup(id, i, j, k)``.
+    voxel = _voxel(em, args[1:], "volume_lookup", node)
+    # ``dtype`` defaults to float32, as the seeds' older ``volume_lookup(vol, ijk)``.
     t = _dtype(em, kwargs, "volume_lookup", node, default=F32)
-    return _call(em, "volume_lookup_value", [*args, em.zero(t, node)], node)
+    return _call(em, "volume_lookup_value", [args[0], *voxel, em.zero(t, node)], node)
 
 
-@_define("volume_store", (5, 5), "``volume_store(id, i, j, k, value)``: write ``value`` to "
+@_define("volume_store", (3, 5), "``volume_store(id, i, j, k, value)``: write ``value`` to "
          "voxel ``(i, j, k)`` when a leaf holds it and the volume holds values of its type "
-         "(no voxel is allocated or activated). Not differentiable.")  # fmt: skip
+         "(no voxel is allocated or activated). ``volume_store(id, ijk, value)`` takes the "
+         "voxel as a vec3i. Not differentiable.")  # fmt: skip
 def _volume_store(em, args, node):
-    value = args[4]
+    voxel = _voxel(em, args[1:-1], "volume_store", node)
+    value = args[-1]
     if is_weak(value) and not isinstance(value, bool):
         value = em.value(value, node)
     t = _value_type(em, value.type if isinstance(value, Value) else value, "volume_store", node)
-    return _call(em, "volume_store_value", [*args[:4], em.value(value, node, want=t)], node)
+    return _call(em, "volume_store_value", [args[0], *voxel, em.value(value, node, want=t)],
+                 node)  # fmt: skip
 
 
 def _index_data(em, args, name: str, node) -> tuple[Value, Value, Type]:

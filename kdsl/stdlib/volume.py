@@ -561,6 +561,12 @@ def volume_lookup_value(id: wp.uint64, i: int, j: int, k: int, like: Any):
 
 
 @func
+def volume_lookup_value(id: wp.uint64, ijk: wp.vec3i, like: Any):  # noqa: F811 - vec3i
+    """``volume_lookup(id, ijk, dtype=type(like))``: voxel ``ijk``'s value."""
+    return volume_lookup_value(id, ijk[0], ijk[1], ijk[2], like)
+
+
+@func
 def volume_store_value(id: wp.uint64, i: int, j: int, k: int, value: Any):
     """``volume_store(id, i, j, k, value)``: writes voxel ``(i, j, k)`` when a leaf holds
     it (tiles and the background are never written), and the grid's type is the value's."""
@@ -570,6 +576,12 @@ def volume_store_value(id: wp.uint64, i: int, j: int, k: int, value: Any):
         loc = _locate(id, i, j, k)
         if loc[1] == LEAF:
             _store(src.words, _value_word(rec, loc, i, j, k), value)
+
+
+@func
+def volume_store_value(id: wp.uint64, ijk: wp.vec3i, value: Any):  # noqa: F811 - vec3i
+    """``volume_store(id, ijk, value)``: ``volume_store_value`` at voxel ``ijk``."""
+    volume_store_value(id, ijk[0], ijk[1], ijk[2], value)
 
 
 @func
@@ -643,6 +655,24 @@ def volume_lookup_i(id: wp.uint64, i: int, j: int, k: int) -> int:
 
 
 @func
+def volume_lookup_f(id: wp.uint64, ijk: wp.vec3i) -> float:  # noqa: F811 - vec3i
+    """The float32 value of voxel ``ijk`` of volume ``id``."""
+    return volume_lookup_value(id, ijk, wp.float32(0.0))
+
+
+@func
+def volume_lookup_v(id: wp.uint64, ijk: wp.vec3i) -> wp.vec3:  # noqa: F811 - vec3i
+    """The vec3f value of voxel ``ijk`` of volume ``id``."""
+    return volume_lookup_value(id, ijk, wp.vec3(0.0))
+
+
+@func
+def volume_lookup_i(id: wp.uint64, ijk: wp.vec3i) -> int:  # noqa: F811 - vec3i
+    """The int32 value of voxel ``ijk`` of volume ``id``."""
+    return volume_lookup_value(id, ijk, wp.int32(0))
+
+
+@func
 def volume_store_f(id: wp.uint64, i: int, j: int, k: int, value: float):
     """Write ``value`` to voxel ``(i, j, k)`` of the float32 volume ``id`` when a leaf holds
     it (no voxel is allocated or activated)."""
@@ -664,11 +694,35 @@ def volume_store_i(id: wp.uint64, i: int, j: int, k: int, value: int):
 
 
 @func
+def volume_store_f(id: wp.uint64, ijk: wp.vec3i, value: float):  # noqa: F811 - vec3i
+    """Write ``value`` to voxel ``ijk`` of the float32 volume ``id`` when a leaf holds it."""
+    volume_store_value(id, ijk, value)
+
+
+@func
+def volume_store_v(id: wp.uint64, ijk: wp.vec3i, value: wp.vec3):  # noqa: F811 - vec3i
+    """Write ``value`` to voxel ``ijk`` of the vec3f volume ``id``."""
+    volume_store_value(id, ijk, value)
+
+
+@func
+def volume_store_i(id: wp.uint64, ijk: wp.vec3i, value: int):  # noqa: F811 - vec3i
+    """Write ``value`` to voxel ``ijk`` of the int32 volume ``id``."""
+    volume_store_value(id, ijk, value)
+
+
+@func
 def volume_lookup_index(id: wp.uint64, i: int, j: int, k: int) -> int:
     """The index of voxel ``(i, j, k)`` in a per-voxel array of volume ``id``
     (``volume_sample_index``'s ``voxel_data``), or -1 when it has none."""
     rec = wp.object_record(id, VolumeRecord)
     return int(_voxel_index(rec, _locate(id, i, j, k), i, j, k)) - 1
+
+
+@func
+def volume_lookup_index(id: wp.uint64, ijk: wp.vec3i) -> int:  # noqa: F811 - vec3i
+    """The index of voxel ``ijk`` in a per-voxel array of volume ``id``, or -1."""
+    return volume_lookup_index(id, ijk[0], ijk[1], ijk[2])
 
 
 @func
