@@ -353,12 +353,16 @@ def _stub_types(kernel: Kernel, stub: Callable[..., Any]) -> list[Any]:
 
 
 def _trimmed(fn: Callable[[], Any]) -> Any:
-    """Run ``fn``; a KdslError leaves without the compiler's internal frames."""
-    if full_tracebacks():
-        return fn()
+    """Run ``fn``; a KdslError leaves without the compiler's internal frames.
+
+    ``KDSL_TRACEBACK`` is read only when an error leaves (launches ask for a kernel's
+    argument types on every call).
+    """
     try:
         return fn()
     except KdslError as e:
+        if full_tracebacks():
+            raise
         err = e
     raise err.with_traceback(None) from None
 

@@ -10,6 +10,7 @@ by ``kdsl.config.max_tape_bytes``.
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Sequence
 from typing import Any
 
@@ -22,7 +23,10 @@ from kdsl.ir import Module, Operation
 from kdsl.ir import types as T
 from kdsl.ir.vjp import is_differentiable
 from kdsl.passes.adjoint.analysis import has_grad_arrays
+from kdsl.runtime.graphs import state as _graphs
 from kdsl.runtime.graphs.state import run_or_record
+from kdsl.runtime.launch import check_tid, launch_plan, normalize_dim, resolve_stream
+from kdsl.runtime.modules import backward_enabled
 
 _ADJ_ATTR = "_kdsl_adjoint"
 _COUNT_ATTR = "_kdsl_counter"
@@ -84,8 +88,6 @@ class DerivedKernel:
 
 def adjoint_kernel(kernel: Any) -> DerivedKernel:
     """The (cached) adjoint of ``kernel``; raises when the kernel disabled its backward pass."""
-    from kdsl.runtime.modules import backward_enabled
-
     if not backward_enabled(kernel):
         raise KdslError(
             f"kernel '{kernel.name}' was compiled with enable_backward=False, so it has no "
@@ -125,54 +127,158 @@ def launch_adjoint(
     entry per parameter: the gradient array of an array parameter (input gradients
     receive ``+=``, output gradients hold the incoming gradient) or None when no
     gradient is wanted (scalars' entries are ignored).
-    """
-    from kdsl.runtime import alloc
-    from kdsl.runtime.array import array
-    from kdsl.runtime.launch import (
-        check_tid,
-        launch_plan,
-        normalize_dim,
-        resolve_stream,
-    )
 
+    A backward pass launches many adjoints with the host waiting, so the per-launch
+    work is kept small: what depends only on the kernel, device and backend is worked
+    out once (``_AdjointPlan``), and a launch outside a graph capture goes through the
+    plan's packed-launch reuse (``LaunchReuse``), as a forward launch does.
+    """
     adj = adjoint_kernel(kernel)
-    dims = normalize_dim(dim, kernel.name)
+    if type(dim) is int and dim >= 0:
+        dims: tuple[int, ...] = (dim,)
+    elif type(dim) is tuple and 0 < len(dim) < 5 and all(type(d) is int and d >= 0 for d in dim):
+        dims = dim  # a tape replays its launches' normalized grids
+    else:
+        dims = normalize_dim(dim, kernel.name)
     check_tid(kernel, dims)
-    n = len(kernel.arg_types)
+    plan = launch_plan(adj, device, backend)
+    ap = _adjoint_plan(adj, plan)
+    n = ap.n
     if len(args) != n or len(adj_args) != n:
         raise KdslLaunchError(
             f"kernel '{kernel.name}': its adjoint takes {n} arguments and {n} adjoints, got "
             f"{len(args)} and {len(adj_args)}"
         )
-    plan = launch_plan(adj, device, backend)
     dev = plan.device
     convs = plan.converters
-    primal = [convs[i](v) for i, v in enumerate(args)]
-    adjoints = []
-    for i, (t, v, g) in enumerate(zip(kernel.arg_types, args, adj_args)):
-        if isinstance(t, T.ArrayType):
-            if g is None or not is_differentiable(t.dtype):
-                # Gradients nobody asked for land in scratch memory of the right shape.
-                g = alloc.zeros_like(v, device=dev) if isinstance(v, array) else v
-            adjoints.append(convs[n + i](g))
-        elif isinstance(t, T.StructType) and g is None and has_grad_arrays(t):
-            adjoints.append(convs[n + i](_struct_adjoint(v, dev)))
-        else:
-            # A scalar's adjoint is an unused input of the adjoint kernel (as in Warp).
-            adjoints.append(primal[i] if g is None else convs[n + i](g))
+    primal = [conv(v) for conv, v in zip(convs, args)]
+    adjoints = [ap.adjoint_arg(i, role, v, g, p) for i, (role, v, g, p) in
+                enumerate(zip(ap.roles, args, adj_args, primal))]  # fmt: skip
     stream = resolve_stream(dev, stream)
-    hidden, status = _hidden_args(kernel, adj, dims, primal, dev, backend, stream)
-    for j, (name, _, _) in enumerate(adj.hidden):
-        if name == "grad_owned":
-            hidden[j] = _owned_mask(args, adj_args)
+    if ap.hidden is not None:  # no tape is read: the hidden arguments are fixed
+        hidden, status = list(ap.hidden), None
+    else:
+        hidden, status = _hidden_args(kernel, adj, dims, primal, dev, backend, stream)
+    if ap.owned_at is not None:
+        hidden[ap.owned_at] = _owned_mask(args, adj_args)
     converted = primal + adjoints + [convs[2 * n + i](h) for i, h in enumerate(hidden)]
-    run_or_record(plan, dims, converted, stream)
+    if _graphs.ACTIVE:
+        run_or_record(plan, dims, converted, stream)
+    else:
+        plan.reuse.launch(dims, converted, stream)
     if status is not None and int(status.numpy()[0]) != 0:
         raise KdslRuntimeError(
             f"the backward pass of kernel '{kernel.name}' ran a dynamic loop more times than "
             "its counting pass measured (control flow that changes between runs, such as one "
             "that depends on atomics); its gradients are incomplete"
         )
+
+
+# How ``_AdjointPlan.adjoint_arg`` makes a parameter's adjoint argument.
+_GRAD_ARRAY, _SCRATCH_ARRAY, _STRUCT, _VALUE = range(4)
+
+
+class _AdjointPlan:
+    """What every adjoint launch of one kernel on one launch plan shares: each
+    parameter's role, and the hidden arguments when they do not depend on the launch
+    (no tape is read, so the counting pass and the tapes' sizes are not needed)."""
+
+    __slots__ = ("convs", "dev", "hidden", "n", "owned_at", "plan", "roles", "scratch")
+
+    def __init__(self, kernel: Any, adj: DerivedKernel, plan: Any) -> None:
+        self.plan = plan
+        self.dev = plan.device
+        self.convs = plan.converters
+        types = kernel.arg_types
+        self.n = len(types)
+        self.roles = [_role(t) for t in types]
+        #: Per parameter index: scratch gradient arrays for arrays without one (cpu only).
+        self.scratch: dict[tuple, Any] = {}
+        self.owned_at = next((j for j, (name, _, _) in enumerate(adj.hidden)
+                              if name == "grad_owned"), None)  # fmt: skip
+        self.hidden: list | None = None
+        if all(name == "grad_owned" or not live for name, _, live in adj.hidden):
+            self.hidden = [_placeholder(name, t, self.dev) for name, t, _ in adj.hidden]
+
+    def adjoint_arg(self, i: int, role: int, v: Any, g: Any, converted: Any) -> Any:
+        """The converted adjoint argument of parameter ``i``: value ``v`` (``converted``
+        as the primal argument), gradient ``g``."""
+        conv = self.convs[self.n + i]
+        if role == _GRAD_ARRAY:
+            return conv(self._scratch(i, v) if g is None else g)
+        if role == _SCRATCH_ARRAY:
+            return conv(self._scratch(i, v))
+        if role == _STRUCT and g is None:
+            return conv(_struct_adjoint(v, self.dev))
+        # A scalar's adjoint is an unused input of the adjoint kernel (as in Warp).
+        return converted if g is None else conv(g)
+
+    def _scratch(self, i: int, v: Any) -> Any:
+        """Zeros shaped like ``v`` for gradients nobody asked for (they land there).
+
+        On the cpu outside a graph capture the memory is kept per parameter (and
+        calling thread) and cleared before each launch, so repeated launches pass the
+        same buffer (and can reuse their packed arguments); elsewhere it is fresh.
+        """
+        from kdsl.runtime import alloc
+        from kdsl.runtime.array import array
+
+        if not isinstance(v, array):
+            return v
+        if not self.dev.is_cpu or _graphs.ACTIVE:
+            return alloc.zeros_like(v, device=self.dev)
+        key = (i, threading.get_ident(), v.shape, v.dtype)
+        z = self.scratch.get(key)
+        if z is None:
+            if len(self.scratch) >= _MAX_SCRATCH:
+                self.scratch.clear()
+            z = self.scratch[key] = alloc.zeros_like(v, device=self.dev)
+        else:
+            z.zero_()
+        return z
+
+
+#: Scratch gradient arrays kept per adjoint plan (cleared when full).
+_MAX_SCRATCH = 16
+
+
+def _placeholder(name: str, t: T.Type, dev: Any) -> Any:
+    """A hidden argument the adjoint code never reads (an unread tape or status), or 0
+    for ``grad_owned`` (filled at each launch)."""
+    from kdsl.runtime import alloc
+    from kdsl.types import class_of
+
+    if name == "grad_owned":
+        return 0
+    if name == "tape_status":
+        return alloc.empty(1, dtype=class_of(T.I32), device=dev)
+    return alloc.empty((1, 1), dtype=class_of(t.dtype), device=dev)
+
+
+def _role(t: T.Type) -> int:
+    if isinstance(t, T.ArrayType):
+        return _GRAD_ARRAY if is_differentiable(t.dtype) else _SCRATCH_ARRAY
+    if isinstance(t, T.StructType) and has_grad_arrays(t):
+        return _STRUCT
+    return _VALUE
+
+
+_PLANS_ATTR = "_kdsl_adjoint_plans"
+
+
+def _adjoint_plan(adj: DerivedKernel, plan: Any) -> _AdjointPlan:
+    """The cached ``_AdjointPlan`` of ``adj`` for launch plan ``plan`` (a new launch plan,
+    after an option or debug setting changed, gets a new one)."""
+    plans = getattr(adj, _PLANS_ATTR, None)
+    if plans is None:
+        plans = {}
+        setattr(adj, _PLANS_ATTR, plans)
+    ap = plans.get(id(plan))
+    if ap is None or ap.plan is not plan:
+        if len(plans) >= 8:
+            plans.clear()
+        ap = plans[id(plan)] = _AdjointPlan(adj.base, adj, plan)
+    return ap
 
 
 def _struct_adjoint(value: Any, dev: Any) -> Any:
@@ -255,7 +361,6 @@ def _tape_array(t: T.ArrayType, threads: int, slots: int, dev: Any) -> Any:
 def _tape_slots(kernel, adj, dims, primal, dev, backend, stream, used) -> list[int]:
     """Each loop's tape length: static, measured by the counting pass, or 0 when unread."""
     from kdsl.runtime import alloc
-    from kdsl.runtime.launch import launch_plan
     from kdsl.types import class_of
 
     slots = list(adj.func.attrs["tape_slots"])

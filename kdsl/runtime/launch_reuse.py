@@ -33,11 +33,14 @@ from typing import Any
 from kdsl.backends.base import Backend, CompiledKernel
 from kdsl.ir import types as T
 
-#: Prepared launches kept per plan (double buffering needs two; a few more for
-#: kernels launched on several array sets in turn). The table is cleared when full.
-MAX_ENTRIES = 8
-#: Keys seen once, waiting for a second launch before they are prepared.
-MAX_SEEN = 32
+#: Prepared launches kept per plan: double buffering needs two, a kernel taped over a
+#: simulation's steps one per step (each step's arrays are kept for the backward pass;
+#: its adjoint launches likewise). When full, entries whose buffers died are dropped,
+#: and the table is cleared if that frees nothing.
+MAX_ENTRIES = 128
+#: Keys seen once, waiting for a second launch before they are prepared (larger than
+#: ``MAX_ENTRIES``, so a cycle through that many argument sets gets prepared).
+MAX_SEEN = 256
 
 # Per parameter: how one converted argument adds to the key, and whether it is a
 # buffer the entry must watch.
@@ -124,10 +127,19 @@ class LaunchReuse:
             return
         self.seen.discard(key)
         if len(self.entries) >= MAX_ENTRIES:
-            self.entries.clear()
+            self._drop_dead()
         entry = self.entries[key] = (run, refs)
         self.last = (key, entry)
         run()
+
+    def _drop_dead(self) -> None:
+        """Drop the entries with a dead buffer; clear the table when none has one."""
+        dead = [k for k, (_, refs) in self.entries.items() if any(r() is None for r in refs)]
+        for k in dead:
+            del self.entries[k]
+        if not dead:
+            self.entries.clear()
+        self.last = None
 
     def _watch(self, converted: Sequence[Any]) -> list | None:
         """Weak references to the entry's buffers (None: one is not weak-referenceable)."""

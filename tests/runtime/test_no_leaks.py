@@ -124,3 +124,22 @@ def test_cuda_launches_captures_and_allocations_leave_nothing():
     held = pool.total_bytes()
     assert _growth(body, 400) <= SLACK
     assert pool.total_bytes() <= held * 1.01 + (1 << 20)
+
+
+def test_taped_launches_and_backward_passes_leave_nothing():
+    # The adjoint launches keep a plan per kernel, scratch gradients and prepared
+    # launches: all bounded, none growing with the passes.
+    a = wp.array(np.ones(16, np.float32), device="cpu", requires_grad=True)
+    b = wp.zeros(16, dtype=float, device="cpu", requires_grad=True)
+    c = wp.zeros(16, dtype=float, device="cpu")  # no gradient: a scratch one is used
+
+    def body(n):
+        for _ in range(n):
+            tape = wp.Tape()
+            with tape:
+                wp.launch(bump, dim=16, inputs=[a, b], device="cpu")
+                wp.launch(bump, dim=16, inputs=[b, c], device="cpu")
+            tape.backward(grads={b: wp.ones(16, dtype=float, device="cpu")})
+            tape.zero()
+
+    assert _growth(body, 400) <= SLACK
