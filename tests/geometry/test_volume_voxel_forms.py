@@ -8,6 +8,8 @@ are compile-time errors at the call."""
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import pytest
 from volume_reference import TILE, GridHandle, sparse_float_grid, typed_grid
@@ -55,52 +57,46 @@ def test_float_lookups_by_vec3i_equal_the_ijk_forms(backend, device):
     assert (want == 5.0).any() and (want == 0.25).any() and (abs(want) < 5.0).any()
 
 
-@wp.kernel
-def lookup_vec3(vid: wp.uint64, ijk: wp.array(dtype=wp.vec3i), out: wp.array2d(dtype=wp.vec3)):
-    t = wp.tid()
-    v = ijk[t]
-    out[t, 0] = wp.volume_lookup_v(vid, v)
-    out[t, 1] = wp.volume_lookup(vid, v, dtype=wp.vec3)
-    out[t, 2] = wp.volume_lookup_v(vid, v[0], v[1], v[2])
+def lookup_kernel(dtype, typed_lookup):
+    """A kernel looking up ``dtype`` values at vec3i voxels three ways: the typed
+    ``typed_lookup(id, ijk)``, ``volume_lookup(id, ijk, dtype=dtype)`` and the typed
+    ``(i, j, k)`` form."""
+
+    @wp.kernel
+    def lookup(vid: wp.uint64, ijk: wp.array(dtype=wp.vec3i), out: wp.array2d(dtype=Any)):
+        t = wp.tid()
+        v = ijk[t]
+        out[t, 0] = typed_lookup(vid, v)
+        out[t, 1] = wp.volume_lookup(vid, v, dtype=dtype)
+        out[t, 2] = typed_lookup(vid, v[0], v[1], v[2])
+
+    return wp.overload(lookup, {"out": wp.array2d(dtype=dtype)})
 
 
-@wp.kernel
-def lookup_int(vid: wp.uint64, ijk: wp.array(dtype=wp.vec3i), out: wp.array2d(dtype=int)):
-    t = wp.tid()
-    v = ijk[t]
-    out[t, 0] = wp.volume_lookup_i(vid, v)
-    out[t, 1] = wp.volume_lookup(vid, v, dtype=int)
-    out[t, 2] = wp.volume_lookup_i(vid, v[0], v[1], v[2])
-    # A float lookup of an int grid is zero in either form (Warp's release behaviour).
-    out[t, 3] = int(wp.volume_lookup_f(vid, v) == 0.0) + int(
-        wp.volume_lookup_f(vid, v[0], v[1], v[2]) == 0.0
-    )
+LOOKUPS = {wp.vec3: lookup_kernel(wp.vec3, wp.volume_lookup_v),
+           int: lookup_kernel(int, wp.volume_lookup_i)}  # fmt: skip
 
 
 @pytest.mark.parametrize("backend,device", BACKENDS)
 def test_vec3_and_int_lookups_by_vec3i_equal_the_ijk_forms(backend, device):
     rng = np.random.default_rng(3)
-    data, dense = typed_grid(rng, GridType.VEC3F, np.float32, (3,), 0.5)
-    grid = GridHandle(data, device)
-    ijk = voxels(dense, rng, 200)
-    out = wp.zeros((len(ijk), 3), dtype=wp.vec3, device=device)
-    wp.launch(lookup_vec3, len(ijk), inputs=[grid.id, wp.array(ijk, dtype=wp.vec3i, device=device),
-              out], backend=backend, device=device)  # fmt: skip
-    want = dense.lookup(ijk.astype(np.int64))
-    for col in range(3):
-        np.testing.assert_array_equal(out.numpy()[:, col], want, err_msg=f"column {col}")
-
-    data, dense = typed_grid(rng, GridType.INT32, np.int32, (), -3)
-    grid = GridHandle(data, device)
-    ijk = voxels(dense, rng, 200)
-    out = wp.zeros((len(ijk), 4), dtype=int, device=device)
-    wp.launch(lookup_int, len(ijk), inputs=[grid.id, wp.array(ijk, dtype=wp.vec3i, device=device),
-              out], backend=backend, device=device)  # fmt: skip
-    want = dense.lookup(ijk.astype(np.int64))
-    for col in range(3):
-        np.testing.assert_array_equal(out.numpy()[:, col], want, err_msg=f"column {col}")
-    np.testing.assert_array_equal(out.numpy()[:, 3], 2)
-    assert (want == -3).any() and (want != -3).any()
+    for grid_type, np_dtype, shape, dtype, bg in (
+        (GridType.VEC3F, np.float32, (3,), wp.vec3, 0.5), (GridType.INT32, np.int32, (), int, -3),
+    ):  # fmt: skip
+        data, dense = typed_grid(rng, grid_type, np_dtype, shape, bg)
+        grid = GridHandle(data, device)
+        ijk = wp.array(voxels(dense, rng, 200), dtype=wp.vec3i, device=device)
+        out = wp.zeros((len(ijk), 3), dtype=dtype, device=device)
+        wp.launch(LOOKUPS[dtype], len(ijk), inputs=[grid.id, ijk, out], backend=backend,
+                  device=device)  # fmt: skip
+        want = dense.lookup(ijk.numpy().astype(np.int64))
+        for col in range(3):
+            np.testing.assert_array_equal(out.numpy()[:, col], want, err_msg=f"column {col}")
+        assert (want == bg).any() and (want != bg).any()
+    # Float lookups of the int grid give zero in every form (Warp's release behaviour).
+    out = wp.full((len(ijk), 6), 1.0, dtype=float, device=device)
+    wp.launch(lookup_float, len(ijk), inputs=[grid.id, ijk, out], backend=backend, device=device)
+    np.testing.assert_array_equal(out.numpy(), 0.0)
 
 
 @wp.kernel
@@ -137,40 +133,29 @@ def voxels_around(active: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     return active[rng.integers(0, len(active), 100)] + rng.integers(-1, 2, (100, 3))
 
 
-@wp.kernel
-def store_by_vec3i(vid: wp.uint64, ijk: wp.array(dtype=wp.vec3i), v: wp.array(dtype=float),
-                   how: int):  # fmt: skip
-    t = wp.tid()
-    if how == 0:
-        wp.volume_store(vid, ijk[t], v[t])
-    elif how == 1:
-        wp.volume_store_f(vid, ijk[t], v[t])
-    else:
-        wp.volume_store(vid, ijk[t][0], ijk[t][1], ijk[t][2], v[t])
+def store_kernel(dtype, typed_store):
+    """A kernel storing ``dtype`` values at vec3i voxels: ``how`` 0 through
+    ``volume_store(id, ijk, v)``, 1 the typed ``typed_store(id, ijk, v)``, 2 the typed
+    ``(i, j, k)`` form."""
+
+    @wp.kernel
+    def store(vid: wp.uint64, ijk: wp.array(dtype=wp.vec3i), v: wp.array(dtype=Any), how: int):
+        t = wp.tid()
+        if how == 0:
+            wp.volume_store(vid, ijk[t], v[t])
+        elif how == 1:
+            typed_store(vid, ijk[t], v[t])
+        else:
+            typed_store(vid, ijk[t][0], ijk[t][1], ijk[t][2], v[t])
+
+    return wp.overload(store, {"v": wp.array(dtype=dtype)})
 
 
-@wp.kernel
-def store_vec3_by_vec3i(vid: wp.uint64, ijk: wp.array(dtype=wp.vec3i), v: wp.array(dtype=wp.vec3),
-                        how: int):  # fmt: skip
-    t = wp.tid()
-    if how == 0:
-        wp.volume_store(vid, ijk[t], v[t])
-    elif how == 1:
-        wp.volume_store_v(vid, ijk[t], v[t])
-    else:
-        wp.volume_store_v(vid, ijk[t][0], ijk[t][1], ijk[t][2], v[t])
-
-
-@wp.kernel
-def store_int_by_vec3i(vid: wp.uint64, ijk: wp.array(dtype=wp.vec3i), v: wp.array(dtype=int),
-                       how: int):  # fmt: skip
-    t = wp.tid()
-    if how == 0:
-        wp.volume_store(vid, ijk[t], v[t])
-    elif how == 1:
-        wp.volume_store_i(vid, ijk[t], v[t])
-    else:
-        wp.volume_store_i(vid, ijk[t][0], ijk[t][1], ijk[t][2], v[t])
+STORES = {
+    float: store_kernel(float, wp.volume_store_f),
+    wp.vec3: store_kernel(wp.vec3, wp.volume_store_v),
+    int: store_kernel(int, wp.volume_store_i),
+}
 
 
 def _grids_after_stores(kernel, data: bytes, ijk, values, device, backend, tiles=None):
@@ -191,20 +176,19 @@ def test_stores_by_vec3i_write_what_the_ijk_forms_write(backend, device):
     ijk = np.unique(voxels(dense, rng), axis=0)
     new = wp.array(rng.standard_normal(len(ijk)).astype(np.float32), device=device)
     before = GridHandle(data, tiles=TILE).words.numpy()
-    a, b, c = _grids_after_stores(store_by_vec3i, data, ijk, new, device, backend, tiles=TILE)
+    a, b, c = _grids_after_stores(STORES[float], data, ijk, new, device, backend, tiles=TILE)
     np.testing.assert_array_equal(a, c)
     np.testing.assert_array_equal(b, c)
     assert (c != before).sum() > 50  # leaf voxels were written
 
-    for grid_type, np_dtype, shape, kernel, dtype in (
-        (GridType.VEC3F, np.float32, (3,), store_vec3_by_vec3i, wp.vec3),
-        (GridType.INT32, np.int32, (), store_int_by_vec3i, int),
+    for grid_type, np_dtype, shape, dtype in (
+        (GridType.VEC3F, np.float32, (3,), wp.vec3), (GridType.INT32, np.int32, (), int),
     ):  # fmt: skip
         data, dense = typed_grid(rng, grid_type, np_dtype, shape, 0)
         ijk = np.unique(voxels(dense, rng), axis=0)
         vals = rng.integers(1, 100, (len(ijk), *shape)).astype(np_dtype)
         v = wp.array(vals, dtype=dtype, device=device)
-        a, b, c = _grids_after_stores(kernel, data, ijk, v, device, backend)
+        a, b, c = _grids_after_stores(STORES[dtype], data, ijk, v, device, backend)
         np.testing.assert_array_equal(a, c)
         np.testing.assert_array_equal(b, c)
         assert (c != GridHandle(data).words.numpy()).any()
@@ -243,8 +227,7 @@ def test_vec3i_forms_compile_through_nvrtc():
     from kdsl.backends.cuda import BACKEND
     from kdsl.compiler import compile_kernel
 
-    for k in (lookup_float, lookup_vec3, lookup_int, lookup_index, store_by_vec3i,
-              store_vec3_by_vec3i, store_int_by_vec3i):  # fmt: skip
+    for k in (lookup_float, lookup_index, *LOOKUPS.values(), *STORES.values()):
         compiled = compile_kernel(BACKEND, k.build_module(), k.key, {"arch": "sm_90"})
         assert compiled.payload.cubin("sm_90")[:4] == b"\x7fELF", k.key
 
