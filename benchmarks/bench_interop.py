@@ -1,4 +1,4 @@
-"""The cost of handing PyTorch tensors to kernels: the interop guide's benchmark.
+"""The cost of handing PyTorch tensors and JAX arrays to kernels: the interop guide's benchmark.
 
     python benchmarks/bench_interop.py [--iters 1000] [--reps 7] [--n 1024] [--json PATH]
 
@@ -11,15 +11,25 @@ in one of four ways (Warp's ``benchmark_interop_torch`` compares the middle thre
 - ``direct from torch``: the tensors themselves (``__cuda_array_interface__`` on a
   GPU, DLPack / ``__array_interface__`` on the CPU).
 
+Two more rows time the other direction and JAX:
+
+- ``to_torch(...)``: one ``to_torch`` of an array per iteration (no launch);
+- ``jax_kernel call``: one call of a jitted JAX function that runs a scale kernel
+  through XLA's FFI (``jax_kernel``), waited for (``block_until_ready``); the
+  ``jax.jit`` of the same scale in plain JAX is printed as a reference.
+
 It runs for kdsl and, when it imports, Warp, on the CPU and (when PyTorch sees one)
 the first GPU, and prints microseconds per iteration (host overhead: the kernel is
-tiny). Results go to benchmarks/results/interop.json.
+tiny). The frameworks' cells of one row are timed in turn, repetition by
+repetition, so load on a shared host hits them alike. Results go to
+benchmarks/results/interop.json.
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
+import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -27,7 +37,7 @@ from typing import Any
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import torch
-from suite.harness import Cell, measure, print_table, to_json, write_json
+from suite.harness import Cell, Stats, print_table, to_json, write_json
 
 import kdsl
 
@@ -92,6 +102,14 @@ def _loop(wp: Any, kernel: Any, method: str, device: str, n: int, iters: int) ->
                 launch(kernel, dim=n, inputs=[xc, yc, 1.0], device=device)
             sync()
 
+    elif method == "to_torch(...)":
+        a = wp.from_torch(x)
+        to_torch = wp.to_torch
+
+        def step() -> None:
+            for _ in range(iters):
+                to_torch(a)
+
     else:
 
         def step() -> None:
@@ -102,23 +120,87 @@ def _loop(wp: Any, kernel: Any, method: str, device: str, n: int, iters: int) ->
     return step
 
 
+def _jax_step(wp: Any, n: int, iters: int) -> Callable:
+    """``iters`` calls of a jitted JAX function running a scale kernel through ``jax_kernel``."""
+    import jax
+    import jax.numpy as jnp
+
+    if wp is None:  # plain JAX: the reference
+        fn = jax.jit(lambda a: a * 2.0)
+    else:
+        make = wp.jax_kernel
+        if wp is kdsl:
+            scale = kdsl_scale
+        else:
+
+            @wp.kernel
+            def scale(a: wp.array(dtype=float), s: float, out: wp.array(dtype=float)):
+                i = wp.tid()
+                out[i] = a[i] * s
+
+        jk = make(scale)
+        fn = jax.jit(lambda a: jk(a, 2.0)[0])
+    x = jnp.arange(n, dtype=jnp.float32)
+
+    def step() -> None:
+        for _ in range(iters):
+            fn(x).block_until_ready()
+
+    return step
+
+
+@kdsl.kernel
+def kdsl_scale(a: kdsl.array(dtype=float), s: float, out: kdsl.array(dtype=float)):
+    i = kdsl.tid()
+    out[i] = a[i] * s
+
+
+def _interleaved(steps: dict[str, Callable], reps: int, iters: int) -> dict[str, Cell]:
+    """Each step timed ``reps`` times, the frameworks in turn (one warm-up call each)."""
+    cells: dict[str, Cell] = {}
+    live = {}
+    for name, step in steps.items():
+        try:
+            step()
+            live[name] = step
+        except Exception as e:  # one failing cell must not stop the table
+            cells[name] = Cell(status=f"error: {type(e).__name__}: {e}"[:60])
+    samples: dict[str, list[float]] = {name: [] for name in live}
+    for _ in range(reps):
+        for name, step in live.items():
+            t0 = time.perf_counter()
+            step()
+            samples[name].append((time.perf_counter() - t0) / iters)
+    for name in live:
+        cells[name] = Cell(stats=Stats.of(samples[name]))
+    return cells
+
+
 def run(iters: int, reps: int, n: int) -> dict[str, dict[str, Cell]]:
     """Microbenchmark cells keyed by ``"method [device]"`` then framework."""
     frameworks: dict[str, tuple[Any, Any] | None] = {"kdsl": (kdsl, saxpy), "warp": _warp()}
     devices = ["cpu"] + (["cuda:0"] if torch.cuda.is_available() else [])
     cells: dict[str, dict[str, Cell]] = {}
     for device in devices:
-        for method in METHODS:
+        for method in (*METHODS, "to_torch(...)"):
+            steps: dict[str, Callable] = {}
             row = cells[f"{method} [{device}]"] = {}
             for name, fw in frameworks.items():
                 if fw is None:
                     row[name] = Cell(status="not installed")
                     continue
                 try:
-                    step = _loop(fw[0], fw[1], method, device, n, iters)
-                    row[name] = Cell(stats=measure(step, reps, per_call=iters))
+                    steps[name] = _loop(fw[0], fw[1], method, device, n, iters)
                 except Exception as e:  # one failing cell must not stop the table
                     row[name] = Cell(status=f"error: {type(e).__name__}: {e}"[:60])
+            row.update(_interleaved(steps, reps, iters))
+    try:
+        import jax  # noqa: F401
+    except ImportError:
+        return cells
+    steps = {name: _jax_step(fw[0], n, iters) for name, fw in frameworks.items() if fw}
+    steps["jax.jit (plain JAX)"] = _jax_step(None, n, iters)
+    cells["jax_kernel call [cpu]"] = _interleaved(steps, reps, iters)
     return cells
 
 
@@ -131,11 +213,12 @@ def main() -> None:
     ap.add_argument("--json", type=Path, default=RESULTS)
     args = ap.parse_args()
     cells = run(args.iters, args.reps, args.n)
-    names = ["kdsl", "warp"]
+    names = ["kdsl", "warp", "jax.jit (plain JAX)"]
     rows = []
     for key, row in cells.items():
         rows.append([key] + [_us(row.get(f)) for f in names])
     print(f"us per iteration (2 tensors of {args.n} float32 + one saxpy launch), median")
+    print("(to_torch: one conversion; jax_kernel call: one jitted call of a scale kernel)")
     print_table(["method [device]", *names], rows)
     meta = {"benchmark": "interop", "iters": args.iters, "reps": args.reps, "n": args.n,
             "unit": "seconds per iteration", "torch": torch.__version__}  # fmt: skip

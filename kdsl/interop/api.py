@@ -49,10 +49,11 @@ __all__ = [
 
 # isort: split
 # The runtime reaches the code above only through its adapter registry (it sits below).
-from kdsl.interop.foreign import foreign_buffer
+from kdsl.interop.foreign import cached_buffer, foreign_buffer
 from kdsl.interop.jax import tracer_message_or_none
 from kdsl.runtime.adapters import register_adapter
 
 register_adapter("foreign_buffer", foreign_buffer)
+register_adapter("cached_buffer", cached_buffer)
 register_adapter("tracer_message", tracer_message_or_none)
 register_adapter("dlpack_export", dlpack.export)

@@ -15,10 +15,12 @@ import numpy as np
 from kdsl.errors import KdslError
 from kdsl.interop import dlpack
 from kdsl.interop.dtypes import InteropTypeError
-from kdsl.interop.torch import is_tensor, scalar_of
+from kdsl.interop.torch import VIEWS, is_tensor, scalar_of
 from kdsl.ir import types as T
 from kdsl.runtime.args import ArgError, check_foreign, has_attribute
 from kdsl.runtime.device import Device
+
+torch_view = VIEWS.view
 
 
 def foreign_buffer(t: T.ArrayType, value: Any, device: Device) -> Any:
@@ -65,4 +67,25 @@ def foreign_buffer(t: T.ArrayType, value: Any, device: Device) -> Any:
             )
         buf = np.asarray(value)
     check_foreign(t, buf.dtype, buf.shape, what, fix)
+    return buf
+
+
+def cached_buffer(t: T.ArrayType, value: Any, device: Device) -> Any:
+    """A PyTorch CPU tensor for a cpu launch, through ``from_torch``'s view cache; else None.
+
+    The launch path asks this first, before the general (slower) checks: a tensor
+    handed to launches again and again costs a few comparisons and gives the same
+    buffer object every time, which lets the launch reuse its packed arguments. None
+    (another object, a CUDA launch, a tensor the cache cannot view) sends the value
+    down the general path, which words every error.
+    """
+    if not (device.is_cpu and is_tensor(value)) or value.is_cuda:
+        return None
+    try:
+        buf, _, dev = torch_view(value)
+    except (KdslError, TypeError, RuntimeError):  # numpy() refuses some tensors (neg bit)
+        return None
+    if dev != device:
+        return None
+    check_foreign(t, buf.dtype, buf.shape, "torch", ".to(torch.{})")
     return buf

@@ -10,6 +10,7 @@ to a framework, and a tensor's gradient attached to a kdsl array.
 
 from __future__ import annotations
 
+import functools
 import importlib
 import sys
 from collections.abc import Callable
@@ -45,6 +46,9 @@ class Framework:
 
     def load(self) -> Any:
         """The framework's module, imported only when a conversion runs."""
+        mod = sys.modules.get(self.module)  # the per-call path: no import machinery
+        if mod is not None and all(name in sys.modules for name in self.submodules):
+            return mod
         mod = importlib.import_module(self.module)
         for name in self.submodules:
             importlib.import_module(name)
@@ -86,7 +90,7 @@ class Framework:
 
     def twin(self, t: T.ScalarType) -> T.ScalarType:
         """``t``, or the signed scalar of its width where the framework lacks ``t`` (uint32)."""
-        return scalar_from_name(getattr(t, self.module), self.label)
+        return _twin(t, self.module, self.label)
 
     def check_export(self, a: Any, fn: str) -> None:
         """Refuse what ``fn`` (``"to_torch"``) cannot hand over: a non-array or a generic one."""
@@ -94,6 +98,11 @@ class Framework:
             raise KdslError(f"{fn}() takes a kdsl array, not {type(a).__name__}")
         if a._t is None:
             raise KdslError(f"{fn}(): the array has no dtype (array(dtype=Any))")
+
+
+@functools.lru_cache(maxsize=64)
+def _twin(t: T.ScalarType, module: str, label: str) -> T.ScalarType:
+    return scalar_from_name(getattr(t, module), label)
 
 
 def attach_grad(a: array, grad: Any, view: TensorView) -> array:

@@ -16,6 +16,12 @@ from kdsl.interop import jax_ffi as F
 from kdsl.interop import xla_ffi
 from kdsl.runtime.descriptor import ArrayDescriptor
 
+#: Calls whose launch arguments a kernel keeps (the table is cleared when full). A
+#: call repeated on buffers at the same addresses (XLA reuses its allocations) then
+#: hands ``launch`` the same views, whose packed form the launch reuses in turn.
+MAX_PREPARED = 64
+_CALL_ATTR = F.CALL_ATTR.encode()
+
 
 class FfiKernel(F.FfiTarget):
     """A kdsl kernel callable from JAX (made by ``jax_kernel``)."""
@@ -34,6 +40,8 @@ class FfiKernel(F.FfiTarget):
         self.kernel = kernel
         self.launch_dims = launch_dims
         self._preloaded: set[str] = set()
+        #: Launch arguments by call and buffer layout (see ``_execute``).
+        self._prepared: dict[tuple, tuple[list, Any]] = {}
         super().__init__(
             f"jax_kernel '{kernel.name}'", kernel.arg_names, kernel.arg_types, num_outputs,
             in_out_argnames, vmap_method, output_dims, F.unique_name("kernel", kernel.key),
@@ -85,8 +93,25 @@ class FfiKernel(F.FfiTarget):
     def _execute(self, frame: Any, platform: str) -> None:
         from kdsl.runtime.launch import launch
 
-        statics, dims = self.calls[xla_ffi.attributes(frame.attrs)[F.CALL_ATTR]]
         device = F.call_device(frame, platform)
+        # Everything the launch arguments depend on: the call (its statics and dims),
+        # the device, and each buffer's address, dtype and dims (vmap batches them).
+        key = (
+            xla_ffi.int_attribute(frame.attrs, _CALL_ATTR), device,
+            xla_ffi.buffer_layouts(frame.args), xla_ffi.buffer_layouts(frame.rets),
+        )  # fmt: skip
+        prepared = self._prepared.get(key)
+        if prepared is None:
+            if len(self._prepared) >= MAX_PREPARED:
+                self._prepared.clear()
+            prepared = self._prepared[key] = self._arguments(frame, device, key[0])
+        values, dims = prepared
+        launch(self.kernel, dims, inputs=values, device=device,
+               stream=F.call_stream(frame, device), record_tape=False)  # fmt: skip
+
+    def _arguments(self, frame: Any, device: Any, call_id: Any) -> tuple[list, Any]:
+        """The launch arguments (views of XLA's buffers, statics) and dims of a call."""
+        statics, dims = self.calls[call_id]
         values, batch = [], 1
         for p, buf in self._buffers(frame):
             if buf is None:
@@ -97,8 +122,7 @@ class FfiKernel(F.FfiTarget):
             values.append(ArrayDescriptor(view, p.type.dtype, device))
         if batch > 1:
             dims = (dims[0] * batch, *dims[1:])
-        launch(self.kernel, dims, inputs=values, device=device,
-               stream=F.call_stream(frame, device), record_tape=False)  # fmt: skip
+        return values, dims[0] if len(dims) == 1 else dims  # an int: launch's quickest grid
 
 
 def jax_kernel(

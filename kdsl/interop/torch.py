@@ -19,6 +19,7 @@ from kdsl.errors import KdslError
 from kdsl.interop.dlpack import Exporter
 from kdsl.interop.dtypes import InteropDeviceError, framework_name
 from kdsl.interop.frameworks import Framework, attach_grad
+from kdsl.interop.tensor_cache import TensorViews
 from kdsl.interop.views import describe_buffer, view_buffer
 from kdsl.ir import types as T
 from kdsl.runtime import cuda_memory as mem
@@ -89,7 +90,8 @@ def _tensor_buffer(t: Any, dev: Device) -> Any:
         return cp.ndarray(shape, np_dtype, cp.cuda.MemoryPointer(memory, 0), strides=strides)
 
 
-def _view(t: Any, dtype: Any) -> tuple[Any, T.Type, Device]:
+def _build_view(t: Any, dtype: Any) -> tuple[Any, T.Type, Device]:
+    """Tensor ``t`` seen as a kdsl buffer of ``dtype``: checked, uncached."""
     torch = _torch()
     if not isinstance(t, torch.Tensor):
         raise KdslError(f"from_torch() takes a torch.Tensor, not {type(t).__name__}")
@@ -98,6 +100,11 @@ def _view(t: Any, dtype: Any) -> tuple[Any, T.Type, Device]:
     what = describe_buffer(str(t.dtype), "tensor", t.shape)
     buf, kt = view_buffer(_tensor_buffer(t, dev), dtype, what)
     return buf, kt, dev
+
+
+#: Views of the tensors seen last, so a tensor handed over again costs a few checks.
+VIEWS = TensorViews(_build_view)
+_view = VIEWS.view
 
 
 def from_torch(
@@ -148,7 +155,15 @@ def _tensor_of(buf: Any, t: T.Type, dev: Device) -> Any:
     if twin != et:  # torch has no full uint16/32/64 support: same bits, signed
         with mem.scope(dev):
             buf = buf.view(twin.np_dtype)
-    return _torch().from_dlpack(Exporter(buf, dev))
+    torch = _torch()
+    if dev.is_cpu and buf.flags.writeable:
+        # No stream to order on the CPU: torch.from_numpy shares the memory as DLPack
+        # would, at a tenth of the cost (the tensor keeps ``buf`` alive).
+        try:
+            return torch.from_numpy(buf)
+        except (TypeError, ValueError):  # negative strides, a dtype torch lacks: DLPack says why
+            pass
+    return torch.from_dlpack(Exporter(buf, dev))
 
 
 def to_torch(a: array, requires_grad: bool | None = None) -> Any:

@@ -199,6 +199,23 @@ def buffers(table: Args) -> list[Buffer]:
     return [ctypes.cast(table.args[i], ctypes.POINTER(Buffer)).contents for i in range(table.size)]
 
 
+def buffer_layouts(table: Args) -> tuple:
+    """Each buffer's ``(data, dtype code, dims)``: all a view of it depends on, as a key."""
+    return tuple(
+        (b.data, b.dtype, tuple(b.dims[: b.rank]))
+        for b in map(Buffer.from_address, table.args[: table.size])
+    )
+
+
+def int_attribute(attrs: Attrs, name: bytes) -> int | None:
+    """The integer scalar attribute ``name`` of a call, read without decoding the others."""
+    for i in range(attrs.size):
+        span = attrs.names[i].contents
+        if attrs.types[i] == ATTR_SCALAR and ctypes.string_at(span.ptr, span.len) == name:
+            return int(_scalar_value(attrs.attrs[i]))
+    return None
+
+
 def buffer_shape(buf: Buffer) -> tuple[int, ...]:
     """The dims of an ``XLA_FFI_Buffer``."""
     return tuple(buf.dims[i] for i in range(buf.rank))

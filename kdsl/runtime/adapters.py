@@ -7,6 +7,9 @@ helpers. Where a launch or an array needs them, it asks this registry, which
 - ``foreign_buffer(t, value, device)``: a DLPack or ``__array_interface__`` producer
   (a PyTorch tensor, a JAX array, ...) as a zero-copy buffer for a parameter of
   array type ``t``, or ``ArgError``;
+- ``cached_buffer(t, value, device)``: the same for a value the interop layer has
+  seen before (a PyTorch tensor handed to launches again and again), from its
+  cache, or None; asked before the general checks, which it skips;
 - ``tracer_message(value)``: a message when ``value`` is a JAX tracer (a launch
   cannot take one), else None;
 - ``dlpack_export(buf, device, **options)``: a DLPack capsule of a kdsl array's buffer.
@@ -22,6 +25,7 @@ from kdsl.errors import KdslError
 #: The hooks the runtime may ask for, with what each does (see the module docstring).
 HOOKS = {
     "foreign_buffer": "read a DLPack or __array_interface__ producer as a launch buffer",
+    "cached_buffer": "read a tensor seen before as a launch buffer, or None",
     "tracer_message": "say why a JAX tracer cannot be a launch argument",
     "dlpack_export": "export a kdsl array through DLPack",
 }

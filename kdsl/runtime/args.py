@@ -83,6 +83,10 @@ def _array(t: T.ArrayType, value: Any, device: Device) -> Any:
     if isinstance(value, array):
         _check_kdsl_array(t, device, value.device, value._t, value.ndim)
         return value._buf
+    cached = adapter("cached_buffer")
+    buf = None if cached is None else cached(t, value, device)
+    if buf is not None:
+        return buf
     if mem.is_cuda_buffer(value):
         if device.is_cpu:
             raise ArgError(

@@ -30,6 +30,7 @@ from kdsl.runtime import tape as _tape
 from kdsl.runtime import timing as _timing
 from kdsl.runtime.args import ArgError, convert, launch_error
 from kdsl.runtime.array import array
+from kdsl.runtime.descriptor import ArrayDescriptor
 from kdsl.runtime.device import Device, get_device
 from kdsl.runtime.graphs import state as _graphs
 from kdsl.runtime.launch_reuse import LaunchReuse
@@ -272,6 +273,13 @@ def _converter(kernel: Any, index: int, name: str, t: Any, device: Device) -> An
                 and (v._t is dtype or v._t == dtype)
             ):
                 return v._buf
+            if (  # from_torch(..., return_ctype=True)
+                type(v) is ArrayDescriptor
+                and v.device is device
+                and v.ndim == ndim
+                and (v.dtype is dtype or v.dtype == dtype)
+            ):
+                return v.buf
             return slow(v)
 
         return conv_array
