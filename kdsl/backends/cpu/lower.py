@@ -15,6 +15,7 @@ it as an extra last parameter.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 from llvmlite import ir
@@ -22,6 +23,7 @@ from llvmlite import ir
 from kdsl.backends.cpu import types as LT
 from kdsl.backends.cpu.composite import Parts, leaf_types, leaves, rebuild_all
 from kdsl.backends.cpu.emitter import Emitter, ModuleState
+from kdsl.backends.cpu.interior import inside, interior_box, split_range
 from kdsl.backends.cpu.kernel_facts import kernel_symbol, tid_ndims
 from kdsl.backends.cpu.memory import load_value
 from kdsl.backends.cpu.ops import TABLE
@@ -29,6 +31,7 @@ from kdsl.backends.cpu.versioning import vector_arrays, versioned
 from kdsl.errors import KdslCapabilityError
 from kdsl.ir import types as T
 from kdsl.ir.core import Block, Module, Operation
+from kdsl.passes.thread_interior import InteriorPlan, interior_plan
 
 KERNEL_TYPE = ir.FunctionType(LT.VOID, [LT.I64, LT.I64, LT.PTR, LT.PTR])
 
@@ -80,13 +83,16 @@ def emit_kernel(state: ModuleState, func: Operation, llname: str) -> ir.Function
         extents.append(B.load(p, typ=LT.I64, align=8))
     em.bind(body_block.args, params)
 
+    # Bounds tests on the thread index: the interior runs a copy without them.
+    plan = None if state.debug else interior_plan(state.module, func)
+
     def emit() -> list:
         # Parameters are read back from the value map: ``versioned`` rebinds dense arrays.
         now = [em.get(a) for a in body_block.args]
         if extents:
-            _row_loops(em, body_block, now, start, end, extents)
+            _row_loops(em, body_block, now, start, end, extents, plan)
         else:
-            _flat_loop(em, body_block, now, start, end)
+            _flat_loop(em, body_block, now, start, end, plan)
         return []
 
     # Threads over arrays of vectors vectorize only with constant strides: see
@@ -125,42 +131,101 @@ def _count_head(
     return i
 
 
-def _flat_loop(em: Emitter, body: Block, params: list, start: ir.Value, end: ir.Value) -> None:
-    """The thread loop of a kernel with a 1-d index: one counted loop over ``[start, end)``.
+def _flat_loop(
+    em: Emitter,
+    body: Block,
+    params: list,
+    start: ir.Value,
+    end: ir.Value,
+    plan: InteriorPlan | None = None,
+) -> None:
+    """The thread loop of a kernel with a 1-d index: counted loops over ``[start, end)``.
 
-    Like ``_row_loops`` it leaves the builder in its exit block.
+    With a ``plan`` the range is split in three: edge, interior (the plan's folded
+    body), edge. Like ``_row_loops`` it leaves the builder in its exit block.
+    """
+    B = em.b
+
+    def at(i: ir.Value) -> None:
+        em.linear = i
+        em.index = []
+
+    # The loops count in i32 (tid is i32) with no-wrap adds, so LLVM sees a simple
+    # induction variable; launches are limited to 2**31 threads.
+    if plan is None:
+        _span(em, body, params, B.trunc(start, LT.I32), B.trunc(end, LT.I32), at, "thread")
+        return
+    lo, hi = interior_box(em, plan, [end])
+    a, b = split_range(em, start, end, lo[0], hi[0])
+    _peeled(em, body, plan, params, [start, a, b, end], at, "thread")
+
+
+def _peeled(
+    em: Emitter,
+    body: Block,
+    plan: InteriorPlan,
+    params: list,
+    marks: list[ir.Value],
+    at: Callable[[ir.Value], None],
+    name: str,
+) -> None:
+    """Loops over ``[m0, m1)`` (edge), ``[m1, m2)`` (interior), ``[m2, m3)`` (edge); i64 marks."""
+    B = em.b
+    m = [B.trunc(x, LT.I32) for x in marks]
+    _span(em, body, params, m[0], m[1], at, name + ".edge")
+    _span(em, plan.interior.regions[0].block, params, m[1], m[2], at, name + ".inner")
+    _span(em, body, params, m[2], m[3], at, name + ".tail")
+
+
+def _span(
+    em: Emitter,
+    body: Block,
+    params: list,
+    lo: ir.Value,
+    hi: ir.Value,
+    at: Callable[[ir.Value], None],
+    name: str,
+) -> None:
+    """One counted i32 loop over ``[lo, hi)`` running ``body``; ``at(i)`` sets the index.
+
+    The builder is left in the loop's exit block.
     """
     B, fn = em.b, em.fn
     entry = B.block
-    # The loop counts in i32 (tid is i32) with no-wrap adds, so LLVM sees a simple
-    # induction variable; launches are limited to 2**31 threads.
-    lo, hi = B.trunc(start, LT.I32), B.trunc(end, LT.I32)
-    head, body_bb, done = (fn.append_basic_block(n) for n in ("thread.head", "thread.body", "exit"))
-    i = _count_head(B, "tid", lo, hi, entry, head, body_bb, done)
-    em.linear = i
-    em.index = []
+    head, body_bb, done = (fn.append_basic_block(f"{name}.{n}") for n in ("head", "body", "exit"))
+    i = _count_head(
+        B, "tid" if name == "thread" else f"tid.{name}", lo, hi, entry, head, body_bb, done
+    )
+    at(i)
     _thread_body(em, body, params, i, head)
     B.position_at_end(done)
 
 
 def _row_loops(
-    em: Emitter, body: Block, params: list, start: ir.Value, end: ir.Value, extents: list
+    em: Emitter,
+    body: Block,
+    params: list,
+    start: ir.Value,
+    end: ir.Value,
+    extents: list,
+    plan: InteriorPlan | None = None,
 ) -> None:
     """The thread loop of a kernel with an n-d index: rows of the last dimension.
 
     The linear range ``[start, end)`` is walked one row at a time: the outer
     components are split from the row number once per row, and the inner loop
     counts the last component directly. So a stencil's inner loop is a plain
-    counted loop with no division per thread, which LLVM can vectorize.
+    counted loop with no division per thread, which LLVM can vectorize. With a
+    ``plan`` (bounds tests on the thread index) a row inside the interior box runs
+    its columns in three loops: edge, interior (the folded body), edge.
     """
     B, fn = em.b, em.fn
+    box = interior_box(em, plan, extents) if plan is not None else None
     entry = B.block
     inner = extents[-1]
     row0, col0 = B.udiv(start, inner), B.urem(start, inner)
-    names = ("row.head", "row.body", "col.head", "col.body", "row.next", "exit")
-    row_head, row_body, col_head, col_body, row_next, done = (
-        fn.append_basic_block(n) for n in names
-    )
+    names = ("row.head", "row.body", "row.next", "exit")
+    row_head, row_body, row_next, done = (fn.append_basic_block(n) for n in names)
     B.branch(row_head)
     B.position_at_end(row_head)
     row = B.phi(LT.I64, name="row")
@@ -174,11 +239,22 @@ def _row_loops(
     last = B.select(B.icmp_signed("<", left, inner), left, inner)
     outer = _split_index(em, row, extents[:-1])
     base32 = B.trunc(row_base, LT.I32)
-    lo, hi = B.trunc(first, LT.I32), B.trunc(last, LT.I32)
-    col = _count_head(B, "tid.col", lo, hi, row_body, col_head, col_body, row_next)
-    em.linear = B.add(base32, col, flags=["nsw"])
-    em.index = [*outer, col]
-    _thread_body(em, body, params, col, col_head)
+
+    def at(col: ir.Value) -> None:
+        em.linear = B.add(base32, col, flags=["nsw"])
+        em.index = [*outer, col]
+
+    if box is None or plan is None:
+        _span(em, body, params, B.trunc(first, LT.I32), B.trunc(last, LT.I32), at, "col")
+    else:
+        lo, hi = box
+        lo_col = lo[-1]
+        for d, t in enumerate(outer):  # a row outside the box runs as edge only
+            if d in plan.dims():
+                lo_col = B.select(inside(em, lo[d], hi[d], t), lo_col, last)
+        a, b = split_range(em, first, last, lo_col, hi[-1])
+        _peeled(em, body, plan, params, [first, a, b, last], at, "col")
+    B.branch(row_next)
     B.position_at_end(row_next)
     row.add_incoming(B.add(row, ir.Constant(LT.I64, 1), flags=["nuw", "nsw"]), row_next)
     first.add_incoming(ir.Constant(LT.I64, 0), row_next)
