@@ -167,9 +167,10 @@ class Parser:
     def parse_struct(self) -> None:
         self.expect("struct")
         name = self.expect_kind("ident", "a struct name").text
+        align = self.parse_int() if self.accept("align") else 0
         self.expect("{")
         fields = self.parse_list("}", lambda: self.parse_typed_name("ident", "a field name"))
-        self.module.add_struct(StructType(name, tuple((tok.text, t) for tok, t in fields)))
+        self.module.add_struct(StructType(name, tuple((tok.text, t) for tok, t in fields), align))
 
     def parse_func(self) -> Operation:
         start = self.expect("func.func")

@@ -36,6 +36,7 @@ from kdsl.ir.types import (
     Type,
     elem_type,
     storage_dtype,
+    struct_dtype,
     value_shape,
 )
 
@@ -58,19 +59,7 @@ def record_dtype(t: Type) -> np.dtype:
         return np.dtype(np.uint64)
     if not isinstance(t, StructType):
         return storage_dtype(t)
-    names, formats, offsets, off, align = [], [], [], 0, 1
-    for name, ft in t.fields:
-        fd = record_dtype(ft)
-        a = fd.alignment if fd.subdtype is None else fd.subdtype[0].alignment
-        off = (off + a - 1) // a * a
-        names.append(name)
-        formats.append(fd)
-        offsets.append(off)
-        off += fd.itemsize
-        align = max(align, a)
-    size = (off + align - 1) // align * align
-    spec = {"names": names, "formats": formats, "offsets": offsets, "itemsize": size}
-    return np.dtype(spec, align=True)
+    return struct_dtype(t, record_dtype)
 
 
 def field_offsets(t: StructType) -> list[int]:

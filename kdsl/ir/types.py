@@ -16,6 +16,7 @@ Text forms::
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import ClassVar
 
@@ -266,10 +267,20 @@ class TransformType(NamedVectorType):
 
 @dataclass(frozen=True)
 class StructType(Type):
-    """A named record. Equality is by name and fields, so two definitions agree."""
+    """A named record. Equality is by name, fields and alignment, so two definitions agree.
+
+    ``align`` is a declared minimum alignment in bytes (a power of two; 0: C's natural
+    alignment, its widest field's). A struct declared ``align=16`` is laid out at a
+    multiple of 16 everywhere (its size padded to 16, its offset inside other structs,
+    every element of an array of it), so a backend may load it with 16-byte vector
+    loads: the cuda backend declares it ``__align__(16)`` and NVRTC then reads a
+    32-byte node as two ``ld.v4``. Arrays of it refuse addresses or strides that are
+    not multiples of ``align`` (``kdsl.runtime.array``).
+    """
 
     name: str
     fields: tuple[tuple[str, Type], ...] = field(default=())
+    align: int = 0
 
     def __str__(self) -> str:
         return f"struct<{self.name}>"
@@ -289,7 +300,8 @@ class StructType(Type):
     def definition(self) -> str:
         """The module-level text form: ``struct Particle {x: vec<3, f32>, m: f32}``."""
         body = ", ".join(f"{n}: {t}" for n, t in self.fields)
-        return f"struct {self.name} {{{body}}}"
+        align = f" align {self.align}" if self.align else ""
+        return f"struct {self.name}{align} {{{body}}}"
 
 
 @dataclass(frozen=True)
@@ -349,8 +361,8 @@ def storage_dtype(t: Type) -> np.dtype:
     """The NumPy dtype of one value of ``t`` in memory (an array element).
 
     Structs use C's natural layout: each field at the next multiple of its own
-    alignment, the struct aligned to its widest field and padded to a multiple
-    of that. The cpu backend's field offsets, the CUDA C structs and NumPy's
+    alignment, the struct aligned to its widest field (or its declared ``align``,
+    if larger) and padded to a multiple of that. The cpu backend's field offsets, the CUDA C structs and NumPy's
     structured arrays all read their layout from here, so they agree. Raises
     ``TypeError`` for types with no memory layout (arrays, handles, and structs
     holding them).
@@ -360,17 +372,36 @@ def storage_dtype(t: Type) -> np.dtype:
     if isinstance(t, VectorType | MatrixType):
         return np.dtype((t.elem.np_dtype, t.shape))
     if isinstance(t, StructType):
-        names, formats, offsets, off, align = [], [], [], 0, 1
-        for name, ft in t.fields:
-            fd = storage_dtype(ft)
-            a = fd.alignment
-            off = (off + a - 1) // a * a
-            names.append(name)
-            formats.append(fd)
-            offsets.append(off)
-            off += fd.itemsize
-            align = max(align, a)
-        size = (off + align - 1) // align * align
-        spec = {"names": names, "formats": formats, "offsets": offsets, "itemsize": size}
-        return np.dtype(spec, align=True)
+        return struct_dtype(t, storage_dtype)
     raise TypeError(f"values of {t} cannot be stored in an array")
+
+
+def struct_dtype(t: StructType, field_dtype: Callable[[Type], np.dtype]) -> np.dtype:
+    """The NumPy dtype of struct ``t`` in C's layout, each field's dtype from
+    ``field_dtype(field type)``: each field at the next multiple of its alignment
+    (``alignment``), the size padded to the struct's alignment."""
+    names, formats, offsets, off = [], [], [], 0
+    for name, ft in t.fields:
+        fd = field_dtype(ft)
+        a = alignment(ft, field_dtype)
+        off = (off + a - 1) // a * a
+        names.append(name)
+        formats.append(fd)
+        offsets.append(off)
+        off += fd.itemsize
+    align = alignment(t, field_dtype)
+    size = (off + align - 1) // align * align
+    spec = {"names": names, "formats": formats, "offsets": offsets, "itemsize": size}
+    return np.dtype(spec, align=True)
+
+
+def alignment(t: Type, field_dtype: Callable[[Type], np.dtype] | None = None) -> int:
+    """The alignment in bytes of a value of ``t`` in memory: for a struct, its declared
+    ``align`` or its widest field's, whichever is larger; otherwise the alignment of
+    ``field_dtype(t)`` (``storage_dtype``; records pass theirs, which also lays out
+    array and handle fields)."""
+    field_dtype = storage_dtype if field_dtype is None else field_dtype
+    if isinstance(t, StructType):
+        return max([1, t.align] + [alignment(ft, field_dtype) for _, ft in t.fields])
+    dt = field_dtype(t)
+    return dt.alignment if dt.subdtype is None else dt.subdtype[0].alignment

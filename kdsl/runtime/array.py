@@ -132,6 +132,8 @@ class array:
         self._inner = inner_shape(t) if t is not None else ()
         self._ndim = buf.ndim - len(self._inner)
         self._device = dev
+        if isinstance(t, T.StructType) and t.align:
+            self._check_alignment(t.align)
         self._grad: array | None = None
         #: Keep ``.grad`` when a backward pass goes through a store into this array
         #: (by default the store consumes it, as in Warp; see docs/autodiff.md).
@@ -139,6 +141,19 @@ class array:
         #: Whether this is a transposed view (Warp's flag; the strides say the same).
         self.is_transposed = False
         self.requires_grad = requires_grad
+
+    def _check_alignment(self, align: int) -> None:
+        """Refuse an array of a struct declared ``align`` (``StructType``) whose address
+        or strides are not multiples of it: kernels load its elements as aligned."""
+        if self.size == 0:
+            return
+        bad = [s for s, d in zip(self.strides, self.shape) if d > 1 and s % align]
+        if self.ptr % align or bad:
+            raise KdslError(
+                f"an array of {self._t.name} (declared align={align}) needs its address and "
+                f"strides to be multiples of {align} bytes; got address {self.ptr:#x}, strides "
+                f"{self.strides}"
+            )
 
     @classmethod
     def _wrap(cls, buf: Any, t: T.Type, device: Device, requires_grad: bool = False) -> array:

@@ -120,18 +120,50 @@ class Struct(metaclass=_StructMeta):
         return f"{type(self).__name__}({body})"
 
 
-def struct(cls: type) -> type:
-    """Decorate a class with annotated fields into a kdsl struct type (as ``wp.struct``)."""
+def struct(cls: type | None = None, *, align: int | None = None) -> Any:
+    """Decorate a class with annotated fields into a kdsl struct type (as ``wp.struct``).
+
+    ``@kdsl.struct(align=16)`` (kdsl only) declares a minimum alignment in bytes, a power
+    of two: the struct's size is padded to it and every array of it must be aligned to
+    it, so the cuda backend loads an element with 16-byte vector loads
+    (``kdsl.ir.types.StructType``)."""
+    if cls is None:
+        return lambda c: _make_struct(c, align, sys._getframe(1).f_locals)
+    return _make_struct(cls, align, sys._getframe(1).f_locals)
+
+
+#: The largest alignment a struct may declare (a CUDA ``__align__`` limit is far above;
+#: no load is wider than 16 bytes, and 256 covers cache-line padding).
+MAX_ALIGN = 256
+
+
+def _check_align(cls: Any, align: Any) -> int:
+    if align is None:
+        return 0
+    if (
+        isinstance(align, bool)
+        or not isinstance(align, int | np.integer)
+        or not (1 <= align <= MAX_ALIGN and align & (align - 1) == 0)
+    ):
+        raise KdslTypeError(
+            f"struct {getattr(cls, '__name__', cls)}: align must be a power of two from 1 to "
+            f"{MAX_ALIGN}, not {align!r}", _class_loc(cls) if isinstance(cls, type) else None,
+        )  # fmt: skip
+    return int(align)
+
+
+def _make_struct(cls: Any, align: Any, caller_locals: dict[str, Any]) -> type:
     if not isinstance(cls, type):
         raise KdslTypeError(f"@kdsl.struct decorates a class, not {cls!r}")
+    declared = _check_align(cls, align)
     anns = inspect.get_annotations(cls)
     if not anns:
         raise KdslTypeError(f"struct {cls.__name__} has no annotated fields", _class_loc(cls))
     # String annotations (``from __future__ import annotations``) may name the caller's
     # locals (a struct defined inside a factory function), as in Warp.
-    scope = {**vars(sys.modules.get(cls.__module__, sys)), **sys._getframe(1).f_locals}
+    scope = {**vars(sys.modules.get(cls.__module__, sys)), **caller_locals}
     fields = tuple((name, _field_type(cls, name, ann, scope)) for name, ann in anns.items())
-    st = StructType(_ir_name(cls.__name__, fields), fields)
+    st = StructType(_ir_name(cls.__name__, fields, declared), fields, declared)
     ns = {
         "__kdsl_type__": st, "__kdsl_keywords__": tuple(anns), "__doc__": cls.__doc__,
         "__module__": cls.__module__, "__qualname__": cls.__qualname__,
@@ -143,13 +175,14 @@ def struct(cls: type) -> type:
     return out
 
 
-def _ir_name(name: str, fields: tuple) -> str:
-    """``name``, or ``name_N`` when another struct of that name has other fields."""
+def _ir_name(name: str, fields: tuple, align: int) -> str:
+    """``name``, or ``name_N`` when another struct of that name has other fields (or
+    another alignment)."""
     cand, n = name, 1
-    while cand in _NAMES and _NAMES[cand].fields != fields:
+    while cand in _NAMES and (_NAMES[cand].fields, _NAMES[cand].align) != (fields, align):
         n += 1
         cand = f"{name}_{n}"
-    _NAMES[cand] = StructType(cand, fields)
+    _NAMES[cand] = StructType(cand, fields, align)
     return cand
 
 

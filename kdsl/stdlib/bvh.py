@@ -41,12 +41,14 @@ AABB, RAY, SPHERE, CAPSULE = 0, 1, 2, 3
 PARALLEL = 4
 
 
-@wp.struct
+@wp.struct(align=16)
 class BvhNode:
-    """A node packed for traversal (32 bytes, one load): its bounds, ``first`` (a leaf's
-    first position in ``items``, -1 for an inner node) and ``next`` (an inner node's
-    ``skip``, a leaf's item count). ``BvhRecord``'s ``lowers``, ``uppers`` and ``first``
-    are strided views of these fields."""
+    """A node packed for traversal (32 bytes, two 16-byte halves as Warp's: the lower
+    bound and ``first``, the upper bound and ``next``; declared 16-byte aligned, so a
+    GPU reads a node with two vector loads): ``first`` is a leaf's first position in
+    ``items`` (-1 for an inner node), ``next`` an inner node's ``skip`` or a leaf's item
+    count. ``BvhRecord``'s ``lowers``, ``uppers`` and ``first`` are strided views of
+    these fields."""
 
     lower: wp.vec3
     first: wp.int32

@@ -69,7 +69,7 @@ def layout(t: T.Type) -> tuple[int, int]:
     if isinstance(t, T.ArrayType):
         return 8 * (1 + 2 * t.ndim), 8
     if isinstance(t, T.StructType):
-        off, align = 0, 1
+        off, align = 0, max(1, t.align)  # a declared ``align`` (C's ``__align__``)
         for _, ft in t.fields:
             s, a = layout(ft)
             off = (off + a - 1) // a * a + s
