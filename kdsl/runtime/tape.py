@@ -152,9 +152,11 @@ class Tape:
         Arrays with a ``.grad`` are tracked in ``gradients``; everything else
         (scalars, vectors, arrays without gradients) has no adjoint.
         """
-        if isinstance(a, array) and a.grad is not None:
-            self.gradients[a] = a.grad
-            return a.grad
+        if isinstance(a, array):
+            g = a.grad
+            if g is not None:
+                self.gradients[a] = g
+            return g
         # A struct's adjoint is built at the adjoint launch; its array fields' gradients
         # are tracked here, so ``tape.gradients[s.field]`` and ``zero()`` reach them (Warp).
         for field, grad in _struct_field_grads(a):
