@@ -31,8 +31,8 @@ def jacobi(u: wp.array2d(dtype=float), out: wp.array2d(dtype=float)):
 def one_sided(u: wp.array2d(dtype=float), out: wp.array2d(dtype=float), n: int):
     # Offsets on the index, a parameter bound, operands swapped, a ``!=`` test.
     i, j = wp.tid()
-    v = float(-1.0)
-    if j + 1 < n and 1 <= i and j - 2 >= 0:
+    v = -1.0
+    if j + 1 < n and 1 <= i and j - 2 >= 0:  # noqa: SIM300 (operands swapped on purpose)
         v = u[i - 1, j] + u[i, j - 2]
     if j != u.shape[1] - 2:
         v = v * 2.0
