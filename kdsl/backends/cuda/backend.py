@@ -21,6 +21,7 @@ from kdsl.backends.cuda.params import Packer
 from kdsl.errors import KdslError
 from kdsl.ir.core import Module
 from kdsl.ir.ops_debug import debug_sites
+from kdsl.passes import DEFAULT_PIPELINE
 
 
 @functools.cache
@@ -99,6 +100,8 @@ class CudaBackend(Backend):
     capabilities = frozenset({"fp16", "fp32", "fp64", "int8", "int16", "int64", "atomics"})
 
     emit_stages = ("cuda-c", "ptx")
+    #: The standard pipeline, then ``block-cache``: all-pairs loops read shared tiles.
+    pipeline = f"{DEFAULT_PIPELINE},block-cache"
     target_options = ("arch",)
 
     def devices(self) -> list[str]:
@@ -108,7 +111,7 @@ class CudaBackend(Backend):
         return _code_version(self.version)
 
     def cache_target(self, target: str) -> str:
-        return f"{target}/nvrtc-{nvrtc.version()}"
+        return f"{target}/{nvrtc.cache_name()}"
 
     def emit(self, module: Module, stage: str, options: dict[str, Any], checked: bool) -> str:
         """The module at ``stage``. "cuda-c" needs no GPU; "ptx" needs NVRTC only."""

@@ -8,7 +8,7 @@ parallel assignment), so after the loop they hold the results.
 
 from __future__ import annotations
 
-from kdsl.backends.cuda import checks
+from kdsl.backends.cuda import checks, tiling
 from kdsl.backends.cuda.emitter import FuncEmitter
 from kdsl.ir import types as T
 from kdsl.ir.core import Operation, OpResult, Value
@@ -36,6 +36,9 @@ def _if(em: FuncEmitter, op: Operation) -> list[str]:
 
 
 def _for(em: FuncEmitter, op: Operation) -> list[str]:
+    shared = tiling.tiled_loads(em, op)
+    if shared:
+        return tiling.lower_tiled_for(em, op, shared)
     lb, ub, step, *init = em.args(op)
     it: T.ScalarType = op.operands[0].type
     types = [r.type for r in op.results]
