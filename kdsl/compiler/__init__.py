@@ -3,6 +3,8 @@ a backend's stages (see ``driver``). It sits above the frontend and the backends
 below the runtime, which asks it for compiled kernels.
 """
 
+from kdsl.backends.facts import register_fact_store
+from kdsl.compiler import cache as kernel_cache
 from kdsl.compiler import python_scope
 from kdsl.compiler.adjoint import adjoint_module
 from kdsl.compiler.driver import compile_kernel, load_support, lower, prepare_module
@@ -13,6 +15,8 @@ from kdsl.types import register_python_scope
 # Builtins, standard-library functions and composite operators called from Python
 # evaluate through the interp backend (see ``python_scope``).
 register_python_scope(python_scope.call)
+# Backends keep slow facts about their toolchain (NVRTC's version) in the kernel cache.
+register_fact_store(kernel_cache.stored_fact)
 
 __all__ = [
     "CompileRecord",

@@ -402,6 +402,21 @@ STATS = Stats()
 SUPPORT_STATS = Stats()
 
 
+#: Lookups of facts backends keep in the cache (``stored_fact``).
+FACT_STATS = Stats()
+
+
+def stored_fact(name: str, learn: Callable[[], bytes]) -> bytes:
+    """A backend's fact (``kdsl.backends.facts``) kept in the kernel cache as an entry.
+
+    Entries are keyed on ``name`` alone (the backend names a fact after what decides
+    it); ahead-of-time directories never hold them.
+    """
+    key = kernel_key("", "facts", str(FORMAT_VERSION), {"fact": name}, "")
+    with outside_aot_directory():
+        return get_or_build(key, learn, bytes, FACT_STATS)
+
+
 def get_or_build(
     key: str, build: Callable[[], bytes], load: Callable[[bytes], T], stats: Stats | None = None
 ) -> T:

@@ -19,10 +19,16 @@ A compile error becomes a ``KdslError`` naming the user's Python file and line
 from __future__ import annotations
 
 import functools
+import hashlib
+import importlib.util
+import json
+import os
 import re
+import sys
 from dataclasses import dataclass
 
 from kdsl.backends.cuda.lower import UNIT_NAME
+from kdsl.backends.facts import stored_fact
 from kdsl.errors import KdslError
 from kdsl.ir.core import Loc, Module
 
@@ -67,15 +73,100 @@ def _nvrtc():
 
 @functools.cache
 def version() -> str:
-    """NVRTC's version, ``"13.0"``; part of cache keys (another NVRTC, other code)."""
-    major, minor = _nvrtc().getVersion()
-    return f"{major}.{minor}"
+    """NVRTC's version, ``"13.0"`` (a stored fact: see ``toolchain_facts``)."""
+    return str(toolchain_facts()["version"])
 
 
 @functools.cache
 def supported_archs() -> tuple[int, ...]:
-    """The ``sm`` numbers this NVRTC can compile for."""
-    return tuple(_nvrtc().getSupportedArchs())
+    """The ``sm`` numbers this NVRTC can compile for (a stored fact)."""
+    return tuple(int(a) for a in toolchain_facts()["archs"])
+
+
+def cache_name() -> str:
+    """How kernel cache keys name the NVRTC: its version and its library's fingerprint.
+
+    Another NVRTC (even of the same version) gives other keys, so other code is
+    never read back as this one's; a cache hit learns this name without loading NVRTC.
+    """
+    fp = library_fingerprint()
+    return f"nvrtc-{version()}" if fp is None else f"nvrtc-{version()}-{fp}"
+
+
+@functools.cache
+def toolchain_facts() -> dict:
+    """NVRTC's version and architectures, asked of the library once per NVRTC.
+
+    Loading ``libnvrtc`` to ask costs 160-300 ms, more than the cache hit it would
+    serve; the answer is kept in the kernel cache under the library's fingerprint
+    (``kdsl.backends.facts``). Without a fingerprint (no library file found where
+    CuPy looks) the library is asked every time.
+    """
+    fp = library_fingerprint()
+    if fp is None:
+        return json.loads(_ask_nvrtc())
+    return json.loads(stored_fact(f"nvrtc-{fp}", _ask_nvrtc))
+
+
+def _ask_nvrtc() -> bytes:
+    nvrtc = _nvrtc()
+    major, minor = nvrtc.getVersion()
+    archs = [int(a) for a in nvrtc.getSupportedArchs()]
+    return json.dumps({"version": f"{major}.{minor}", "archs": archs}).encode()
+
+
+#: The file names CuPy's loader (``cuda.pathfinder``) opens for NVRTC on Linux.
+_LIB_NAMES = ("libnvrtc.so", "libnvrtc.so.11.2", "libnvrtc.so.12", "libnvrtc.so.13",
+              "libnvrtc.so.14")  # fmt: skip
+#: Where the wheels put it, under a site-packages directory.
+_WHEEL_DIRS = ("nvidia/cu13/lib", "nvidia/cu12/lib", "nvidia/cuda_nvrtc/lib", "nvidia/cu14/lib")
+_SYSTEM_DIRS = ("/usr/local/cuda/lib64", "/usr/lib/x86_64-linux-gnu", "/usr/lib/aarch64-linux-gnu",
+                "/usr/lib64", "/usr/lib", "/lib/x86_64-linux-gnu", "/lib64")  # fmt: skip
+
+
+def _search_dirs() -> list[str]:
+    """Every directory CuPy may load ``libnvrtc`` from: wheels, conda, CUDA_PATH, the system."""
+    dirs = [os.path.join(p, d) for p in sys.path if p for d in _WHEEL_DIRS]
+    env = os.environ
+    for var in ("CONDA_PREFIX", "CUDA_PATH", "CUDA_HOME"):
+        root = env.get(var)
+        if root:
+            dirs += [os.path.join(root, "lib64"), os.path.join(root, "lib")]
+    dirs += [d for d in env.get("LD_LIBRARY_PATH", "").split(os.pathsep) if d]
+    return dirs + list(_SYSTEM_DIRS)
+
+
+@functools.cache
+def library_fingerprint() -> str | None:
+    """A digest of every ``libnvrtc`` file CuPy could load (path, size, mtime), and of
+    CuPy's NVRTC binding; None when none is found (or off Linux).
+
+    It names the NVRTC without loading it: a changed, added or removed library file
+    changes it. Files are only looked at, never opened.
+    """
+    if not sys.platform.startswith("linux"):
+        return None
+    found = []
+    for d in dict.fromkeys(_search_dirs()):  # each directory once, in order
+        if not os.path.isdir(d):
+            continue
+        for name in _LIB_NAMES:
+            path = os.path.join(d, name)
+            try:
+                st = os.stat(path)
+            except OSError:
+                continue
+            found.append((path, st.st_size, st.st_mtime_ns))
+    if not found:
+        return None
+    spec = importlib.util.find_spec("cupy_backends")
+    for root in (spec.submodule_search_locations or []) if spec is not None else []:
+        libs = os.path.join(root, "cuda", "libs")
+        for name in sorted(os.listdir(libs)) if os.path.isdir(libs) else []:
+            if name.startswith("nvrtc"):
+                st = os.stat(os.path.join(libs, name))
+                found.append((name, st.st_size, st.st_mtime_ns))
+    return hashlib.sha256(repr(found).encode()).hexdigest()[:16]
 
 
 def arch_for(compute_capability: int) -> str:
