@@ -10,11 +10,10 @@ import pytest
 import kdsl as wp
 from kdsl.errors import KdslTypeError
 from kdsl.geometry.bvh import BvhError
+from tests.geometry.queries import UNBOUNDED, collect, launch_hits
 
 BACKENDS = ["interp", "cpu"]
 CONSTRUCTORS = ["lbvh", "median", "sah"]
-#: Most hits a query records (the count is exact beyond it).
-MAX_HITS = 64
 cuda = pytest.mark.skipif(not wp.is_cuda_available(), reason="no GPU")
 
 
@@ -24,14 +23,7 @@ def aabb_hits(
     hits: wp.array2d(dtype=int), counts: wp.array(dtype=int),
 ):  # fmt: skip
     i = wp.tid()
-    q = wp.bvh_query_aabb(bvh, lo[i], hi[i], root)
-    k = 0
-    n = 0
-    while wp.bvh_query_next(q, k):
-        if n < MAX_HITS:
-            hits[i, n] = k
-        n += 1
-    counts[i] = n
+    collect(wp.bvh_query_aabb(bvh, lo[i], hi[i], root), UNBOUNDED, i, hits, counts)
 
 
 @wp.kernel
@@ -40,14 +32,7 @@ def ray_hits(
     max_t: float, hits: wp.array2d(dtype=int), counts: wp.array(dtype=int),
 ):  # fmt: skip
     i = wp.tid()
-    q = wp.bvh_query_ray(bvh, start[i], dir[i])
-    k = 0
-    n = 0
-    while wp.bvh_query_next(q, k, max_t):
-        if n < MAX_HITS:
-            hits[i, n] = k
-        n += 1
-    counts[i] = n
+    collect(wp.bvh_query_ray(bvh, start[i], dir[i]), max_t, i, hits, counts)
 
 
 @wp.kernel
@@ -56,14 +41,7 @@ def sphere_hits(
     hits: wp.array2d(dtype=int), counts: wp.array(dtype=int),
 ):  # fmt: skip
     i = wp.tid()
-    q = wp.bvh_query_sphere(bvh, centre[i], radius)
-    k = 0
-    n = 0
-    while wp.bvh_query_next(q, k):
-        if n < MAX_HITS:
-            hits[i, n] = k
-        n += 1
-    counts[i] = n
+    collect(wp.bvh_query_sphere(bvh, centre[i], radius), UNBOUNDED, i, hits, counts)
 
 
 @wp.kernel
@@ -72,14 +50,7 @@ def capsule_hits(
     radius: float, max_t: float, hits: wp.array2d(dtype=int), counts: wp.array(dtype=int),
 ):  # fmt: skip
     i = wp.tid()
-    q = wp.bvh_query_capsule(bvh, start[i], dir[i], radius)
-    k = 0
-    n = 0
-    while wp.bvh_query_next(q, k, max_t):
-        if n < MAX_HITS:
-            hits[i, n] = k
-        n += 1
-    counts[i] = n
+    collect(wp.bvh_query_capsule(bvh, start[i], dir[i], radius), max_t, i, hits, counts)
 
 
 @wp.kernel
@@ -88,19 +59,15 @@ def group_roots(bvh: wp.uint64, groups: wp.array(dtype=int), roots: wp.array(dty
     roots[i] = wp.bvh_get_group_root(bvh, groups[i])
 
 
-def hit_sets(hits, counts) -> list[set[int]]:
-    h, c = hits.numpy(), counts.numpy()
-    assert c.max(initial=0) <= MAX_HITS, "test sizes must keep hits under MAX_HITS"
-    out = [set(h[i, : c[i]].tolist()) for i in range(len(c))]
-    assert [len(s) for s in out] == c.tolist(), "an item was reported twice"
+def hit_sets(lists: list[list[int]]) -> list[set[int]]:
+    """Each query's items as a set (no item reported twice)."""
+    out = [set(hits) for hits in lists]
+    assert [len(s) for s in out] == [len(h) for h in lists], "an item was reported twice"
     return out
 
 
 def run_query(kernel, n: int, args: list, backend: str, device: str = "cpu"):
-    hits = wp.zeros((n, MAX_HITS), dtype=int, device=device)
-    counts = wp.zeros(n, dtype=int, device=device)
-    wp.launch(kernel, dim=n, inputs=[*args, hits, counts], backend=backend, device=device)
-    return hit_sets(hits, counts)
+    return hit_sets(launch_hits(wp, kernel, n, args, device=device, backend=backend))
 
 
 # Float64 brute force.

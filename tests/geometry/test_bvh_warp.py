@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 import kdsl as wp
+from tests.geometry.queries import MAX_HITS, UNBOUNDED, launch_hits
 from tests.geometry.test_bvh import (
-    MAX_HITS,
     aabb_hits,
     make_bvh,
     random_boxes,
@@ -21,18 +21,30 @@ warp = pytest.importorskip("warp")
 warp.config.quiet = True
 
 
+@warp.func
+def warp_collect(q: warp.BvhQuery, max_t: float, i: int, hits: warp.array2d(dtype=int),
+                 counts: warp.array(dtype=int)):  # fmt: skip
+    """``queries.collect`` in Warp: ``bvh_query_next(q, k)`` for a negative ``max_t``."""
+    k = int(0)  # noqa: UP018, RUF046 - Warp needs a dynamic variable
+    n = int(0)  # noqa: UP018, RUF046
+    more = bool(True)  # noqa: UP018 - Warp needs a dynamic variable
+    while more:
+        if max_t < 0.0:
+            more = warp.bvh_query_next(q, k)
+        else:
+            more = warp.bvh_query_next(q, k, max_t)
+        if more:
+            if n < MAX_HITS:
+                hits[i, n] = k
+            n += 1
+    counts[i] = n
+
+
 @warp.kernel
 def warp_aabb(bvh: warp.uint64, lo: warp.array(dtype=warp.vec3), hi: warp.array(dtype=warp.vec3),
               hits: warp.array2d(dtype=int), counts: warp.array(dtype=int)):  # fmt: skip
     i = warp.tid()
-    q = warp.bvh_query_aabb(bvh, lo[i], hi[i])
-    k = int(0)  # noqa: UP018, RUF046 - Warp needs a dynamic variable
-    n = int(0)  # noqa: UP018, RUF046
-    while warp.bvh_query_next(q, k):
-        if n < MAX_HITS:
-            hits[i, n] = k
-        n += 1
-    counts[i] = n
+    warp_collect(warp.bvh_query_aabb(bvh, lo[i], hi[i]), UNBOUNDED, i, hits, counts)
 
 
 @warp.kernel
@@ -40,14 +52,7 @@ def warp_ray(bvh: warp.uint64, start: warp.array(dtype=warp.vec3),
              dir: warp.array(dtype=warp.vec3), max_t: float, hits: warp.array2d(dtype=int),
              counts: warp.array(dtype=int)):  # fmt: skip
     i = warp.tid()
-    q = warp.bvh_query_ray(bvh, start[i], dir[i])
-    k = int(0)  # noqa: UP018, RUF046 - Warp needs a dynamic variable
-    n = int(0)  # noqa: UP018, RUF046
-    while warp.bvh_query_next(q, k, max_t):
-        if n < MAX_HITS:
-            hits[i, n] = k
-        n += 1
-    counts[i] = n
+    warp_collect(warp.bvh_query_ray(bvh, start[i], dir[i]), max_t, i, hits, counts)
 
 
 @warp.kernel
@@ -55,36 +60,18 @@ def warp_capsule0(bvh: warp.uint64, start: warp.array(dtype=warp.vec3),
                   dir: warp.array(dtype=warp.vec3), max_t: float,
                   hits: warp.array2d(dtype=int), counts: warp.array(dtype=int)):  # fmt: skip
     i = warp.tid()
-    q = warp.bvh_query_capsule(bvh, start[i], dir[i], 0.0)
-    k = int(0)  # noqa: UP018, RUF046 - Warp needs a dynamic variable
-    n = int(0)  # noqa: UP018, RUF046
-    while warp.bvh_query_next(q, k, max_t):
-        if n < MAX_HITS:
-            hits[i, n] = k
-        n += 1
-    counts[i] = n
+    warp_collect(warp.bvh_query_capsule(bvh, start[i], dir[i], 0.0), max_t, i, hits, counts)
 
 
 @warp.kernel
 def warp_sphere(bvh: warp.uint64, centre: warp.array(dtype=warp.vec3), radius: float,
                 hits: warp.array2d(dtype=int), counts: warp.array(dtype=int)):  # fmt: skip
     i = warp.tid()
-    q = warp.bvh_query_sphere(bvh, centre[i], radius)
-    k = int(0)  # noqa: UP018, RUF046 - Warp needs a dynamic variable
-    n = int(0)  # noqa: UP018, RUF046
-    while warp.bvh_query_next(q, k):
-        if n < MAX_HITS:
-            hits[i, n] = k
-        n += 1
-    counts[i] = n
+    warp_collect(warp.bvh_query_sphere(bvh, centre[i], radius), UNBOUNDED, i, hits, counts)
 
 
 def warp_query(kernel, m: int, args: list) -> list[set[int]]:
-    hits = warp.zeros((m, MAX_HITS), dtype=int, device="cpu")
-    counts = warp.zeros(m, dtype=int, device="cpu")
-    warp.launch(kernel, dim=m, inputs=[*args, hits, counts], device="cpu")
-    h, c = hits.numpy(), counts.numpy()
-    return [set(h[i, : c[i]].tolist()) for i in range(m)]
+    return [set(hits) for hits in launch_hits(warp, kernel, m, args)]
 
 
 def wv(a: np.ndarray):

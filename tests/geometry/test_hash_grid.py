@@ -10,6 +10,7 @@ import pytest
 import kdsl as wp
 from kdsl.errors import KdslTypeError
 from kdsl.geometry.hash_grid import HashGridError
+from tests.geometry.queries import UNBOUNDED, collect, launch_hits
 
 BACKENDS = ["interp", "cpu"]
 #: Most candidates a query records (the count is exact beyond it).
@@ -38,14 +39,7 @@ def sum(grid: wp.uint64, points: wp.array(dtype=wp.vec3), output: wp.array(dtype
 def candidates(grid: wp.uint64, centre: wp.array(dtype=wp.vec3), max_dist: float,
                hits: wp.array2d(dtype=int), counts: wp.array(dtype=int)):  # fmt: skip
     i = wp.tid()
-    q = wp.hash_grid_query(grid, centre[i], max_dist)
-    k = 0
-    n = 0
-    while wp.hash_grid_query_next(q, k):
-        if n < MAX_HITS:
-            hits[i, n] = k
-        n += 1
-    counts[i] = n
+    collect(wp.hash_grid_query(grid, centre[i], max_dist), UNBOUNDED, i, hits, counts)
 
 
 @wp.kernel
@@ -68,15 +62,8 @@ def run_sum(grid, pts, radius, backend, device="cpu"):
 
 
 def run_candidates(grid, centres, max_dist, backend, device="cpu"):
-    m = len(centres)
-    hits = wp.zeros((m, MAX_HITS), dtype=int, device=device)
-    counts = wp.zeros(m, dtype=int, device=device)
-    wp.launch(candidates, dim=m, backend=backend, device=device,
-              inputs=[grid.id, wp.array(centres, dtype=wp.vec3, device=device), max_dist,
-                      hits, counts])  # fmt: skip
-    h, c = hits.numpy(), counts.numpy()
-    assert c.max() <= MAX_HITS
-    return [list(h[i, : c[i]]) for i in range(m)]
+    args = [grid.id, wp.array(centres, dtype=wp.vec3, device=device), max_dist]
+    return launch_hits(wp, candidates, len(centres), args, MAX_HITS, device, backend=backend)
 
 
 def cell_coord(v: np.ndarray) -> np.ndarray:
@@ -87,18 +74,16 @@ def cell_coord(v: np.ndarray) -> np.ndarray:
     return np.where(ok, np.nan_to_num(c), out).astype(np.int64)
 
 
+def bucket(c: np.ndarray, dims) -> np.ndarray:
+    """The bucket of cells ``c`` (..., 3) in a grid of ``dims`` (x fastest, wrapped)."""
+    return ((c[..., 2] % dims[2]) * dims[1] + c[..., 1] % dims[1]) * dims[0] + c[..., 0] % dims[0]
+
+
 def model_candidates(p, dims, radius, centres, max_dist):
     """The documented rule: buckets of the cells ``[c - d, c + d]`` overlaps (at most dim
     per axis), x fastest, each bucket's points in original order."""
     inv = np.float32(1) / np.float32(radius)
-    cells = cell_coord(p * inv)
-
-    def bucket(c):
-        return ((c[..., 2] % dims[2]) * dims[1] + c[..., 1] % dims[1]) * dims[0] + c[..., 0] % dims[
-            0
-        ]
-
-    pb = bucket(cells)
+    pb = bucket(cell_coord(p * inv), dims)
     d = np.float32(max_dist)
     result = []
     for c in np.asarray(centres, np.float32):
@@ -109,7 +94,7 @@ def model_candidates(p, dims, radius, centres, max_dist):
         for z in range(lo[2], hi[2] + 1):
             for y in range(lo[1], hi[1] + 1):
                 for x in range(lo[0], hi[0] + 1):
-                    got += list(np.nonzero(pb == bucket(np.array([x, y, z])))[0])
+                    got += list(np.nonzero(pb == bucket(np.array([x, y, z]), dims))[0])
         result.append(got)
     return result
 
@@ -182,13 +167,8 @@ def test_candidates_match_warp():
     wgrid = warp.HashGrid(*dims, device="cpu")
     wgrid.build(warp.array(p, dtype=warp.vec3, device="cpu"), radius)
     for max_dist in (radius, 0.05, 0.7):
-        hits = warp.zeros((len(centres), MAX_HITS), dtype=int, device="cpu")
-        counts = warp.zeros(len(centres), dtype=int, device="cpu")
-        warp.launch(warp_candidates, dim=len(centres), device="cpu",
-                    inputs=[wgrid.id, warp.array(centres, dtype=warp.vec3, device="cpu"),
-                            max_dist, hits, counts])  # fmt: skip
-        h, c = hits.numpy(), counts.numpy()
-        want = [list(h[i, : c[i]]) for i in range(len(centres))]
+        args = [wgrid.id, warp.array(centres, dtype=warp.vec3, device="cpu"), max_dist]
+        want = launch_hits(warp, warp_candidates, len(centres), args, MAX_HITS)
         assert run_candidates(grid, centres, max_dist, "cpu") == want  # same points, same order
 
 
@@ -203,11 +183,10 @@ def test_point_id_is_the_sorted_order(backend):
     assert run_candidates(grid, [[0.5, 0.5, 0.5]], 1.0, backend) == [[]]
     grid.build(wp.array(p, dtype=wp.vec3), 0.3)
     wp.launch(point_ids, dim=152, inputs=[grid.id, out], backend=backend)
-    c = cell_coord(p * (np.float32(1) / np.float32(0.3)))
-    bucket = ((c[:, 2] % 5) * 4 + c[:, 1] % 4) * 3 + c[:, 0] % 3
+    buckets = bucket(cell_coord(p * (np.float32(1) / np.float32(0.3))), (3, 4, 5))
     ids = out.numpy()
     assert ids[0] == -1 and ids[-1] == -1
-    np.testing.assert_array_equal(ids[1:-1], np.argsort(bucket, kind="stable"))
+    np.testing.assert_array_equal(ids[1:-1], np.argsort(buckets, kind="stable"))
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
