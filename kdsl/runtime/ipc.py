@@ -72,8 +72,24 @@ def array_ipc_handle(arr: array) -> bytes:
         return bytes(rt.ipcGetMemHandle(buf.data.ptr))
 
 
-class _Mapping:
-    """An opened IPC allocation; closed when the last buffer over it is collected."""
+def _open(opener: str, handle: bytes, dev: Device, what: str, hint: str = "") -> int:
+    """``cudaIpcOpen*Handle`` (``opener``, a CuPy runtime name) of ``handle`` on ``dev``;
+    a KdslError naming ``what`` (and ``hint``) when CUDA refuses it."""
+    cp = cupy()
+    with cp.cuda.Device(dev.ordinal):
+        try:
+            return getattr(cp.cuda.runtime, opener)(handle)
+        except cp.cuda.runtime.CUDARuntimeError as e:
+            raise KdslError(
+                f"{what}: CUDA could not open the handle on '{dev}'{hint}: {e}"
+            ) from None
+
+
+class _Opened:
+    """A CUDA object opened from an IPC handle (``ptr`` on device ``ordinal``), released
+    with the CuPy runtime function named ``release`` when collected."""
+
+    release = ""
 
     def __init__(self, ptr: int, ordinal: int) -> None:
         self.ptr = ptr
@@ -83,9 +99,15 @@ class _Mapping:
         try:
             cp = cupy()
             with cp.cuda.Device(self.ordinal):
-                cp.cuda.runtime.ipcCloseMemHandle(self.ptr)
+                getattr(cp.cuda.runtime, self.release)(self.ptr)
         except Exception:  # at interpreter exit CUDA may already be gone
             pass
+
+
+class _Mapping(_Opened):
+    """An opened IPC allocation; closed when the last buffer over it is collected."""
+
+    release = "ipcCloseMemHandle"
 
 
 def from_ipc_handle(
@@ -110,15 +132,9 @@ def from_ipc_handle(
             raise KdslError(f"from_ipc_handle(): {len(outer)} strides for {len(dims)} dimensions")
     inner_strides = tuple(npd.itemsize * int(np.prod(inner[k + 1 :])) for k in range(len(inner)))
     extent = 0 if 0 in dims else item + sum((d - 1) * abs(s) for d, s in zip(dims, outer))
+    ptr = _open("ipcOpenMemHandle", handle, dev, "from_ipc_handle()",
+                " (a handle made in this same process, or one whose array was freed?)")  # fmt: skip
     cp = cupy()
-    with cp.cuda.Device(dev.ordinal):
-        try:
-            ptr = cp.cuda.runtime.ipcOpenMemHandle(handle)
-        except cp.cuda.runtime.CUDARuntimeError as e:
-            raise KdslError(
-                f"from_ipc_handle(): CUDA could not open the handle on '{dev}' (a handle made "
-                f"in this same process, or one whose array was freed?): {e}"
-            ) from None
     mem = cp.cuda.UnownedMemory(ptr, extent, _Mapping(ptr, dev.ordinal), dev.ordinal)
     buf = cp.ndarray(dims + inner, npd, cp.cuda.MemoryPointer(mem, 0), outer + inner_strides)
     return array(buf, dtype=dtype, device=dev, copy=False)
@@ -133,13 +149,11 @@ def event_ipc_handle(event: Event) -> bytes:
         return bytes(cupy().cuda.runtime.ipcGetEventHandle(event.cuda_event))
 
 
-class _OpenedEvent:
+class _OpenedEvent(_Opened):
     """The CuPy-event face (``ptr``, ``record``, ``synchronize``, ``done``) of an event
     opened from an IPC handle; destroyed when collected."""
 
-    def __init__(self, ptr: int, ordinal: int) -> None:
-        self.ptr = ptr
-        self.ordinal = ordinal
+    release = "eventDestroy"
 
     def record(self, stream: Any) -> None:
         cupy().cuda.runtime.eventRecord(self.ptr, stream.ptr)
@@ -151,28 +165,13 @@ class _OpenedEvent:
     def done(self) -> bool:
         return cupy().cuda.runtime.eventQuery(self.ptr) == 0
 
-    def __del__(self) -> None:
-        try:
-            cp = cupy()
-            with cp.cuda.Device(self.ordinal):
-                cp.cuda.runtime.eventDestroy(self.ptr)
-        except Exception:  # at interpreter exit CUDA may already be gone
-            pass
-
 
 def event_from_ipc_handle(handle: bytes, device: Any = None) -> Event:
     """An ``Event`` opened from another process's ``Event.ipc_handle()``, on ``device``
     (the current CUDA device when None): record it, wait on it, synchronize it."""
     dev = _ipc_device("cuda" if device is None else device, "event_from_ipc_handle()")
     handle = _check_handle(handle, "event_from_ipc_handle()")
-    cp = cupy()
-    with cp.cuda.Device(dev.ordinal):
-        try:
-            ptr = cp.cuda.runtime.ipcOpenEventHandle(handle)
-        except cp.cuda.runtime.CUDARuntimeError as e:
-            raise KdslError(
-                f"event_from_ipc_handle(): CUDA could not open the handle on '{dev}': {e}"
-            ) from None
+    ptr = _open("ipcOpenEventHandle", handle, dev, "event_from_ipc_handle()")
     event = Event.__new__(Event)  # wraps the opened handle instead of creating an event
     event.cupy = _OpenedEvent(ptr, dev.ordinal)
     event.device = dev
