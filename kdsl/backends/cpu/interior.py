@@ -5,8 +5,8 @@ per bounds test) and a copy of its body with those tests folded. Here the cuts
 become LLVM values, once per launch, before the thread loop: per thread dimension
 ``d`` the interior is ``lo[d] <= t_d < hi[d]`` (i64), clamped to ``[0, extent)``.
 ``lower`` then runs the folded copy on the interior columns of each row and the
-kernel's own body on the rest (boundary peeling), so a stencil's inner loop has no
-branch and vectorizes.
+kernel's own body on the rest, in one loop for both edges (boundary peeling), so a
+stencil's inner loop has no branch and vectorizes.
 """
 
 from __future__ import annotations

@@ -25,6 +25,7 @@ from kdsl.backends.cpu.composite import Parts, leaf_types, leaves, rebuild_all
 from kdsl.backends.cpu.emitter import Emitter, ModuleState
 from kdsl.backends.cpu.interior import inside, interior_box, split_range
 from kdsl.backends.cpu.kernel_facts import kernel_symbol, tid_ndims
+from kdsl.backends.cpu.local_sums import LocalSums, find_sites
 from kdsl.backends.cpu.memory import load_value
 from kdsl.backends.cpu.ops import TABLE
 from kdsl.backends.cpu.versioning import vector_arrays, versioned
@@ -85,6 +86,11 @@ def emit_kernel(state: ModuleState, func: Operation, llname: str) -> ir.Function
 
     # Bounds tests on the thread index: the interior runs a copy without them.
     plan = None if state.debug else interior_plan(state.module, func)
+    if not state.debug:  # atomic adds to one element: summed per range, one atomic after
+        sites = find_sites(body_block)
+        if plan is not None:
+            sites += find_sites(plan.interior.regions[0].block)
+        em.local_sums = LocalSums(B, sites) if sites else None
 
     def emit() -> list:
         # Parameters are read back from the value map: ``versioned`` rebinds dense arrays.
@@ -103,6 +109,8 @@ def emit_kernel(state: ModuleState, func: Operation, llname: str) -> ir.Function
         versioned(em, arrays, emit, [])
     else:
         emit()
+    if em.local_sums is not None:
+        em.local_sums.flush(B, fn)
     B.ret_void()
     return fn
 
@@ -141,8 +149,8 @@ def _flat_loop(
 ) -> None:
     """The thread loop of a kernel with a 1-d index: counted loops over ``[start, end)``.
 
-    With a ``plan`` the range is split in three: edge, interior (the plan's folded
-    body), edge. Like ``_row_loops`` it leaves the builder in its exit block.
+    With a ``plan`` the range is split into edges and interior (see ``_peeled``).
+    Like ``_row_loops`` it leaves the builder in its exit block.
     """
     B = em.b
 
@@ -169,12 +177,17 @@ def _peeled(
     at: Callable[[ir.Value], None],
     name: str,
 ) -> None:
-    """Loops over ``[m0, m1)`` (edge), ``[m1, m2)`` (interior), ``[m2, m3)`` (edge); i64 marks."""
+    """The edges ``[m0, m1)`` and ``[m2, m3)`` in one loop (one copy of the body: it
+    jumps from ``m1`` to ``m2``), then the interior ``[m1, m2)``; marks are i64."""
     B = em.b
     m = [B.trunc(x, LT.I32) for x in marks]
-    _span(em, body, params, m[0], m[1], at, name + ".edge")
+
+    def skip(nxt: ir.Value) -> ir.Value:
+        return B.select(B.icmp_signed("==", nxt, m[1]), m[2], nxt)
+
+    start = B.select(B.icmp_signed("==", m[0], m[1]), m[2], m[0])
+    _span(em, body, params, start, m[3], at, name + ".edge", skip)
     _span(em, plan.interior.regions[0].block, params, m[1], m[2], at, name + ".inner")
-    _span(em, body, params, m[2], m[3], at, name + ".tail")
 
 
 def _span(
@@ -185,10 +198,12 @@ def _span(
     hi: ir.Value,
     at: Callable[[ir.Value], None],
     name: str,
+    skip: Callable[[ir.Value], ir.Value] | None = None,
 ) -> None:
-    """One counted i32 loop over ``[lo, hi)`` running ``body``; ``at(i)`` sets the index.
+    """One i32 loop from ``lo`` while ``< hi`` running ``body``; ``at(i)`` sets the index.
 
-    The builder is left in the loop's exit block.
+    ``skip`` maps each next index to the one to run (the edge loop of ``_peeled``). The
+    builder is left in the loop's exit block.
     """
     B, fn = em.b, em.fn
     entry = B.block
@@ -197,7 +212,7 @@ def _span(
         B, "tid" if name == "thread" else f"tid.{name}", lo, hi, entry, head, body_bb, done
     )
     at(i)
-    _thread_body(em, body, params, i, head)
+    _thread_body(em, body, params, i, head, skip)
     B.position_at_end(done)
 
 
@@ -217,7 +232,7 @@ def _row_loops(
     counts the last component directly. So a stencil's inner loop is a plain
     counted loop with no division per thread, which LLVM can vectorize. With a
     ``plan`` (bounds tests on the thread index) a row inside the interior box runs
-    its columns in three loops: edge, interior (the folded body), edge.
+    its edge columns in one loop and its interior columns (the folded body) in another.
     """
     B, fn = em.b, em.fn
     box = interior_box(em, plan, extents) if plan is not None else None
@@ -263,19 +278,29 @@ def _row_loops(
 
 
 def _thread_body(
-    em: Emitter, body: Block, params: list, counter: ir.PhiInstr, head: ir.Block
+    em: Emitter,
+    body: Block,
+    params: list,
+    counter: ir.PhiInstr,
+    head: ir.Block,
+    skip: Callable[[ir.Value], ir.Value] | None = None,
 ) -> None:
-    """One thread's code, then the step of ``counter`` and the branch back to ``head``."""
+    """One thread's code, then the step of ``counter`` (``skip``-ped when given) and the
+    branch back to ``head``."""
     B, fn = em.b, em.fn
+
+    def step() -> ir.Value:
+        nxt = B.add(counter, ir.Constant(LT.I32, 1), flags=["nsw"])
+        return nxt if skip is None else skip(nxt)
+
     if em.state.debug:  # a failed check ends its thread by branching here
         em.abort_block = fn.append_basic_block("thread.abort")
     em.lower_block(body, params)
-    counter.add_incoming(B.add(counter, ir.Constant(LT.I32, 1), flags=["nsw"]), B.block)
+    counter.add_incoming(step(), B.block)
     B.branch(head)
     if em.abort_block is not None:
         B.position_at_end(em.abort_block)
-        step = B.add(counter, ir.Constant(LT.I32, 1), flags=["nsw"])
-        counter.add_incoming(step, em.abort_block)
+        counter.add_incoming(step(), em.abort_block)
         B.branch(head)
 
 
