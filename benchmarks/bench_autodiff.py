@@ -200,8 +200,8 @@ def main(argv: list[str] | None = None) -> int:
     data = {"machine": harness.machine(), "device": args.device, "quick": args.quick,
             "ratios": ratios, "accuracy": rows_acc}  # fmt: skip
     path = args.json or RESULTS / f"autodiff-{time.strftime('%Y%m%d-%H%M%S')}.json"
-    harness.write_json(data, path)
-    print(f"\nwrote {path}")
+    print()
+    harness.save_json(data, path)
     return 0
 
 

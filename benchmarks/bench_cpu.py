@@ -282,8 +282,7 @@ def main() -> int:
         "elapsed_s": elapsed,
         "versions": {f: (m if isinstance(m, str) else m.version()) for f, m in mods.items()},
     }
-    harness.write_json(harness.to_json(cells, meta), path)
-    print(f"wrote {path}")
+    harness.save_json(harness.to_json(cells, meta), path)
     return harness.exit_status(cells, "bench_cpu")
 
 

@@ -399,8 +399,7 @@ def main() -> int:
     }
     print_summary(cells, meta, meta["sizes"])
     path = args.json or RESULTS / f"cuda-{time.strftime('%Y%m%d-%H%M%S')}.json"
-    harness.write_json(harness.to_json(cells, meta), path)
-    print(f"wrote {path}")
+    harness.save_json(harness.to_json(cells, meta), path)
     return harness.exit_status(cells, "bench_cuda")
 
 

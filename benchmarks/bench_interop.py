@@ -37,7 +37,7 @@ from typing import Any
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import torch
-from suite.harness import Cell, Stats, print_table, to_json, write_json
+from suite.harness import Cell, Stats, print_table, save_json, to_json
 
 import kdsl
 
@@ -222,8 +222,7 @@ def main() -> None:
     print_table(["method [device]", *names], rows)
     meta = {"benchmark": "interop", "iters": args.iters, "reps": args.reps, "n": args.n,
             "unit": "seconds per iteration", "torch": torch.__version__}  # fmt: skip
-    write_json(to_json(cells, meta), args.json)
-    print(f"wrote {args.json}")
+    save_json(to_json(cells, meta), args.json)
 
 
 def _us(cell: Cell | None) -> str:

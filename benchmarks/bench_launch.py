@@ -17,15 +17,13 @@ It also prints the host overhead of a dim=1 launch with two array arguments:
 Results go to benchmarks/results/launch.json.
 """
 
-import argparse
-import json
-import platform
 import statistics
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
+from suite.harness import median_seconds, save_json, script_meta, script_parser
 
 import kdsl as wp
 from kdsl.backends.cpu import num_threads, pool
@@ -54,16 +52,6 @@ def copy1(a: wp.array(dtype=float), b: wp.array(dtype=float)):
     b[i] = a[i]
 
 
-def _median_seconds(fn, reps: int) -> float:
-    fn()  # compile, warm caches and the pool
-    times = []
-    for _ in range(reps):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times)
-
-
 def crossover(kernel, max_log2: int, reps: int) -> tuple[list[dict], int | None]:
     """Inline and pooled launch times per size, and the first size where the pool wins."""
     rows, first = [], None
@@ -78,10 +66,11 @@ def crossover(kernel, max_log2: int, reps: int) -> tuple[list[dict], int | None]
             def run(x=x, y=y, n=n):
                 wp.launch(kernel, n, [x, y, 0.5])
 
+            # cpu launches return finished: nothing to synchronize.
             pool.min_parallel = 1 << 62
-            inline = _median_seconds(run, reps)
+            inline = median_seconds(run, reps, sync=lambda: None)
             pool.min_parallel = 1
-            pooled = _median_seconds(run, reps)
+            pooled = median_seconds(run, reps, sync=lambda: None)
             rows.append({"threads": n, "inline_us": inline * 1e6, "pool_us": pooled * 1e6})
             # The first of two consecutive sizes where the pool wins: one noisy win is not enough.
             if first is None and pooled < inline and len(rows) > 1:
@@ -114,18 +103,16 @@ def launch_overhead(reps: int) -> dict[str, float]:
 
 def main() -> int:
     """Measure, print the tables and write the JSON."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--reps", type=int, default=30)
+    parser = script_parser(__doc__, RESULTS, reps=30)
     parser.add_argument("--max-log2", type=int, default=20)
-    parser.add_argument("--json", type=Path, default=RESULTS)
     args = parser.parse_args()
 
     over = launch_overhead(max(3, args.reps // 6))
     print(f"threads: {num_threads()}   min_parallel now: {pool.min_parallel}")
     print(f"dim=1 launch, two arrays: {over['launch_us']:.2f} us; "
           f"prepared: {over['prepared_us']:.2f} us\n")  # fmt: skip
-    result = {"python": sys.version.split()[0], "machine": platform.processor() or platform.machine(),
-              "threads": num_threads(), "overhead": over, "kernels": {}}  # fmt: skip
+    result = {**script_meta("bench_launch.py"), "threads": num_threads(), "overhead": over,
+              "kernels": {}}  # fmt: skip
     for kernel in (saxpy, heavy):
         rows, first = crossover(kernel, args.max_log2, args.reps)
         result["kernels"][kernel.key] = {"rows": rows, "crossover": first}
@@ -136,9 +123,7 @@ def main() -> int:
             print(f"{r['threads']:>9} {r['inline_us']:>10.1f} {r['pool_us']:>10.1f} "
                   f"{r['inline_us'] / r['pool_us']:>8.2f}")  # fmt: skip
         print()
-    args.json.parent.mkdir(parents=True, exist_ok=True)
-    args.json.write_text(json.dumps(result, indent=2))
-    print(f"wrote {args.json}")
+    save_json(result, args.json)
     return 0
 
 

@@ -208,8 +208,7 @@ def on_gpu(device: str, bodies: list[int]) -> int:
     print(f"n-body on {data['device']}: plain loop against block-cache tiles (ms per launch)")
     harness.print_table(["math", "bodies", "plain", "tiled", "speed-up", "same results"], rows)
     path = RESULTS / f"nbody-tiles-{time.strftime('%Y%m%d-%H%M%S')}.json"
-    harness.write_json(data, path)
-    print(f"wrote {path}")
+    harness.save_json(data, path)
     return 1 if failed else 0
 
 

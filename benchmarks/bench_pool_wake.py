@@ -13,14 +13,13 @@ for its wake-up (on a VM, waking an idle vCPU). The table shows how a launch's p
 cost beyond inline grows with the gap. Results go to benchmarks/results/pool_wake.json.
 """
 
-import argparse
-import json
 import os
-import platform
 import statistics
 import sys
 import time
 from pathlib import Path
+
+from suite.harness import save_json, script_meta, script_parser
 
 RESULTS = Path(__file__).resolve().parent / "results" / "pool_wake.json"
 
@@ -77,10 +76,8 @@ def measure(gaps: list[int], reps: int) -> list[dict]:
 
 def main() -> int:
     """Measure, print the table and write the JSON."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--reps", type=int, default=8)
+    parser = script_parser(__doc__, RESULTS, reps=8)
     parser.add_argument("--gaps", default="0,25,50,100,200,400,1000")
-    parser.add_argument("--json", type=Path, default=RESULTS)
     args = parser.parse_args()
     from kdsl.backends.cpu.pool import num_threads
 
@@ -94,17 +91,12 @@ def main() -> int:
         print(f"{r['gap_us']:>8d}{r['inline_median_us']:>12.1f}{r['inline_p10_us']:>12.1f}"
               f"{r['pool_median_us']:>10.1f}{r['pool_p10_us']:>10.1f}")  # fmt: skip
     result = {
-        "command": " ".join(["python", "benchmarks/bench_pool_wake.py", *sys.argv[1:]]),
-        "python": sys.version.split()[0],
-        "machine": platform.processor() or platform.machine(),
-        "cpus": os.cpu_count(),
+        **script_meta("bench_pool_wake.py"),
         "load_average": os.getloadavg()[0] if hasattr(os, "getloadavg") else None,
         "kdsl_cpu_threads": num_threads(),
         "rows": rows,
     }
-    args.json.parent.mkdir(parents=True, exist_ok=True)
-    args.json.write_text(json.dumps(result, indent=2))
-    print(f"wrote {args.json}")
+    save_json(result, args.json)
     return 0
 
 

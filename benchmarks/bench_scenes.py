@@ -7,7 +7,7 @@ The scene files of ``kdsl.scenes`` are bound to kdsl (``bind("kdsl")``) and to W
 (``bind("warp")``) and run on the same device, float32, with the benchmark sizes of
 ``SIZES`` (larger than the scenes' defaults, so the step is work, not launch
 overhead). A step's time is the median over ``--reps`` repetitions of ``steps``
-steps (device synchronized around them), after one untimed compile step.
+steps (device synchronized around them), after one untimed repetition (the compile).
 
 Cold compile: in a fresh process per framework and scene, with its kernel cache
 pointed at an empty directory (``KDSL_CACHE=0``; ``WARP_CACHE_PATH`` at a new
@@ -16,16 +16,13 @@ compiles each kernel it launches, forward only; Warp builds each launched kernel
 module, forward and adjoint. Results go to benchmarks/results/scenes.json.
 """
 
-import argparse
-import json
 import os
-import platform
-import statistics
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
+
+from suite import harness
 
 RESULTS = Path(__file__).resolve().parent / "results" / "scenes.json"
 
@@ -49,16 +46,15 @@ def _step_us(name: str, binding: str, device: str, reps: int) -> float:
     integrator, params, dt, steps = SIZES[name]
     scene = make_scene(name, "f32", integrator, device, binding=binding, **params)
     wp = scene.wp
-    scene.step(dt)  # compile
-    wp.synchronize_device(scene.device)
-    times = []
-    for _ in range(reps):
-        start = time.perf_counter()
+
+    def run() -> None:
         for _ in range(steps):
             scene.step(dt)
+
+    def sync() -> None:
         wp.synchronize_device(scene.device)
-        times.append((time.perf_counter() - start) / steps)
-    return 1e6 * statistics.median(times)
+
+    return 1e6 * harness.median_seconds(run, reps, sync) / steps
 
 
 #: Run in a fresh process: build one scene and time its first step (the cold compile).
@@ -88,12 +84,10 @@ def cold_compile_s(name: str, binding: str, device: str) -> float:
 
 def main() -> int:
     """Measure, print the table and write the JSON."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = harness.script_parser(__doc__, RESULTS, reps=7)
     parser.add_argument("--device", default="cpu", choices=["cpu", "cuda"])
-    parser.add_argument("--reps", type=int, default=7)
     parser.add_argument("--scenes", help="comma-separated (default: every scene)")
     parser.add_argument("--no-compile", action="store_true", help="skip the cold compiles")
-    parser.add_argument("--json", type=Path, default=RESULTS)
     args = parser.parse_args()
     from kdsl.backends.cpu.pool import num_threads
 
@@ -114,19 +108,9 @@ def main() -> int:
                 if "kdsl_cold_s" in row else "")  # fmt: skip
         print(f"{name:12s}{row['integrator']:18s}{kd:>11.1f}{wa:>11.1f}{wa / kd:>9.2f}{cold}",
               flush=True)  # fmt: skip
-    result = {
-        "command": " ".join(["python", "benchmarks/bench_scenes.py", *sys.argv[1:]]),
-        "python": sys.version.split()[0],
-        "machine": platform.processor() or platform.machine(),
-        "cpus": os.cpu_count(),
-        "device": args.device,
-        "kdsl_cpu_threads": num_threads(),
-        "precision": "f32",
-        "scenes": rows,
-    }
-    args.json.parent.mkdir(parents=True, exist_ok=True)
-    args.json.write_text(json.dumps(result, indent=2))
-    print(f"wrote {args.json}")
+    result = {**harness.script_meta("bench_scenes.py"), "device": args.device,
+              "kdsl_cpu_threads": num_threads(), "precision": "f32", "scenes": rows}  # fmt: skip
+    harness.save_json(result, args.json)
     return 0
 
 

@@ -13,6 +13,7 @@ in a real loop and every sample ends with the work finished.
 
 from __future__ import annotations
 
+import argparse
 import importlib
 import json
 import os
@@ -329,3 +330,30 @@ def write_json(data: dict[str, Any], path: Path) -> None:
     """Write ``data`` to ``path`` (parents created)."""
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(data, indent=1, default=str) + "\n")
+
+
+def save_json(data: dict[str, Any], path: Path) -> None:
+    """``write_json`` and say where the results went."""
+    write_json(data, path)
+    print(f"wrote {path}")
+
+
+# -- command lines ---------------------------------------------------------------
+def script_parser(doc: str, results: Path, reps: int) -> argparse.ArgumentParser:
+    """A benchmark script's parser: its docstring's first line, ``--reps`` (default
+    ``reps``) and ``--json`` (default ``results``); the script adds its own options."""
+    parser = argparse.ArgumentParser(description=doc.splitlines()[0])
+    parser.add_argument("--reps", type=int, default=reps)
+    parser.add_argument("--json", type=Path, default=results)
+    return parser
+
+
+def script_meta(script: str) -> dict[str, Any]:
+    """What a script's JSON records about the run: the command line (as run from the
+    repository root), Python's version, the processor and the CPU count."""
+    return {
+        "command": " ".join(["python", f"benchmarks/{script}", *sys.argv[1:]]),
+        "python": sys.version.split()[0],
+        "machine": platform.processor() or platform.machine(),
+        "cpus": os.cpu_count(),
+    }
