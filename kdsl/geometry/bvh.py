@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from kdsl.errors import KdslError, KdslTypeError
-from kdsl.geometry.device_tree import DeviceTree, pack_nodes, refit, upload_tree
+from kdsl.geometry.device_tree import DeviceTree, node_field, pack_nodes, refit, upload_tree
 from kdsl.geometry.lbvh import build_lbvh
 from kdsl.geometry.median import build_median
 from kdsl.geometry.sah import build_sah
@@ -125,9 +125,12 @@ class Bvh:
         build = CONSTRUCTORS[self.constructor]
         tree = build(self.lowers, self.uppers, self.leaf_size, self.groups, self._num_groups)
         self._tree = tree
-        self._nodes = empty(tree.num_nodes, dtype=BvhNode, device=self.device)
+        if tree.nodes is not None:  # the constructor packed the links itself
+            self._nodes = tree.nodes
+        else:
+            self._nodes = empty(tree.num_nodes, dtype=BvhNode, device=self.device)
+            pack_nodes(tree, self._nodes, self._node_field(12, T.I32))
         self._bounds = [self._node_field(0, VEC3), self._node_field(16, VEC3)]
-        pack_nodes(tree, self._nodes, self._node_field(12, T.I32))
         refit(self._tree, self.lowers, self.uppers, self._bounds[0], self._bounds[1])
         self._write_record()
 
@@ -154,11 +157,7 @@ class Bvh:
 
     def _node_field(self, offset: int, dtype) -> array:
         """A strided view of one field of every packed node (``BvhNode``)."""
-        n = self._nodes
-        if n.shape[0] == 0:
-            return empty(0, dtype=dtype, device=self.device)
-        return array(ptr=n.ptr + offset, dtype=dtype, shape=n.shape, strides=n.strides,
-                     device=self.device)  # fmt: skip
+        return node_field(self._nodes, offset, dtype)
 
     def refit(self) -> None:
         """Recompute the node bounds from the current boxes (the tree keeps its shape), with

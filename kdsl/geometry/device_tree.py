@@ -43,6 +43,17 @@ class DeviceTree:
     parent: array  # empty on a CPU
     arrivals: array  # int32 per node, zero between refits; empty on a CPU
     num_nodes: int
+    #: The packed nodes (``kdsl.stdlib.bvh.BvhNode``) with their links written, when the
+    #: constructor wrote them itself (``lbvh``); None: ``kdsl.Bvh`` packs them.
+    nodes: array | None = None
+
+
+def node_field(nodes: array, offset: int, dtype) -> array:
+    """A strided view of the field at byte ``offset`` of every packed node."""
+    if nodes.shape[0] == 0:
+        return empty(0, dtype=dtype, device=nodes.device)
+    return array(ptr=nodes.ptr + offset, dtype=dtype, shape=nodes.shape, strides=nodes.strides,
+                 device=nodes.device)  # fmt: skip
 
 
 def _device_ints(a: np.ndarray, device) -> array:
@@ -163,8 +174,7 @@ def pack_nodes(tree: DeviceTree, nodes: array, packed_first: array) -> None:
     ``next``, an inner node's ``skip`` or a leaf's count; ``refit`` writes the bounds."""
     if tree.num_nodes == 0:
         return
-    packed_next = array(ptr=nodes.ptr + 28, dtype=int32, shape=nodes.shape,
-                        strides=nodes.strides, device=nodes.device)  # fmt: skip
+    packed_next = node_field(nodes, 28, int32)
     launch(_pack_links, dim=tree.num_nodes, device=nodes.device,
            inputs=[tree.first, tree.count, tree.skip, packed_first, packed_next])  # fmt: skip
 

@@ -26,10 +26,11 @@ from __future__ import annotations
 from kdsl.frontend.api import atomic_add, func, kernel, tid
 from kdsl.frontend.api import max as vmax
 from kdsl.frontend.api import min as vmin
-from kdsl.geometry.device_tree import DeviceTree, with_parents
+from kdsl.geometry.device_tree import DeviceTree, node_field
 from kdsl.runtime.alloc import empty, full, zeros
 from kdsl.runtime.array import array
 from kdsl.runtime.launch import launch
+from kdsl.stdlib.bvh import BvhNode
 from kdsl.types import int32, uint64, vec3
 from kdsl.utils import array_scan, radix_sort_pairs
 
@@ -163,11 +164,21 @@ def _delta(keys: array(dtype=uint64), n: int, i: int, j: int) -> int:
     return _clz64(a ^ b)
 
 
+@func
+def _is_leaf(
+    keys: array(dtype=uint64), a: int, b: int, leaf_size: int
+) -> bool:  # fmt: skip
+    """Whether a node over sorted items ``[a, b]`` is a leaf: few items, one group."""
+    return b - a + 1 <= leaf_size and (keys[a] >> uint64(32)) == (keys[b] >> uint64(32))
+
+
 @kernel
 def _karras_nodes(
-    keys: array(dtype=uint64), n: int32, range_a: array(dtype=int32),
-    range_b: array(dtype=int32), parent: array(dtype=int32),
+    keys: array(dtype=uint64), n: int32, leaf_size: int32, range_a: array(dtype=int32),
+    range_b: array(dtype=int32), parent: array(dtype=int32), starts: array(dtype=int32),
 ):  # fmt: skip
+    # Also counts the kept nodes by their first position ``a`` into ``starts[a + 1]``
+    # (zeros before): the root, and both children of every inner node that is no leaf.
     i = tid()
     if i >= n - 1:  # a leaf: node n - 1 + k holds sorted item k
         k = i - (n - 1)
@@ -175,9 +186,11 @@ def _karras_nodes(
         range_b[i] = k
         if n == 1:
             parent[i] = -1
+            atomic_add(starts, 1, 1)
         return
     if i == 0:
         parent[0] = -1
+        atomic_add(starts, 1, 1)
     d = 1
     if _delta(keys, n, i, i + 1) < _delta(keys, n, i, i - 1):
         d = -1
@@ -216,14 +229,9 @@ def _karras_nodes(
         right = n - 1 + gamma + 1
     parent[left] = i
     parent[right] = i
-
-
-@func
-def _is_leaf(
-    keys: array(dtype=uint64), a: int, b: int, leaf_size: int
-) -> bool:  # fmt: skip
-    """Whether a node over sorted items ``[a, b]`` is a leaf: few items, one group."""
-    return b - a + 1 <= leaf_size and (keys[a] >> uint64(32)) == (keys[b] >> uint64(32))
+    if not _is_leaf(keys, a, b, leaf_size):  # its children are kept
+        atomic_add(starts, a + 1, 1)
+        atomic_add(starts, gamma + 2, 1)
 
 
 @func
@@ -238,15 +246,17 @@ def _is_kept(
     return not _is_leaf(keys, range_a[p], range_b[p], leaf_size)
 
 
-@kernel
-def _count_starts(
-    keys: array(dtype=uint64), range_a: array(dtype=int32),
-    range_b: array(dtype=int32), parent: array(dtype=int32),
-    leaf_size: int32, starts: array(dtype=int32),
-):  # fmt: skip
-    x = tid()
-    if _is_kept(keys, range_a, range_b, parent, x, leaf_size):
-        atomic_add(starts, range_a[x], 1)
+@func
+def _chain_rank(range_a: array(dtype=int32), parent: array(dtype=int32), x: int) -> int:
+    """Kept ancestors of ``x`` starting at its position too (the chain of left children
+    above it): ``x``'s preorder number is ``before[range_a[x]]`` plus this."""
+    a = range_a[x]
+    rank = 0
+    p = parent[x]
+    while p >= 0 and range_a[p] == a:
+        rank += 1
+        p = parent[p]
+    return rank
 
 
 @kernel
@@ -254,38 +264,50 @@ def _preorder(
     keys: array(dtype=uint64), range_a: array(dtype=int32),
     range_b: array(dtype=int32), parent: array(dtype=int32),
     leaf_size: int32, before: array(dtype=int32), has_groups: int32,
-    skip: array(dtype=int32), first: array(dtype=int32),
-    count: array(dtype=int32), group_roots: array(dtype=int32),
+    skip: array(dtype=int32), count: array(dtype=int32), group_roots: array(dtype=int32),
+    node_first: array(dtype=int32), node_next: array(dtype=int32), with_parents: int32,
+    pre_parent: array(dtype=int32),
 ):  # fmt: skip
+    # Writes the kept node ``x`` at its preorder number: ``skip``, ``count``, the packed
+    # node's links (``BvhNode.first``, ``.next``) and, ``with_parents``, its parent's
+    # preorder number (its Karras parent is kept too: a leaf's subtree is dropped whole).
     x = tid()
     if not _is_kept(keys, range_a, range_b, parent, x, leaf_size):
         return
     a = range_a[x]
     b = range_b[x]
-    rank = 0  # kept ancestors starting at ``a`` too (a chain of left children above x)
-    p = parent[x]
-    while p >= 0 and range_a[p] == a:
-        rank += 1
-        p = parent[p]
-    pre = before[a] + rank
-    skip[pre] = before[b + 1]
+    pre = before[a] + _chain_rank(range_a, parent, x)
+    after = before[b + 1]
+    skip[pre] = after
     if _is_leaf(keys, a, b, leaf_size):
-        first[pre] = a
+        node_first[pre] = a
+        node_next[pre] = b - a + 1
         count[pre] = b - a + 1
     else:
-        first[pre] = -1
+        node_first[pre] = -1
+        node_next[pre] = after
         count[pre] = 0
-    if has_groups != 0:
+    q = parent[x]
+    if with_parents != 0:
+        up = -1
+        if q >= 0:
+            up = pre - 1  # the left child follows its parent
+            if range_a[q] != a:
+                up = before[range_a[q]] + _chain_rank(range_a, parent, q)
+        pre_parent[pre] = up
+    if has_groups != 0:  # the root of a group: one group, its parent (if any) spans two
         g = keys[a] >> uint64(32)
-        if g == (keys[b] >> uint64(32)):
-            q = parent[x]
-            if q < 0 or (keys[range_a[q]] >> uint64(32)) != (keys[range_b[q]] >> uint64(32)):
-                group_roots[int(g)] = pre
+        top = q < 0 or (keys[range_a[q]] >> uint64(32)) != (keys[range_b[q]] >> uint64(32))
+        if g == (keys[b] >> uint64(32)) and top:
+            group_roots[int(g)] = pre
 
 
 def build_lbvh(lowers: array, uppers: array, leaf_size: int, groups: array | None,
-               num_groups: int) -> DeviceTree:  # fmt: skip
-    """Build a ``DeviceTree`` over the boxes on their device (see the module docstring)."""
+               num_groups: int, bottom_up: bool | None = None) -> DeviceTree:  # fmt: skip
+    """Build a ``DeviceTree`` over the boxes on their device (see the module docstring),
+    its packed nodes' links written (``DeviceTree.nodes``) and, for the bottom-up refit
+    (on a GPU by default, anywhere with ``bottom_up=True``), its parents and arrival
+    counters."""
     device = lowers.device
     n = lowers.shape[0]
     leaf_size = max(1, int(leaf_size))
@@ -311,23 +333,30 @@ def build_lbvh(lowers: array, uppers: array, leaf_size: int, groups: array | Non
     radix_sort_pairs(keys, values, n, end_bit=key_bits)
     nodes = 2 * n - 1
     range_a, range_b, parent = ints(nodes), ints(nodes), ints(nodes)
+    counts = zeros(n + 1, dtype=int32, device=device)  # kept nodes starting at a, at a + 1
     launch(_karras_nodes, dim=nodes, device=device,
-              inputs=[keys, n, range_a, range_b, parent])  # fmt: skip
-    starts = zeros(n + 1, dtype=int32, device=device)
-    launch(_count_starts, dim=nodes, device=device,
-              inputs=[keys, range_a, range_b, parent, leaf_size, starts])  # fmt: skip
-    array_scan(starts, starts, inclusive=False)
-    skip, first, count = ints(nodes), ints(nodes), ints(nodes)
+           inputs=[keys, n, leaf_size, range_a, range_b, parent, counts])  # fmt: skip
+    before = ints(n + 1)  # kept nodes starting before each position
+    array_scan(counts, before, inclusive=True)
+    # The packed nodes, allocated for the most nodes (the count comes back below).
+    packed = empty(nodes, dtype=BvhNode, device=device)
+    node_first, node_next = node_field(packed, 12, int32), node_field(packed, 28, int32)
+    skip, count = ints(nodes), ints(nodes)
+    if bottom_up is None:  # a GPU refits bottom up (``device_tree``), from parents
+        bottom_up = device.is_cuda
+    pre_parent = ints(nodes if bottom_up else 0)
     group_roots = full(max(num_groups, 1), -1, dtype=int32, device=device)
     launch(
         _preorder, dim=nodes, device=device,
-        inputs=[keys, range_a, range_b, parent, leaf_size, starts, int(groups is not None),
-                skip, first, count, group_roots],
+        inputs=[keys, range_a, range_b, parent, leaf_size, before, int(groups is not None),
+                skip, count, group_roots, node_first, node_next, int(bottom_up), pre_parent],
     )  # fmt: skip
-    num_nodes = int(starts[n : n + 1].numpy()[0])  # the build's one read back
+    num_nodes = int(before[n : n + 1].numpy()[0])  # the build's one read back
     if num_groups == 0:
         group_roots = group_roots[:0]
     none = ints(0)
-    tree = DeviceTree(skip[:num_nodes], first[:num_nodes], count[:num_nodes], values[:n],
-                      group_roots, none, none, num_nodes)  # fmt: skip
-    return with_parents(tree)
+    arrivals = zeros(num_nodes, dtype=int32, device=device) if bottom_up else none
+    return DeviceTree(
+        skip[:num_nodes], node_first[:num_nodes], count[:num_nodes], values[:n], group_roots,
+        pre_parent[:num_nodes] if bottom_up else none, arrivals, num_nodes, packed[:num_nodes],
+    )  # fmt: skip

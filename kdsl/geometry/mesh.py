@@ -14,9 +14,9 @@ from typing import Any
 
 from kdsl.errors import KdslTypeError
 from kdsl.geometry.bvh import Bvh
-from kdsl.geometry.mesh_refit import face_boxes, first_index_out_of_range, first_non_finite
+from kdsl.geometry.mesh_refit import checked_face_boxes
 from kdsl.ir import types as T
-from kdsl.runtime.alloc import empty, zeros
+from kdsl.runtime.alloc import empty
 from kdsl.runtime.array import array
 from kdsl.runtime.objects import ObjectRecord
 from kdsl.stdlib.mesh import MeshRecord
@@ -102,24 +102,18 @@ class Mesh:
                     f"Mesh velocities must match the points ({pts.shape[0]} on {self.device}),"
                     f" not {vel.shape[0]} on {vel.device}"
                 )
-        scratch = empty(1, dtype=int32, device=self.device)  # the device checks' answer
-        bad = first_index_out_of_range(idx, pts.shape[0], scratch)
-        if bad >= 0:
-            value = int(idx[bad : bad + 1].numpy()[0])
-            raise KdslTypeError(f"Mesh indices out of range: {value} for {pts.shape[0]} points")
         num_tris = idx.shape[0] // 3
         if groups is not None and (not isinstance(groups, array) or groups.shape != (num_tris,)):
             raise KdslTypeError("Mesh groups must be an int32 array with one entry per face")
         self._points, self.indices, self.velocities = pts, idx, vel
         self.support_winding_number = bool(support_winding_number)
         self._num_tris = num_tris
-        self._first_bad = scratch
-        self._check_points()
-        self._lowers = empty(num_tris, dtype=VEC3, device=self.device)  # face_boxes fills them
+        self._first_bad = empty(2, dtype=int32, device=self.device)  # the device checks' answer
+        self._lowers = empty(num_tris, dtype=VEC3, device=self.device)  # the checks fill them
         self._uppers = empty(num_tris, dtype=VEC3, device=self.device)
         self._no_velocities = empty(0, dtype=VEC3, device=self.device)
         self._edges = empty(num_tris, dtype=float32, device=self.device)
-        self._edge_sum = zeros(1, dtype=float32, device=self.device)
+        self._edge_sum = empty(1, dtype=float32, device=self.device)  # the checks write it
         self._recorded: tuple | None = None
         self._write_boxes()
         self.bvh = Bvh(
@@ -152,23 +146,27 @@ class Mesh:
 
     def refit(self) -> None:
         """Update the face boxes and the BVH's bounds from the current points (the tree
-        keeps its shape: rebuild with ``mesh.bvh.rebuild()`` after large motions)."""
-        self._check_points()
+        keeps its shape: rebuild with ``mesh.bvh.rebuild()`` after large motions). A
+        non-finite point is an error, raised before the BVH changes."""
         self._write_boxes()
         self.bvh.refit()
         self._write_record()
 
-    def _check_points(self) -> None:
-        bad = first_non_finite(self._points, self._first_bad)
-        if bad >= 0:
-            value = self._points[bad : bad + 1].numpy()[0].tolist()
-            raise KdslTypeError(f"Mesh point {bad} is not finite: {value}")
-
     def _write_boxes(self) -> None:
-        """The faces' boxes (the BVH's items) and the average edge length, by kernels on
-        the mesh's device."""
-        face_boxes(self._points, self.indices, self._lowers, self._uppers, self._edges,
-                   self._edge_sum)  # fmt: skip
+        """The faces' boxes (the BVH's items) and the average edge length, by one checking
+        kernel on the mesh's device: an index out of range or a non-finite point raises."""
+        bad_index, bad_point = checked_face_boxes(
+            self._points, self.indices, self._lowers, self._uppers, self._edges,
+            self._edge_sum, self._first_bad,
+        )  # fmt: skip
+        if bad_index >= 0:
+            value = int(self.indices[bad_index : bad_index + 1].numpy()[0])
+            raise KdslTypeError(
+                f"Mesh indices out of range: {value} for {self._points.shape[0]} points"
+            )
+        if bad_point >= 0:
+            value = self._points[bad_point : bad_point + 1].numpy()[0].tolist()
+            raise KdslTypeError(f"Mesh point {bad_point} is not finite: {value}")
 
     def _write_record(self) -> None:
         state = (self._points, self.velocities, self.bvh.id)

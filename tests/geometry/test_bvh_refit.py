@@ -11,7 +11,9 @@ import pytest
 
 import kdsl as wp
 from kdsl.geometry.bvh import CONSTRUCTORS
-from kdsl.geometry.device_tree import refit, with_parents
+from kdsl.geometry.device_tree import pack_nodes, refit, with_parents
+from kdsl.geometry.lbvh import build_lbvh
+from kdsl.stdlib.bvh import BvhNode
 
 cuda = pytest.mark.skipif(not wp.is_cuda_available(), reason="no GPU")
 
@@ -54,3 +56,27 @@ def test_bottom_up_refit_matches_sequential(device, constructor, leaf_size):
         np.testing.assert_array_equal(got[0][0], lo.numpy().min(axis=0))
         np.testing.assert_array_equal(got[1][0], hi.numpy().max(axis=0))
     assert not bottom_up.arrivals.numpy().any()
+
+
+@pytest.mark.parametrize("device", ["cpu", pytest.param("cuda:0", marks=cuda)])
+@pytest.mark.parametrize("leaf_size", [1, 3])
+@pytest.mark.parametrize("num_groups", [0, 5])
+def test_lbvh_writes_the_parents_and_links_of_its_nodes(device, leaf_size, num_groups):
+    """The lbvh build numbers each node's parent and packs each node's links itself (no
+    separate launches): the same as ``with_parents`` and ``pack_nodes`` give."""
+    rng = np.random.default_rng(11)
+    lo, hi = boxes(rng, 2000, device)
+    groups = None
+    if num_groups:
+        groups = wp.array(rng.integers(0, num_groups, 2000).astype(np.int32), device=device)
+    tree = build_lbvh(lo, hi, leaf_size, groups, num_groups, bottom_up=True)
+    none = wp.empty(0, dtype=wp.int32, device=device)
+    linked = with_parents(dataclasses.replace(tree, parent=none, arrivals=none), bottom_up=True)
+    np.testing.assert_array_equal(tree.parent.numpy(), linked.parent.numpy())
+    assert tree.arrivals.shape == (tree.num_nodes,) and not tree.arrivals.numpy().any()
+    packed = wp.empty(tree.num_nodes, dtype=BvhNode, device=device)
+    pack_nodes(tree, packed, wp.empty(tree.num_nodes, dtype=wp.int32, device=device))
+    got, want = tree.nodes.numpy(), packed.numpy()
+    np.testing.assert_array_equal(got["next"], want["next"])
+    np.testing.assert_array_equal(got["first"], tree.first.numpy())
+    assert not build_lbvh(lo, hi, leaf_size, groups, num_groups, bottom_up=False).parent.size
