@@ -16,16 +16,14 @@ import kdsl as wp
 from kdsl.errors import KdslError, KdslLaunchError
 from kdsl.interop.tensor_cache import TensorViews
 from kdsl.interop.torch import VIEWS
+from kdsl.testing.cases.programs import make_programs
 
 torch = pytest.importorskip("torch")
 
 BACKENDS = ["interp", "cpu"]
 
 
-@wp.kernel
-def saxpy(x: wp.array(dtype=float), y: wp.array(dtype=float), a: float):
-    i = wp.tid()
-    y[i] = a * x[i] + y[i]
+saxpy = make_programs()["saxpy"]  # y = a * x + y
 
 
 @wp.kernel
@@ -211,18 +209,37 @@ def test_jax_ffi_calls_reuse_arguments_and_follow_new_data():
     jnp = jax.numpy
     from kdsl.jax_experimental.ffi import jax_kernel
 
-    @wp.kernel
-    def scale(a: wp.array(dtype=float), s: float, out: wp.array(dtype=float)):
-        i = wp.tid()
-        out[i] = a[i] * s
-
-    js = jax_kernel(scale)
-    f = jax.jit(lambda a: js(a, 2.0)[0])
+    js = jax_kernel(saxpy, in_out_argnames=["y"])  # y is aliased: updated in place
+    f = jax.jit(lambda x, y: js(x, y, 2.0)[0])
+    y = jnp.ones(16, dtype=jnp.float32)
     for k in range(5):
         x = jnp.full(16, float(k), dtype=jnp.float32)
-        assert np.asarray(f(x)).tolist() == [2.0 * k] * 16
+        assert np.asarray(f(x, y)).tolist() == [2.0 * k + 1.0] * 16
     assert 1 <= len(js._prepared) <= 10  # keyed on buffer addresses, which XLA reuses
-    batched = jax.jit(jax.vmap(lambda a: js(a, 3.0)[0]))(jnp.ones((3, 16), jnp.float32))
+    g = jax.jit(jax.vmap(lambda x, y: js(x, y, 3.0)[0]))
+    batched = g(jnp.ones((3, 16), jnp.float32), jnp.zeros((3, 16), jnp.float32))
     assert np.asarray(batched).tolist() == [[3.0] * 16] * 3
-    g = jax.jit(lambda a: js(a, 2.0)[0])
-    assert np.asarray(g(jnp.ones(7, jnp.float32))).tolist() == [2.0] * 7  # other dims
+    short = f(jnp.ones(7, jnp.float32), jnp.ones(7, jnp.float32))  # other dims
+    assert np.asarray(short).tolist() == [3.0] * 7
+
+
+@pytest.mark.skipif(not wp.is_cuda_available(), reason="needs a CUDA device")
+def test_cuda_tensor_views_are_cached_and_follow_the_tensor():
+    if not torch.cuda.is_available():
+        pytest.skip("PyTorch sees no CUDA device")
+    x = torch.ones(8, device="cuda:0")
+    y = torch.zeros(8, device="cuda:0")
+    a, b = wp.from_torch(y), wp.from_torch(y)
+    assert a._buf is b._buf and a.ptr == y.data_ptr() and a.device == "cuda:0"
+    for _ in range(3):
+        xc = wp.from_torch(x, return_ctype=True)
+        yc = wp.from_torch(y, return_ctype=True)
+        wp.launch(saxpy, dim=8, inputs=[xc, yc, 1.0], device="cuda:0")
+    wp.synchronize()
+    assert y.tolist() == [3.0] * 8
+    y.data = torch.zeros(8, device="cuda:0")  # new memory behind the same object
+    wp.launch(saxpy, dim=8, inputs=[wp.from_torch(x), wp.from_torch(y), 2.0], device="cuda:0")
+    wp.synchronize()
+    assert y.tolist() == [2.0] * 8 and wp.from_torch(y).ptr == y.data_ptr()
+    t = wp.to_torch(wp.from_torch(y))
+    assert t.data_ptr() == y.data_ptr() and t.device == y.device
