@@ -21,29 +21,19 @@ from kdsl.backends.cuda import BACKEND, nvrtc
 from kdsl.compiler import lower
 from kdsl.passes import DEFAULT_PIPELINE
 from kdsl.testing.cases import all_cases
+from kdsl.testing.cases.programs import make_programs
 
 ARCH = "sm_90"
 needs_gpu = pytest.mark.skipif(not wp.is_cuda_available(), reason="needs a CUDA GPU")
 
 
-def _accelerations(
-    pos: wp.array(dtype=wp.vec3),
-    mass: wp.array(dtype=float),
-    acc: wp.array(dtype=wp.vec3),
-    eps2: float,
-):
-    i = wp.tid()
-    p = pos[i]
-    a = wp.vec3(0.0, 0.0, 0.0)
-    for j in range(pos.shape[0]):
-        d = pos[j] - p
-        inv_r = 1.0 / wp.sqrt(wp.dot(d, d) + eps2)
-        a = a + d * (mass[j] * inv_r * inv_r * inv_r)
-    acc[i] = a
+def _nbody(**options) -> wp.Kernel:
+    """A fresh n-body kernel object with ``options`` (compiled on its first launch)."""
+    return wp.kernel(**options)(make_programs()["nbody"].func)
 
 
-nbody = wp.kernel(_accelerations)
-nbody_fast = wp.kernel(fast_math=True)(_accelerations)
+nbody = _nbody()
+nbody_fast = _nbody(fast_math=True)
 
 
 @wp.kernel
@@ -117,7 +107,7 @@ def test_budget_caches_only_what_fits():
 
 def test_plain_pipeline_gives_the_plain_loop(monkeypatch):
     monkeypatch.setattr(BACKEND, "pipeline", DEFAULT_PIPELINE)
-    assert "__shared__" not in _cuda_c(wp.kernel(_accelerations))
+    assert "__shared__" not in _cuda_c(_nbody())
 
 
 @pytest.mark.parametrize("fast", [False, True])
@@ -171,7 +161,7 @@ _EXTENTS = [(1, 1), (5, 5), (255, 255), (256, 256), (257, 257), (1000, 1000), (6
 def _plain_kernel(monkeypatch, **options):
     """The n-body kernel compiled without block-cache (a fresh kernel object)."""
     monkeypatch.setattr(BACKEND, "pipeline", DEFAULT_PIPELINE)
-    kernel = wp.kernel(**options)(_accelerations)
+    kernel = _nbody(**options)
     assert "__shared__" not in _cuda_c(kernel)
     return kernel
 
