@@ -9,21 +9,10 @@ import pytest
 
 import kdsl as wp
 from kdsl.errors import KdslError, KdslLaunchError
+from tests.interop.kernels import double_vec, saxpy
 
 pytestmark = pytest.mark.skipif(not wp.is_cuda_available(), reason="needs a CUDA device")
 DEV = "cuda:0"
-
-
-@wp.kernel
-def saxpy(x: wp.array(dtype=float), y: wp.array(dtype=float), a: float):
-    i = wp.tid()
-    y[i] = a * x[i] + y[i]
-
-
-@wp.kernel
-def double_vec(v: wp.array(dtype=wp.vec3)):
-    i = wp.tid()
-    v[i] = v[i] * 2.0
 
 
 @pytest.fixture(scope="module")

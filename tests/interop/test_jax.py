@@ -5,22 +5,13 @@ import pytest
 
 import kdsl as wp
 from kdsl.errors import KdslError, KdslLaunchError
+from tests.interop.kernels import saxpy
 
 jax = pytest.importorskip("jax")
 jnp = jax.numpy
 
 
-@pytest.fixture(autouse=True)
-def _jax_on_the_cpu():
-    # These are the CPU paths: on a GPU machine JAX would put new arrays on the GPU.
-    with jax.default_device(jax.devices("cpu")[0]):
-        yield
-
-
-@wp.kernel
-def saxpy(x: wp.array(dtype=float), y: wp.array(dtype=float), a: float):
-    i = wp.tid()
-    y[i] = a * x[i] + y[i]
+pytestmark = pytest.mark.usefixtures("jax_on_the_cpu")
 
 
 def _aligned(n, dtype=np.float32, align=64):

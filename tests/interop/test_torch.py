@@ -5,20 +5,9 @@ import pytest
 
 import kdsl as wp
 from kdsl.errors import KdslError, KdslLaunchError
+from tests.interop.kernels import double_vec, saxpy
 
 torch = pytest.importorskip("torch")
-
-
-@wp.kernel
-def saxpy(x: wp.array(dtype=float), y: wp.array(dtype=float), a: float):
-    i = wp.tid()
-    y[i] = a * x[i] + y[i]
-
-
-@wp.kernel
-def double_vec(v: wp.array(dtype=wp.vec3)):
-    i = wp.tid()
-    v[i] = v[i] * 2.0
 
 
 def test_from_torch_is_zero_copy():
