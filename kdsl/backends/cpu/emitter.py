@@ -168,6 +168,8 @@ class Emitter:
         #: The thread's linear index (i32) and n-d index components (i32), when a kernel.
         self.linear: ir.Value | None = None
         self.index: list[ir.Value] = []
+        #: A kernel's range-local sums (``local_sums``): atomic adds summed per range.
+        self.local_sums: Any = None
         #: Debug builds: the error record (i64*) and, in a kernel, the block that
         #: ends the current thread after a failed check (see ``checks``).
         self.error_record: ir.Value | None = None

@@ -225,6 +225,9 @@ def _atomic(em: Emitter, op: Operation) -> Any:
     at = op.operands[1].type
     et = T.elem_type(at.dtype)
     ptr = element_ptr(em, em.get(op.operands[1]), at, op.operands[2:])
+    if em.local_sums is not None and op in em.local_sums:  # summed per range (local_sums)
+        parts = components(em.get(op.operands[0]))
+        return em.local_sums.add(em.b, op, _components(em, ptr, at.dtype), parts)
     rmw = _rmw_op(op.attrs["kind"], et)
     out = []  # componentwise: one atomic per scalar component
     for p, x in zip(_components(em, ptr, at.dtype), components(em.get(op.operands[0]))):
