@@ -4,17 +4,14 @@ from __future__ import annotations
 
 import io
 import re
-from dataclasses import dataclass
 from pathlib import Path
-from typing import ClassVar
 
 import pytest
 
 from kdsl.errors import KdslVerifyError
-from kdsl.ir import Module, parse_module, print_module
+from kdsl.ir import parse_module, print_module
 from kdsl.passes import (
     DEFAULT_PIPELINE,
-    ModulePass,
     PassCrashError,
     PassManager,
     get_all_passes,
@@ -25,16 +22,7 @@ from kdsl.passes import (
     run_fixpoint,
     run_pipeline,
 )
-
-SRC = """\
-func.func @f(%x: f32) -> (f32) {kind = "func"} {
-  %a = arith.constant {value = 2.0} : f32
-  %b = arith.constant {value = 3.0} : f32
-  %c = arith.mul %a, %b : f32
-  %d = arith.add %x, %c : f32
-  func.return %d
-}
-"""
+from tests.passes.broken_passes import SRC, BreakIRPass, CrashPass
 
 
 def test_registry_matches_file_names():
@@ -69,29 +57,6 @@ def test_parse_pipeline_with_options_round_trips():
 def test_parse_pipeline_errors(text, message):
     with pytest.raises(ValueError, match=re.escape(message)):
         parse_pipeline(text)
-
-
-@dataclass(frozen=True)
-class BreakIRPass(ModulePass):
-    """Leaves a use of an erased value behind (invalid IR)."""
-
-    name: ClassVar[str] = "break-ir"
-
-    def apply(self, module: Module) -> bool:
-        func = module.funcs[0]
-        body = func.regions[0].block
-        ret = body.ops[-1]
-        body.detach(ret)
-        body.insert(0, ret)  # the return now uses %d before it is defined
-        return True
-
-
-@dataclass(frozen=True)
-class CrashPass(ModulePass):
-    name: ClassVar[str] = "crash"
-
-    def apply(self, module: Module) -> bool:
-        raise ZeroDivisionError("boom")
 
 
 def test_verify_each_names_the_pass_and_writes_a_reproducer(tmp_path):

@@ -20,38 +20,7 @@ from kdsl.ir.core import OpResult, Value
 from kdsl.passes import ModulePass, PassCrashError, PassManager, optimize, parse_pipeline
 from kdsl.passes.manager import clone_module
 from kdsl.testing.cases.programs import make_programs
-
-SRC = """\
-func.func @f(%x: f32) -> (f32) {kind = "func"} {
-  %a = arith.constant {value = 2.0} : f32
-  %b = arith.constant {value = 3.0} : f32
-  %c = arith.mul %a, %b : f32
-  %d = arith.add %x, %c : f32
-  func.return %d
-}
-"""
-
-
-@dataclass(frozen=True)
-class BreakIRPass(ModulePass):
-    """Moves the return to the top of the body: a use before its definition."""
-
-    name: ClassVar[str] = "break-ir"
-
-    def apply(self, module: Module) -> bool:
-        body = module.funcs[0].regions[0].block
-        ret = body.ops[-1]
-        body.detach(ret)
-        body.insert(0, ret)
-        return True
-
-
-@dataclass(frozen=True)
-class CrashPass(ModulePass):
-    name: ClassVar[str] = "crash"
-
-    def apply(self, module: Module) -> bool:
-        raise ZeroDivisionError("boom")
+from tests.passes.broken_passes import SRC, BreakIRPass, CrashPass
 
 
 @dataclass(frozen=True)
