@@ -16,18 +16,11 @@ import numpy as np
 import pytest
 
 import kdsl as wp
+from tests.device_targets import TARGETS
 
 NAN = math.nan
 #: The ``warp`` entry of a row whose builtin Warp 1.19 no longer has.
 REMOVED = "removed in Warp 1.19"
-TARGETS = [
-    pytest.param("cpu", "interp", id="interp"),
-    pytest.param("cpu", None, id="cpu"),
-    pytest.param(
-        "cuda:0", None, id="cuda",
-        marks=pytest.mark.skipif(not wp.is_cuda_available(), reason="no GPU"),
-    ),
-]  # fmt: skip
 
 
 # --- kernels, built for kdsl or for Warp by the same code -------------------------------

@@ -15,15 +15,8 @@ import pytest
 import kdsl as wp
 import kdsl.optim
 from kdsl.optim import SGD, Adam, OptimError, OptimShapeError, OptimTypeError
+from tests.device_targets import TARGETS
 
-TARGETS = [
-    pytest.param("cpu", "interp", id="interp"),
-    pytest.param("cpu", None, id="cpu"),
-    pytest.param(
-        "cuda:0", None, id="cuda",
-        marks=pytest.mark.skipif(not wp.is_cuda_available(), reason="no GPU"),
-    ),
-]  # fmt: skip
 DTYPES = [wp.float32, wp.float64, wp.float16, wp.vec3, wp.vec2d, wp.mat22, wp.vec3h]
 RTOL = {np.float16: 2e-3, np.float32: 2e-5, np.float64: 1e-12}
 STEPS = 4
