@@ -50,6 +50,7 @@ from kdsl.stdlib.api import *
 # on the runtime above.
 from kdsl import autograd, utils
 from kdsl.geometry import *
+from kdsl.texture import *
 from kdsl.utils.map import map  # noqa: A004 - Warp's name
 from kdsl.utils.transforms import transform_expand
 

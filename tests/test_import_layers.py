@@ -25,7 +25,7 @@ LAYERS: list[set[str]] = [
     {"stdlib"},
     {"compiler"},
     {"runtime"},
-    {"interop", "autograd", "utils", "optim", "render"},
+    {"interop", "autograd", "utils", "optim", "render", "texture"},
     {"geometry"},
     {"jax_experimental"},
     {"scenes"},  # user code on the public API, above everything (docs/scenes.md)

@@ -8,6 +8,7 @@ an op of its own). The builtins are defined in groups, each module with a
 - ``builtins_math``: scalar math composed from ops (``clamp``, ``lerp``...);
 - ``builtins_linalg``: vector and matrix math (``trace``, ``inverse``, ``vector()``...);
 - ``builtins_ops``: the operator-named builtins (``add``, ``bit_and``...), ``reversed``;
+- ``builtins_volume``, ``builtins_texture``: the ``dtype=`` volume builtins, ``texture_sample``;
 - ``builtins_arrays``: ``view`` (and ``array``, which the runtime maps onto its class);
 - ``geometry``: quaternion and transform constructors;
 - ``printing``: ``print`` and ``printf``.
@@ -30,6 +31,7 @@ from kdsl.frontend import (
     builtins_math,
     builtins_ops,
     builtins_records,
+    builtins_texture,
     builtins_volume,
     geometry,
     printing,
@@ -45,6 +47,7 @@ TABLES: tuple[BuiltinTable, ...] = (
     builtins_ops.TABLE,
     builtins_records.TABLE,
     builtins_volume.TABLE,
+    builtins_texture.TABLE,
     builtins_arrays.TABLE,
     geometry.TABLE,
     printing.TABLE,
