@@ -264,12 +264,12 @@ def _preorder(
     keys: array(dtype=uint64), range_a: array(dtype=int32),
     range_b: array(dtype=int32), parent: array(dtype=int32),
     leaf_size: int32, before: array(dtype=int32), has_groups: int32,
-    skip: array(dtype=int32), count: array(dtype=int32), group_roots: array(dtype=int32),
-    node_first: array(dtype=int32), node_next: array(dtype=int32), with_parents: int32,
-    pre_parent: array(dtype=int32),
+    skip: array(dtype=int32), first: array(dtype=int32), count: array(dtype=int32),
+    group_roots: array(dtype=int32), node_first: array(dtype=int32),
+    node_next: array(dtype=int32), with_parents: int32, pre_parent: array(dtype=int32),
 ):  # fmt: skip
-    # Writes the kept node ``x`` at its preorder number: ``skip``, ``count``, the packed
-    # node's links (``BvhNode.first``, ``.next``) and, ``with_parents``, its parent's
+    # Writes the kept node ``x`` at its preorder number: ``skip``, ``first``, ``count``
+    # (contiguous, for the refit), the packed node's links (``BvhNode.first``, ``.next``) and, ``with_parents``, its parent's
     # preorder number (its Karras parent is kept too: a leaf's subtree is dropped whole).
     x = tid()
     if not _is_kept(keys, range_a, range_b, parent, x, leaf_size):
@@ -280,10 +280,12 @@ def _preorder(
     after = before[b + 1]
     skip[pre] = after
     if _is_leaf(keys, a, b, leaf_size):
+        first[pre] = a
         node_first[pre] = a
         node_next[pre] = b - a + 1
         count[pre] = b - a + 1
     else:
+        first[pre] = -1
         node_first[pre] = -1
         node_next[pre] = after
         count[pre] = 0
@@ -341,7 +343,7 @@ def build_lbvh(lowers: array, uppers: array, leaf_size: int, groups: array | Non
     # The packed nodes, allocated for the most nodes (the count comes back below).
     packed = empty(nodes, dtype=BvhNode, device=device)
     node_first, node_next = node_field(packed, 12, int32), node_field(packed, 28, int32)
-    skip, count = ints(nodes), ints(nodes)
+    skip, first, count = ints(nodes), ints(nodes), ints(nodes)
     if bottom_up is None:  # a GPU refits bottom up (``device_tree``), from parents
         bottom_up = device.is_cuda
     pre_parent = ints(nodes if bottom_up else 0)
@@ -349,7 +351,8 @@ def build_lbvh(lowers: array, uppers: array, leaf_size: int, groups: array | Non
     launch(
         _preorder, dim=nodes, device=device,
         inputs=[keys, range_a, range_b, parent, leaf_size, before, int(groups is not None),
-                skip, count, group_roots, node_first, node_next, int(bottom_up), pre_parent],
+                skip, first, count, group_roots, node_first, node_next, int(bottom_up),
+                pre_parent],
     )  # fmt: skip
     num_nodes = int(before[n : n + 1].numpy()[0])  # the build's one read back
     if num_groups == 0:
@@ -357,6 +360,6 @@ def build_lbvh(lowers: array, uppers: array, leaf_size: int, groups: array | Non
     none = ints(0)
     arrivals = zeros(num_nodes, dtype=int32, device=device) if bottom_up else none
     return DeviceTree(
-        skip[:num_nodes], node_first[:num_nodes], count[:num_nodes], values[:n], group_roots,
+        skip[:num_nodes], first[:num_nodes], count[:num_nodes], values[:n], group_roots,
         pre_parent[:num_nodes] if bottom_up else none, arrivals, num_nodes, packed[:num_nodes],
     )  # fmt: skip

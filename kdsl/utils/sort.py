@@ -69,7 +69,9 @@ def radix_sort_pairs(keys, values, count: int, begin_bit: int = 0, end_bit: int 
         order_key = radix_order(xp, kb[:count])
         if (begin_bit, end_bit) != (0, bits):
             mask = (1 << (end_bit - begin_bit)) - 1
-            order_key = (order_key >> order_key.dtype.type(begin_bit)) & order_key.dtype.type(mask)
+            if begin_bit:  # each operation is a kernel on a GPU: no shift by zero
+                order_key = order_key >> order_key.dtype.type(begin_bit)
+            order_key = order_key & order_key.dtype.type(mask)
             if end_bit - begin_bit <= 32 < bits:  # half the radix passes on 32-bit keys
                 order_key = order_key.astype(xp.uint32)
         perm = _argsort(xp, order_key, k.device.is_cuda)
