@@ -2,13 +2,9 @@
 
 from __future__ import annotations
 
-import inspect
-
-import pytest
-
 import kdsl as wp
-from kdsl.errors import KdslTypeError
 from kdsl.ir import parse_module, print_module
+from tests.frontend.located_errors import expect_error_at_marker
 
 
 @wp.kernel
@@ -41,15 +37,6 @@ def test_atomic_builtins_emit_the_atomic_ops(check_ir):
     assert print_module(parse_module(text)) == text
 
 
-def _check_error(kernel, fragment: str) -> None:
-    lines, start = inspect.getsourcelines(kernel.func)
-    line = next(start + k for k, text in enumerate(lines) if "# <-" in text)
-    with pytest.raises(KdslTypeError) as info:
-        kernel.build_module()
-    assert fragment in info.value.message, info.value.message
-    assert info.value.loc is not None and info.value.loc.line == line
-
-
 def test_atomic_type_errors_are_located():
     @wp.kernel
     def and_on_floats(a: wp.array(dtype=float)):
@@ -67,7 +54,8 @@ def test_atomic_type_errors_are_located():
     def not_an_array(x: float):
         wp.atomic_add(x, 0, 1.0)  # <-
 
-    _check_error(and_on_floats, "atomic and needs an integer array")
-    _check_error(cas_wrong_type, "compare value and a new value of the array's type")
-    _check_error(too_few_indices, "needs 2 indices, got 1")
-    _check_error(not_an_array, "needs an array first")
+    expect_error_at_marker(and_on_floats, "atomic and needs an integer array", caret=False)
+    expect_error_at_marker(cas_wrong_type,
+                           "compare value and a new value of the array's type", caret=False)
+    expect_error_at_marker(too_few_indices, "needs 2 indices, got 1", caret=False)
+    expect_error_at_marker(not_an_array, "needs an array first", caret=False)

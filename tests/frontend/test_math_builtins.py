@@ -7,14 +7,13 @@ rules against Warp 1.19 on CPU directly (skipped without warp) and the error pat
 """
 # ruff: noqa: SIM300, RUF059
 
-import inspect
 
 import numpy as np
 import pytest
 
 import kdsl as wp
-from kdsl.errors import KdslTypeError
 from kdsl.testing.cases.scalar_math import ref_erfcinv
+from tests.frontend.located_errors import expect_error_at_marker
 
 F = wp.array(dtype=float)
 
@@ -210,23 +209,12 @@ def test_bit_count_every_width(backend):
 # --- located errors -------------------------------------------------------------------------
 
 
-def _expect(kernel, fragment: str) -> None:
-    """Building ``kernel`` raises a KdslTypeError with ``fragment``, at the line marked ``# <-``."""
-    lines, start = inspect.getsourcelines(kernel.func)
-    line = next(start + k for k, text in enumerate(lines) if "# <-" in text)
-    with pytest.raises(KdslTypeError) as info:
-        kernel.build_module()
-    assert fragment in info.value.message, info.value.message
-    assert info.value.loc is not None and info.value.loc.line == line, str(info.value)
-    assert "^" in str(info.value)
-
-
 def test_error_trace_of_vector():
     @wp.kernel
     def k(a: F):
         a[0] = wp.trace(wp.vec3())  # <-
 
-    _expect(k, "trace() needs a matrix, not vec<3, f32>")
+    expect_error_at_marker(k, "trace() needs a matrix, not vec<3, f32>")
 
 
 def test_error_determinant_not_square():
@@ -234,7 +222,7 @@ def test_error_determinant_not_square():
     def k(a: F):
         a[0] = wp.determinant(wp.matrix(shape=(2, 3), dtype=float))  # <-
 
-    _expect(k, "determinant() needs a square matrix")
+    expect_error_at_marker(k, "determinant() needs a square matrix")
 
 
 def test_error_inverse_of_int_matrix():
@@ -242,7 +230,7 @@ def test_error_inverse_of_int_matrix():
     def k(a: F):
         m = wp.inverse(wp.identity(n=2, dtype=int))  # <-
 
-    _expect(k, "inverse() needs a float argument")
+    expect_error_at_marker(k, "inverse() needs a float argument")
 
 
 def test_error_inverse_of_vector():
@@ -250,7 +238,7 @@ def test_error_inverse_of_vector():
     def k(a: F):
         m = wp.inverse(wp.vec2())  # <-
 
-    _expect(k, "inverse() needs a square matrix, quaternion or transform")
+    expect_error_at_marker(k, "inverse() needs a square matrix, quaternion or transform")
 
 
 def test_error_frac_of_int():
@@ -258,7 +246,7 @@ def test_error_frac_of_int():
     def k(a: F, n: int):
         m = wp.frac(n)  # <-
 
-    _expect(k, "frac() needs a float argument, not i32")
+    expect_error_at_marker(k, "frac() needs a float argument, not i32")
 
 
 def test_error_lerp_of_ints():
@@ -266,7 +254,7 @@ def test_error_lerp_of_ints():
     def k(a: F, n: int):
         m = wp.lerp(n, n, 0.5)  # <-
 
-    _expect(k, "lerp() needs a float argument")
+    expect_error_at_marker(k, "lerp() needs a float argument")
 
 
 def test_error_cw_mul_mismatch():
@@ -274,7 +262,7 @@ def test_error_cw_mul_mismatch():
     def k(a: F):
         v = wp.cw_mul(wp.vec3(), wp.vec4())  # <-
 
-    _expect(k, "cw_mul() needs two values of one type")
+    expect_error_at_marker(k, "cw_mul() needs two values of one type")
 
 
 def test_error_identity_size():
@@ -282,7 +270,7 @@ def test_error_identity_size():
     def k(a: F, n: int):
         m = wp.identity(n, float)  # <-
 
-    _expect(k, "n must be a positive integer constant")
+    expect_error_at_marker(k, "n must be a positive integer constant")
 
 
 def test_error_identity_dtype():
@@ -290,7 +278,7 @@ def test_error_identity_dtype():
     def k(a: F):
         m = wp.identity(n=3, dtype=wp.vec3)  # <-
 
-    _expect(k, "dtype must be a scalar type")
+    expect_error_at_marker(k, "dtype must be a scalar type")
 
 
 def test_error_unknown_keyword():
@@ -298,7 +286,7 @@ def test_error_unknown_keyword():
     def k(a: F):
         m = wp.identity(size=3)  # <-
 
-    _expect(k, "takes only n, dtype as keyword arguments (got 'size')")
+    expect_error_at_marker(k, "takes only n, dtype as keyword arguments (got 'size')")
 
 
 def test_error_argmin_of_scalar():
@@ -306,7 +294,7 @@ def test_error_argmin_of_scalar():
     def k(a: F):
         i = wp.argmin(a[0])  # <-
 
-    _expect(k, "argmin() needs a vector, not f32")
+    expect_error_at_marker(k, "argmin() needs a vector, not f32")
 
 
 def test_error_bit_count_of_float():
@@ -314,7 +302,7 @@ def test_error_bit_count_of_float():
     def k(a: F):
         i = wp.bit_count(a[0])  # <-
 
-    _expect(k, "bit_count() needs an integer scalar, not f32")
+    expect_error_at_marker(k, "bit_count() needs an integer scalar, not f32")
 
 
 def test_error_min_of_one_scalar():
@@ -322,7 +310,7 @@ def test_error_min_of_one_scalar():
     def k(a: F):
         x = wp.min(a[0])  # <-
 
-    _expect(k, "min() of one argument needs a vector")
+    expect_error_at_marker(k, "min() of one argument needs a vector")
 
 
 def test_error_norm_of_int_vector():
@@ -330,7 +318,7 @@ def test_error_norm_of_int_vector():
     def k(a: F):
         x = wp.norm_huber(wp.vec3i(), 1)  # <-
 
-    _expect(k, "norm_huber() needs a float argument")
+    expect_error_at_marker(k, "norm_huber() needs a float argument")
 
 
 def test_error_skew_of_2_vector():
@@ -338,7 +326,7 @@ def test_error_skew_of_2_vector():
     def k(a: F):
         m = wp.skew(wp.vec2())  # <-
 
-    _expect(k, "skew() needs a 3-vector")
+    expect_error_at_marker(k, "skew() needs a 3-vector")
 
 
 def test_error_matrix_without_shape():
@@ -346,7 +334,7 @@ def test_error_matrix_without_shape():
     def k(a: F):
         m = wp.matrix(1.0, 2.0, 3.0, 4.0)  # <-
 
-    _expect(k, "matrix() needs shape=(rows, cols)")
+    expect_error_at_marker(k, "matrix() needs shape=(rows, cols)")
 
 
 def test_error_svd3_of_2x2():
@@ -354,7 +342,7 @@ def test_error_svd3_of_2x2():
     def k(a: F):
         U, s, V = wp.svd3(wp.mat22())  # <-
 
-    _expect(k, "no overload of svd3() takes (mat<2, 2, f32>)")
+    expect_error_at_marker(k, "no overload of svd3() takes (mat<2, 2, f32>)")
 
 
 # --- gradients flow through the composed builtins and the library code -----------------------

@@ -6,15 +6,14 @@ on CPU (vectors end with a space, matrices print one row per line).
 
 from __future__ import annotations
 
-import inspect
 import math
 
 import pytest
 
 import kdsl as wp
-from kdsl.errors import KdslTypeError
 from kdsl.ir import parse_module, print_module
 from kdsl.ir.ops_print import FormatError, c_format, format_values, parse_format
+from tests.frontend.located_errors import expect_error_at_marker
 
 BACKENDS = ("interp", "cpu")
 LABEL = "const text"
@@ -128,17 +127,6 @@ def test_reference_formatter_follows_c():
             parse_format(bad)
 
 
-def _check_error(kernel, fragment: str) -> None:
-    """``kernel`` fails to build with a KdslTypeError at the line marked ``# <-``."""
-    lines, start = inspect.getsourcelines(kernel.func)
-    line = next(start + k for k, text in enumerate(lines) if "# <-" in text)
-    with pytest.raises(KdslTypeError) as info:
-        kernel.build_module()
-    assert fragment in info.value.message, info.value.message
-    assert info.value.loc is not None and info.value.loc.line == line
-    assert "^" in str(info.value)
-
-
 def test_printf_checks_argument_types():
     @wp.kernel
     def int_as_float(i: int):
@@ -160,11 +148,11 @@ def test_printf_checks_argument_types():
     def string_arg(x: float):
         wp.printf("%d\n", "text")  # <-
 
-    _check_error(int_as_float, "'%f' needs a float, got a i32")
-    _check_error(float_as_int, "'%d' needs an integer, got a f32")
-    _check_error(int_as_string, "'%s' prints a bool")
-    _check_error(vector_arg, "cannot format a vec<3, f32>")
-    _check_error(string_arg, "no string values")
+    expect_error_at_marker(int_as_float, "'%f' needs a float, got a i32")
+    expect_error_at_marker(float_as_int, "'%d' needs an integer, got a f32")
+    expect_error_at_marker(int_as_string, "'%s' prints a bool")
+    expect_error_at_marker(vector_arg, "cannot format a vec<3, f32>")
+    expect_error_at_marker(string_arg, "no string values")
 
 
 def test_printf_checks_the_format():
@@ -188,8 +176,8 @@ def test_printf_checks_the_format():
     def bad_end(i: int):
         print(i, end=i)  # <-
 
-    _check_error(too_few, "has 2 conversions but 1 arguments")
-    _check_error(too_many, "has 1 conversions but 2 arguments")
-    _check_error(star_width, "'*' widths")
-    _check_error(not_constant, "must be a string constant")
-    _check_error(bad_end, "print's end must be a string constant")
+    expect_error_at_marker(too_few, "has 2 conversions but 1 arguments")
+    expect_error_at_marker(too_many, "has 1 conversions but 2 arguments")
+    expect_error_at_marker(star_width, "'*' widths")
+    expect_error_at_marker(not_constant, "must be a string constant")
+    expect_error_at_marker(bad_end, "print's end must be a string constant")
