@@ -48,57 +48,62 @@ from suite.harness import median_seconds
 RESULTS = Path(__file__).resolve().parent / "results" / "geometry.json"
 
 
+def _hit_kernels(m):
+    """The box- and ray-query kernels in module ``m``'s API (kdsl or warp): each thread
+    counts the items its query reports."""
 
-
-@wp.kernel
-def kd_box_hits(bvh: wp.uint64, lo: wp.array(dtype=wp.vec3), hi: wp.array(dtype=wp.vec3),
-                out: wp.array(dtype=int)):  # fmt: skip
-    i = wp.tid()
-    q = wp.bvh_query_aabb(bvh, lo[i], hi[i])
-    k = int(0)  # noqa: UP018, RUF046 - the Warp spelling of a loop-carried int
-    n = int(0)  # noqa: UP018, RUF046
-    while wp.bvh_query_next(q, k):
-        n += 1
-    out[i] = n
-
-
-@wp.kernel
-def kd_ray_hits(bvh: wp.uint64, start: wp.array(dtype=wp.vec3), d: wp.array(dtype=wp.vec3),
-                max_t: float, out: wp.array(dtype=int)):  # fmt: skip
-    i = wp.tid()
-    q = wp.bvh_query_ray(bvh, start[i], d[i])
-    k = int(0)  # noqa: UP018, RUF046
-    n = int(0)  # noqa: UP018, RUF046
-    while wp.bvh_query_next(q, k, max_t):
-        n += 1
-    out[i] = n
-
-
-def _warp_kernels(warp):
-    @warp.kernel
-    def box_hits(bvh: warp.uint64, lo: warp.array(dtype=warp.vec3),
-                 hi: warp.array(dtype=warp.vec3), out: warp.array(dtype=int)):  # fmt: skip
-        i = warp.tid()
-        q = warp.bvh_query_aabb(bvh, lo[i], hi[i])
-        k = int(0)  # noqa: UP018, RUF046
+    @m.kernel
+    def box_hits(bvh: m.uint64, lo: m.array(dtype=m.vec3), hi: m.array(dtype=m.vec3),
+                 out: m.array(dtype=int)):  # fmt: skip
+        i = m.tid()
+        q = m.bvh_query_aabb(bvh, lo[i], hi[i])
+        k = int(0)  # noqa: UP018, RUF046 - the Warp spelling of a loop-carried int
         n = int(0)  # noqa: UP018, RUF046
-        while warp.bvh_query_next(q, k):
+        while m.bvh_query_next(q, k):
             n += 1
         out[i] = n
 
-    @warp.kernel
-    def ray_hits(bvh: warp.uint64, start: warp.array(dtype=warp.vec3),
-                 d: warp.array(dtype=warp.vec3), max_t: float,
-                 out: warp.array(dtype=int)):  # fmt: skip
-        i = warp.tid()
-        q = warp.bvh_query_ray(bvh, start[i], d[i])
+    @m.kernel
+    def ray_hits(bvh: m.uint64, start: m.array(dtype=m.vec3), d: m.array(dtype=m.vec3),
+                 max_t: float, out: m.array(dtype=int)):  # fmt: skip
+        i = m.tid()
+        q = m.bvh_query_ray(bvh, start[i], d[i])
         k = int(0)  # noqa: UP018, RUF046
         n = int(0)  # noqa: UP018, RUF046
-        while warp.bvh_query_next(q, k, max_t):
+        while m.bvh_query_next(q, k, max_t):
             n += 1
         out[i] = n
 
     return box_hits, ray_hits
+
+
+def _bvh_rows(m, side: str, constructors, data, max_t: float, dev: str, reps: int,
+              sync) -> list[dict]:  # fmt: skip
+    """Build, refit and query times of module ``m``'s Bvh per constructor, over ``data``
+    (box lowers and uppers, query box lowers and uppers, ray starts and directions)."""
+    box_hits, ray_hits = _hit_kernels(m)
+    lo, hi, qlo, qhi, rs, rd = (m.array(a, dtype=m.vec3, device=dev) for a in data)
+    queries = len(data[2])
+    out = m.zeros(queries, dtype=int, device=dev)
+    rows = []
+    for cons in constructors:
+        bvh = m.Bvh(lo, hi, constructor=cons)
+        row = {"section": "bvh", "side": side, "constructor": cons, "boxes": len(data[0]),
+               "queries": queries}  # fmt: skip
+        row["build_s"] = median_seconds(lambda cons=cons: m.Bvh(lo, hi, constructor=cons),
+                                        reps, sync)  # fmt: skip
+        row["refit_s"] = median_seconds(bvh.refit, reps, sync)
+        for name, kernel, inputs in (
+            ("aabb", box_hits, [bvh.id, qlo, qhi, out]),
+            ("ray", ray_hits, [bvh.id, rs, rd, max_t, out]),
+        ):
+            row[f"{name}_s"] = median_seconds(
+                lambda k=kernel, i=inputs: m.launch(k, dim=queries, inputs=i, device=dev),
+                reps, sync,
+            )  # fmt: skip
+            row[f"{name}_hits"] = int(out.numpy().sum())
+        rows.append(row)
+    return rows
 
 
 def bvh_section(args) -> list[dict]:
@@ -113,69 +118,22 @@ def bvh_section(args) -> list[dict]:
     rs = rng.random((m, 3)).astype(np.float32)
     rd = rng.normal(size=(m, 3)).astype(np.float32)
     rd /= np.linalg.norm(rd, axis=1, keepdims=True)
-    max_t = 0.05
+    data, max_t = (lo, hi, qlo, qhi, rs, rd), 0.05
     sync = wp.synchronize if dev != "cpu" else (lambda: None)
-    rows, totals = [], {}
-
-    def kv(a):
-        return wp.array(a, dtype=wp.vec3, device=dev)
-
-    klo, khi, kqlo, kqhi, krs, krd = map(kv, (lo, hi, qlo, qhi, rs, rd))
-    out = wp.zeros(m, dtype=int, device=dev)
-    for cons in args.constructors:
-        bvh = wp.Bvh(klo, khi, constructor=cons)
-        row = {"section": "bvh", "side": "kdsl", "constructor": cons, "boxes": n, "queries": m}
-        row["build_s"] = median_seconds(lambda cons=cons: wp.Bvh(klo, khi, constructor=cons),
-                                   args.reps, sync)  # fmt: skip
-        row["refit_s"] = median_seconds(bvh.refit, args.reps, sync)
-        for name, kernel, inputs in (
-            ("aabb", kd_box_hits, [bvh.id, kqlo, kqhi, out]),
-            ("ray", kd_ray_hits, [bvh.id, krs, krd, max_t, out]),
-        ):
-            row[f"{name}_s"] = median_seconds(
-                lambda k=kernel, i=inputs: wp.launch(k, dim=m, inputs=i, device=dev),
-                args.reps, sync,
-            )  # fmt: skip
-            totals[(cons, name)] = int(out.numpy().sum())
-            row[f"{name}_hits"] = totals[(cons, name)]
-        rows.append(row)
+    rows = _bvh_rows(wp, "kdsl", args.constructors, data, max_t, dev, args.reps, sync)
     try:
         import warp
     except ImportError:
-        warp = None
-    if warp is not None:
-        warp.config.quiet = True
-        box_hits, ray_hits = _warp_kernels(warp)
-        wdev = "cpu" if dev == "cpu" else dev
-
-        def wv(a):
-            return warp.array(a, dtype=warp.vec3, device=wdev)
-
-        wlo, whi, wqlo, wqhi, wrs, wrd = map(wv, (lo, hi, qlo, qhi, rs, rd))
-        wout = warp.zeros(m, dtype=int, device=wdev)
-        wsync = warp.synchronize
-        for cons in ("sah", "median") if dev == "cpu" else ("lbvh", "sah"):
-            wb = warp.Bvh(wlo, whi, constructor=cons)
-            row = {"section": "bvh", "side": "warp", "constructor": cons, "boxes": n,
-                   "queries": m}  # fmt: skip
-            row["build_s"] = median_seconds(lambda cons=cons: warp.Bvh(wlo, whi, constructor=cons),
-                                       args.reps, wsync)  # fmt: skip
-            row["refit_s"] = median_seconds(wb.refit, args.reps, wsync)
-            for name, kernel, inputs in (
-                ("aabb", box_hits, [wb.id, wqlo, wqhi, wout]),
-                ("ray", ray_hits, [wb.id, wrs, wrd, max_t, wout]),
-            ):
-                row[f"{name}_s"] = median_seconds(
-                    lambda k=kernel, i=inputs: warp.launch(k, dim=m, inputs=i, device=wdev),
-                    args.reps, wsync,
-                )  # fmt: skip
-                row[f"{name}_hits"] = int(wout.numpy().sum())
-            rows.append(row)
-        want = {"aabb": rows[-1]["aabb_hits"], "ray": rows[-1]["ray_hits"]}
-        for (cons, name), got in totals.items():
-            if got != want[name]:
-                sys.exit(f"kdsl {cons} tree: {got} {name} hits, Warp {want[name]}")
-    return rows
+        return rows
+    warp.config.quiet = True
+    constructors = ("sah", "median") if dev == "cpu" else ("lbvh", "sah")
+    wrows = _bvh_rows(warp, "warp", constructors, data, max_t, dev, args.reps, warp.synchronize)
+    for r in rows:
+        for name in ("aabb", "ray"):
+            if r[f"{name}_hits"] != wrows[-1][f"{name}_hits"]:
+                sys.exit(f"kdsl {r['constructor']} tree: {r[f'{name}_hits']} {name} hits, "
+                         f"Warp {wrows[-1][f'{name}_hits']}")  # fmt: skip
+    return rows + wrows
 
 
 def _print_bvh(rows: list[dict]) -> None:
