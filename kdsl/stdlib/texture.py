@@ -22,7 +22,7 @@ coarser level scales by ``size / base_size``). ``WRAP`` and ``MIRROR`` first red
 coordinate to one period (1 or 2 normalized, the base size or twice it in texels).
 ``CLOSEST`` takes the texel whose cell holds the coordinate (computed in float64, as
 Warp's CPU sampler); ``LINEAR`` blends the two (four, eight) nearest texel centers with
-float32 weights. Indices beyond the edge wrap, mirror (``-1`` is ``0``), clamp, or read
+float32 weights, one axis after the other (u, then v, then w), in Warp's CPU order. Indices beyond the edge wrap, mirror (``-1`` is ``0``), clamp, or read
 zero (``BORDER``).
 
 **Mip levels.** ``lod < 0`` (the default) samples level 0; otherwise ``lod`` is clamped
@@ -128,9 +128,9 @@ def _decode(rec: Any, k: int) -> float:
     divided by ``texel_scale`` and clamped at -1."""
     fmt = rec.texel_format
     v = 0
-    if fmt == UINT8 or fmt == INT8:
+    if fmt == UINT8 or fmt == INT8:  # noqa: SIM109 - kernels have no `in`
         v = int(rec.texels8[k])
-    elif fmt == UINT16 or fmt == INT16:
+    elif fmt == UINT16 or fmt == INT16:  # noqa: SIM109
         v = int(rec.texels16[k])
     elif fmt == FLOAT16:
         return float(wp.cast(rec.texels16[k], wp.float16))
@@ -180,7 +180,9 @@ def _level_size(base: int, level: int) -> int:
 
 @func
 def _periodic(mode: int) -> bool:
-    return mode == WRAP or mode == MIRROR
+    if mode == WRAP:
+        return True
+    return mode == MIRROR
 
 
 @func
@@ -294,6 +296,20 @@ def _fetch(rec: Any, n: int, inside: bool, like: Any):
 
 
 @func
+def _bilinear(rec: Any, row0: int, row1: int, in0: bool, in1: bool, x0: int, x1: int, w: int,
+              fx: float, fy: float, like: Any):  # fmt: skip
+    """The blend of texels ``x0``, ``x1`` of the rows starting at ``row0`` and ``row1``
+    (``in0``/``in1``: whether each row is inside the texture) by weights ``fx``, ``fy``."""
+    v00 = _fetch(rec, row0 + x0, in0 and _inside(x0, w), like)
+    v10 = _fetch(rec, row0 + x1, in0 and _inside(x1, w), like)
+    v01 = _fetch(rec, row1 + x0, in1 and _inside(x0, w), like)
+    v11 = _fetch(rec, row1 + x1, in1 and _inside(x1, w), like)
+    a = v00 * (1.0 - fx) + v10 * fx
+    b = v01 * (1.0 - fx) + v11 * fx
+    return a * (1.0 - fy) + b * fy
+
+
+@func
 def _at_level(rec: Texture1D, level: int, u: float, like: Any):
     """The texture sampled on mip level ``level`` at ``u``."""
     w = _level_size(rec.width, level)
@@ -321,17 +337,8 @@ def _at_level(rec: Texture2D, level: int, uv: wp.vec2, like: Any):
         return _fetch(rec, start + y * w + x, _inside(x, w) and _inside(y, h), like)
     x0, x1, fx = _linear(uv[0], rec.width, w, mu, rec.normalized)
     y0, y1, fy = _linear(uv[1], rec.height, h, mv, rec.normalized)
-    r0 = start + y0 * w
-    r1 = start + y1 * w
-    in0 = _inside(y0, h)
-    in1 = _inside(y1, h)
-    v00 = _fetch(rec, r0 + x0, in0 and _inside(x0, w), like)
-    v10 = _fetch(rec, r0 + x1, in0 and _inside(x1, w), like)
-    v01 = _fetch(rec, r1 + x0, in1 and _inside(x0, w), like)
-    v11 = _fetch(rec, r1 + x1, in1 and _inside(x1, w), like)
-    a = v00 * (1.0 - fx) + v10 * fx
-    b = v01 * (1.0 - fx) + v11 * fx
-    return a * (1.0 - fy) + b * fy
+    return _bilinear(rec, start + y0 * w, start + y1 * w, _inside(y0, h), _inside(y1, h),
+                     x0, x1, w, fx, fy, like)  # fmt: skip
 
 
 @func
@@ -352,26 +359,15 @@ def _at_level(rec: Texture3D, level: int, uvw: wp.vec3, like: Any):
     x0, x1, fx = _linear(uvw[0], rec.width, w, mu, rec.normalized)
     y0, y1, fy = _linear(uvw[1], rec.height, h, mv, rec.normalized)
     z0, z1, fz = _linear(uvw[2], rec.depth, d, mw, rec.normalized)
-    out = like
-    for c in range(8):
-        x = x0
-        wx = 1.0 - fx
-        if (c & 1) != 0:
-            x = x1
-            wx = fx
-        y = y0
-        wy = 1.0 - fy
-        if (c & 2) != 0:
-            y = y1
-            wy = fy
-        z = z0
-        wz = 1.0 - fz
-        if (c & 4) != 0:
-            z = z1
-            wz = fz
-        inside = _inside(x, w) and _inside(y, h) and _inside(z, d)
-        out = out + _fetch(rec, start + (z * h + y) * w + x, inside, like) * (wx * wy * wz)
-    return out
+    iny0 = _inside(y0, h)
+    iny1 = _inside(y1, h)
+    inz0 = _inside(z0, d)
+    inz1 = _inside(z1, d)
+    p0 = _bilinear(rec, start + (z0 * h + y0) * w, start + (z0 * h + y1) * w, inz0 and iny0,
+                   inz0 and iny1, x0, x1, w, fx, fy, like)  # fmt: skip
+    p1 = _bilinear(rec, start + (z1 * h + y0) * w, start + (z1 * h + y1) * w, inz1 and iny0,
+                   inz1 and iny1, x0, x1, w, fx, fy, like)  # fmt: skip
+    return p0 * (1.0 - fz) + p1 * fz
 
 
 # -- mip levels ------------------------------------------------------------------------
