@@ -16,8 +16,14 @@ its own inline launches (``RangeCost``). A launch runs on the pool when its
 expected inline time exceeds what splitting it saves, ``t > overhead * n/(n-1)``
 for ``n`` threads, where ``overhead`` is what the kernel's own pool launches were
 measured to cost beyond their share of the work (``dispatch_seconds`` until one
-ran): some kernels pay far more on the pool than the hand-off (4,096-thread adjoint
-kernels: about 100 us more than inline, cause not yet known); a kernel held inline
+ran): some launches pay far more on the pool than the hand-off, when the workers
+went to sleep (a worker polls ``native_pool.WORKER_SPIN`` yields after its share, then
+sleeps on a futex, and waking an idle vCPU takes tens of microseconds). That is the
+likely cause of the ``throw`` scene's 4,096-thread adjoint launches costing about
+100 us more on the pool than inline: they came some 70 us of Python apart (the adjoint
+launch path before its plan and reuse), past the workers' polling, where forward
+launches came 20 us apart; ``benchmarks/bench_pool_wake.py`` shows a launch's pool
+cost growing with the pause before it (measured on a loaded host only). A kernel held inline
 that way tries the pool again every ``retry_pool_every`` launches, so one slow pool
 launch (the workers' start, a busy moment) does not decide for good. A kernel not measured
 yet runs inline (and is measured) up to ``measure_inline_up_to`` threads, and on
