@@ -13,16 +13,7 @@ import pytest
 import kdsl as wp
 from kdsl.runtime.adjoint import adjoint_kernel
 from kdsl.runtime.launch import launch_plan
-
-BACKENDS = [
-    "interp",
-    "cpu",
-    pytest.param("cuda", marks=pytest.mark.skipif(not wp.is_cuda_available(), reason="no GPU")),
-]
-
-
-def _device(backend):
-    return "cuda" if backend == "cuda" else "cpu"
+from tests.device_targets import TARGETS
 
 
 @wp.kernel
@@ -46,9 +37,8 @@ def total(x: wp.array(dtype=float), loss: wp.array(dtype=float)):
 
 
 @pytest.mark.filterwarnings("ignore:kernel reads array 'tmp' after writing it")
-@pytest.mark.parametrize("backend", BACKENDS)
-def test_scratch_gradients_start_from_zero_at_every_launch(backend):
-    dev = _device(backend)
+@pytest.mark.parametrize(("dev", "backend"), TARGETS)
+def test_scratch_gradients_start_from_zero_at_every_launch(dev, backend):
     x = wp.array(np.arange(4, dtype=np.float32), device=dev, requires_grad=True)
     tmp = wp.zeros(4, dtype=float, device=dev)  # no gradient
     y = wp.zeros(4, dtype=float, device=dev, requires_grad=True)
@@ -71,11 +61,11 @@ def _flight(xs, loss, h, dev, backend):
     return tape
 
 
-@pytest.mark.parametrize("backend", BACKENDS)
-def test_repeated_taped_flights_give_the_same_gradient(backend):
+@pytest.mark.parametrize(("dev", "backend"), TARGETS)
+def test_repeated_taped_flights_give_the_same_gradient(dev, backend):
     # More steps than a small reuse table holds: every adjoint launch repeats only after
     # the others, as in a simulation optimized through its tape.
-    dev, steps, h = _device(backend), 40, 0.01
+    steps, h = 40, 0.01
     x0 = np.linspace(0.1, 0.5, 8).astype(np.float32)
     xs = [wp.zeros(8, dtype=float, device=dev, requires_grad=True) for _ in range(steps + 1)]
     loss = wp.zeros(1, dtype=float, device=dev, requires_grad=True)
@@ -97,7 +87,7 @@ def test_repeated_taped_flights_give_the_same_gradient(backend):
     for g in grads:
         np.testing.assert_allclose(g, expect, rtol=1e-5)
     assert np.array_equal(grads[0], grads[1]) and np.array_equal(grads[1], grads[2])
-    if backend == "cpu":  # the adjoint launches of the later passes reused their packing
+    if dev == "cpu" and backend is None:  # later passes reused the adjoints' packing
         plan = launch_plan(adjoint_kernel(flight_step), dev, backend)
         assert plan.reuse.hits >= steps
 

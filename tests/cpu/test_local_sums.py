@@ -13,16 +13,7 @@ import kdsl as wp
 from kdsl.backends.cpu import pool
 from kdsl.backends.cpu.local_sums import find_sites
 from kdsl.compiler import adjoint_module
-
-BACKENDS = [
-    "interp",
-    "cpu",
-    pytest.param("cuda", marks=pytest.mark.skipif(not wp.is_cuda_available(), reason="no GPU")),
-]
-
-
-def _device(backend):
-    return "cuda" if backend == "cuda" else "cpu"
+from tests.device_targets import TARGETS
 
 
 @wp.kernel
@@ -134,9 +125,8 @@ def split(request):
         pool.min_parallel, pool.adaptive = old
 
 
-@pytest.mark.parametrize("backend", BACKENDS)
-def test_sums_match_one_atomic_per_thread(backend, split):
-    dev = _device(backend)
+@pytest.mark.parametrize(("dev", "backend"), TARGETS)
+def test_sums_match_one_atomic_per_thread(dev, backend, split):
     rng = np.random.default_rng(3)
     xs = rng.standard_normal(5000).astype(np.float32)
     total = wp.array(np.array([0.25], np.float32), device=dev)
@@ -162,33 +152,31 @@ def test_sums_match_one_atomic_per_thread(backend, split):
     np.testing.assert_array_equal(ov.numpy()[0], xv.sum(axis=0))  # exact: integers in f32
 
 
-@pytest.mark.parametrize("backend", BACKENDS)
-def test_one_range_from_zero_gives_the_sequential_sum_exactly(backend):
-    dev = _device(backend)
+@pytest.mark.parametrize("split", ["inline"], indirect=True)
+@pytest.mark.parametrize(("dev", "backend"), TARGETS)
+def test_one_range_from_zero_gives_the_sequential_sum_exactly(dev, backend, split):
     xs = np.random.default_rng(5).standard_normal(1000).astype(np.float32)
     total = wp.zeros(1, dtype=float, device=dev)
     wp.launch(squares, 1000, [wp.array(xs, device=dev), total], device=dev, backend=backend)
     expect = np.float32(0.0)
     for v in xs:
         expect = np.float32(expect + v * v)
-    if backend == "cuda":  # threads add in any order on a GPU
+    if dev != "cpu":  # threads add in any order on a GPU
         np.testing.assert_allclose(total.numpy()[0], expect, rtol=1e-5)
     else:
         assert total.numpy()[0] == expect
 
 
-@pytest.mark.parametrize("backend", BACKENDS)
-def test_a_site_no_thread_reaches_leaves_memory_as_it_was(backend, split):
-    dev = _device(backend)
+@pytest.mark.parametrize(("dev", "backend"), TARGETS)
+def test_a_site_no_thread_reaches_leaves_memory_as_it_was(dev, backend, split):
     out = wp.array(np.array([-0.0], np.float32), device=dev)
     wp.launch(skipped, 5000, [wp.zeros(5000, dtype=float, device=dev), out], device=dev,
               backend=backend)  # fmt: skip
     assert np.signbit(out.numpy()[0]) and out.numpy()[0] == 0.0
 
 
-@pytest.mark.parametrize("backend", BACKENDS)
-def test_gradient_of_a_shared_parameter(backend, split):
-    dev = _device(backend)
+@pytest.mark.parametrize(("dev", "backend"), TARGETS)
+def test_gradient_of_a_shared_parameter(dev, backend, split):
     xs = np.linspace(-1.0, 2.0, 4100).astype(np.float32)
     x = wp.array(xs, device=dev, requires_grad=True)
     c = wp.array(np.array([3.0], np.float32), device=dev, requires_grad=True)
