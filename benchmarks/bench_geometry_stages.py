@@ -37,6 +37,7 @@ from kdsl.runtime.objects import ObjectRecord
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from bench_geometry_mesh import bumpy_cube_sphere
+from suite.harness import median_seconds
 
 RESULTS = Path(__file__).resolve().parent / "results" / "geometry_stages.json"
 #: The module-level names of the steps, in the modules that call them.
@@ -97,14 +98,7 @@ class StepClock:
 def _profile(name: str, fn: Callable[[], object], sync, reps: int) -> list[dict]:
     """The rows of one workload: per step, its median seconds per call of ``fn`` in
     both passes, and the unwrapped total."""
-    fn()
-    sync()
-    total = []
-    for _ in range(reps):
-        t = time.perf_counter()
-        fn()
-        sync()
-        total.append(time.perf_counter() - t)
+    total = median_seconds(fn, reps, sync)  # also the warm-up call
     passes = {}
     for per_sync in (True, False):
         clock = StepClock(sync)
@@ -131,7 +125,7 @@ def _profile(name: str, fn: Callable[[], object], sync, reps: int) -> list[dict]
         rows.append(row)
     rows.sort(key=lambda r: -r["sync_ms"])
     rows.append({"workload": name, "step": "total", "calls": 1,
-                 "sync_ms": 1e3 * statistics.median(total), "issue_ms": float("nan")})  # fmt: skip
+                 "sync_ms": 1e3 * total, "issue_ms": float("nan")})  # fmt: skip
     return rows
 
 
