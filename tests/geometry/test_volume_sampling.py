@@ -24,6 +24,7 @@ import kdsl as wp
 from kdsl.errors import KdslRuntimeError, KdslTypeError
 from kdsl.geometry.nanovdb.builder import build_grid, leaves_from_voxels
 from kdsl.geometry.nanovdb.layout import GridType
+from tests.source_kernels import kernel_from_file
 
 CLOSEST, LINEAR = 0, 1
 cuda = pytest.mark.skipif(not wp.is_cuda_available(), reason="no GPU")
@@ -417,26 +418,6 @@ def test_value_type_mismatch(backend):
         wp.launch(sample_f_debug, 1, inputs=[grid.id, out], backend=backend)
 
 
-def _compile_error(body: str, match: str) -> None:
-    """Compiling a kernel whose body is ``body`` raises a KdslTypeError matching ``match``."""
-    import textwrap
-    import types
-
-    src = textwrap.dedent(f"""
-        import kdsl as wp
-
-        @wp.kernel
-        def bad(vid: wp.uint64, d: wp.array(dtype=wp.float32), di: wp.array(dtype=int)):
-            {body}
-        """)  # fmt: skip
-    mod = types.ModuleType("volume_bad")
-    path = _compile_error.tmp / f"bad_{abs(hash(body))}.py"
-    path.write_text(src)
-    exec(compile(src, str(path), "exec"), mod.__dict__)
-    with pytest.raises(KdslTypeError, match=match):
-        wp.launch(mod.bad, 1, inputs=[0, wp.zeros(1), wp.zeros(1, dtype=int)], backend="interp")
-
-
 @pytest.mark.parametrize("body,match", [
     ("wp.volume_sample(vid, wp.vec3(), 1, dtype=wp.mat33)", "unsupported volume type"),
     ("wp.volume_sample(vid, wp.vec3(), 1)", r"needs the volume's value type"),
@@ -448,8 +429,10 @@ def _compile_error(body: str, match: str) -> None:
     ("wp.volume_sample_f(vid, wp.vec3(), 1, 2)", "volume_sample_f"),
 ])  # fmt: skip
 def test_compile_time_type_errors(body, match, tmp_path):
-    _compile_error.tmp = tmp_path
-    _compile_error(body, match)
+    params = "vid: wp.uint64, d: wp.array(dtype=wp.float32), di: wp.array(dtype=int)"
+    bad, _ = kernel_from_file(tmp_path, params, body, "volume_bad")
+    with pytest.raises(KdslTypeError, match=match):
+        wp.launch(bad, 1, inputs=[0, wp.zeros(1), wp.zeros(1, dtype=int)], backend="interp")
 
 
 def test_samples_equal_warps_on_the_same_bytes(float_grid):

@@ -17,6 +17,7 @@ from volume_reference import TILE, GridHandle, sparse_float_grid, typed_grid
 import kdsl as wp
 from kdsl.errors import KdslTypeError
 from kdsl.geometry.nanovdb.layout import GridType
+from tests.source_kernels import kernel_from_file
 
 cuda = pytest.mark.skipif(not wp.is_cuda_available(), reason="no GPU")
 BACKENDS = [("interp", "cpu"), ("cpu", "cpu"), pytest.param("cuda", "cuda:0", marks=cuda)]
@@ -232,25 +233,6 @@ def test_vec3i_forms_compile_through_nvrtc():
         assert compiled.payload.cubin("sm_90")[:4] == b"\x7fELF", k.key
 
 
-def _bad_kernel(tmp_path, body: str):
-    """A kernel whose body is ``body``, compiled from a file (so errors can name it)."""
-    import textwrap
-    import types
-
-    src = textwrap.dedent(f"""\
-        import kdsl as wp
-
-        @wp.kernel
-        def bad(vid: wp.uint64):
-            {body}
-        """)  # fmt: skip
-    path = tmp_path / "bad_voxel.py"
-    path.write_text(src)
-    mod = types.ModuleType("bad_voxel")
-    exec(compile(src, str(path), "exec"), mod.__dict__)
-    return mod.bad, path
-
-
 @pytest.mark.parametrize("body,match", [
     ("wp.volume_lookup(vid, wp.vec3(1.0))", r"volume_lookup\(\): a voxel is a vec3i or three "
      r"int32s \(i, j, k\), got \(vec<3, f32>\)"),
@@ -265,7 +247,7 @@ def _bad_kernel(tmp_path, body: str):
     ("wp.volume_lookup_index(vid, wp.vec2i())", r"no overload of volume_lookup_index\(\)"),
 ])  # fmt: skip
 def test_bad_voxel_arguments_are_errors_at_the_call(tmp_path, body, match):
-    kernel, path = _bad_kernel(tmp_path, body)
+    kernel, path = kernel_from_file(tmp_path, "vid: wp.uint64", body, "bad_voxel")
     with pytest.raises(KdslTypeError, match=match) as err:
         wp.launch(kernel, 1, inputs=[0], backend="interp")
     # The message points at the call: file, line, column and the source line.
