@@ -15,10 +15,9 @@ from typing import Any
 from kdsl.errors import KdslTypeError
 from kdsl.frontend.builtins_base import BuiltinTable
 from kdsl.frontend.library import library_function
-from kdsl.frontend.values import describe, is_weak
+from kdsl.frontend.values import describe, is_weak, named_type
 from kdsl.ir import Value
 from kdsl.ir.types import F32, ScalarType, StructType, Type, VectorType
-from kdsl.types import type_of
 
 TABLE = BuiltinTable(__name__)
 
@@ -49,18 +48,11 @@ def _is_dtype(x: Any) -> bool:
     """Whether the call argument ``x`` names a type (a ``dtype`` given by position)."""
     if isinstance(x, Value) or is_weak(x) or isinstance(x, tuple | list | str):
         return False
-    try:
-        type_of(x)
-    except TypeError:
-        return False
-    return True
+    return named_type(x) is not None
 
 
 def _sample_type(em, dtype: Any, node) -> Type:
-    try:
-        t = dtype if isinstance(dtype, Type) else type_of(dtype)
-    except TypeError:
-        t = None
+    t = named_type(dtype)
     if t not in SAMPLE_TYPES:
         got = t if t is not None else describe(dtype)
         raise em.error(KdslTypeError, f"texture_sample(): unsupported texture type {got}; "

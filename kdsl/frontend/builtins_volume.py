@@ -16,10 +16,9 @@ from typing import Any
 from kdsl.errors import KdslTypeError
 from kdsl.frontend.builtins_base import Builtin, BuiltinTable
 from kdsl.frontend.library import library_function
-from kdsl.frontend.values import describe, is_weak
+from kdsl.frontend.values import describe, is_weak, named_type
 from kdsl.ir import Value
 from kdsl.ir.types import F32, F64, I32, I64, U32, ArrayType, MatrixType, Type, VectorType
-from kdsl.types import type_of
 
 TABLE = BuiltinTable(__name__)
 
@@ -40,10 +39,7 @@ LIBRARY = (
 
 def _value_type(em, t: Any, name: str, node) -> Type:
     """``t`` (a dtype or an IR type) if a volume can hold it."""
-    try:
-        ir_t = t if isinstance(t, Type) else type_of(t)
-    except TypeError:
-        ir_t = None
+    ir_t = named_type(t)
     if ir_t not in VALUE_TYPES:
         got = ir_t if ir_t is not None else describe(t)
         raise em.error(KdslTypeError, f"{name}(): unsupported volume type {got}; a volume "

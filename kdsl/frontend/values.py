@@ -17,6 +17,7 @@ import numpy as np
 
 from kdsl.ir import Value
 from kdsl.ir.types import BOOL, F32, I32, MatrixType, ScalarType, Type, VectorType
+from kdsl.types import type_of
 
 WEAK = (bool, int, float)
 
@@ -63,6 +64,16 @@ def describe(x: Any) -> str:
         return f"a Python {type(x).__name__}"
     name = getattr(x, "__name__", None) or type(x).__name__
     return f"the Python object {name!r}"
+
+
+def named_type(x: Any) -> Type | None:
+    """The IR type ``x`` names (an IR type, or a dtype ``type_of`` knows), or None."""
+    if isinstance(x, Type):
+        return x
+    try:
+        return type_of(x)
+    except TypeError:
+        return None
 
 
 def is_composite(t: Type) -> bool:

@@ -22,8 +22,8 @@ coarser level scales by ``size / base_size``). ``WRAP`` and ``MIRROR`` first red
 coordinate to one period (1 or 2 normalized, the base size or twice it in texels).
 ``CLOSEST`` takes the texel whose cell holds the coordinate (computed in float64, as
 Warp's CPU sampler); ``LINEAR`` blends the two (four, eight) nearest texel centers with
-float32 weights, one axis after the other (u, then v, then w), in Warp's CPU order. Indices beyond the edge wrap, mirror (``-1`` is ``0``), clamp, or read
-zero (``BORDER``).
+float32 weights, one axis after the other (u, then v, then w), in Warp's CPU order.
+Indices beyond the edge wrap, mirror (``-1`` is ``0``), clamp, or read zero (``BORDER``).
 
 **Mip levels.** ``lod < 0`` (the default) samples level 0; otherwise ``lod`` is clamped
 to ``[0, num_mip_levels - 1]``, and ``mip_filter_mode`` picks the nearest level
@@ -55,67 +55,25 @@ CLOSEST, LINEAR = 0, 1
 WRAP, CLAMP, MIRROR, BORDER = 0, 1, 2, 3
 
 
-@wp.struct
-class Texture1D:
-    """The record of a ``kdsl.Texture1D`` (see the module docstring)."""
-
-    texels8: wp.array(dtype=wp.uint8)
-    texels16: wp.array(dtype=wp.uint16)
-    texels32: wp.array(dtype=wp.uint32)
-    width: wp.int32
-    num_channels: wp.int32
-    texel_format: wp.int32
-    texel_sign: wp.int32
-    texel_scale: wp.float32
-    filter_mode: wp.int32
-    mip_filter_mode: wp.int32
-    num_mip_levels: wp.int32
-    normalized: wp.int32
-    address_mode_u: wp.int32
+def _record(ndim: int) -> Any:
+    """The record struct ``Texture<ndim>D``: the texel views, the size along each axis
+    (``width``, ``height``, ``depth``), the format and modes, an address mode per axis."""
+    fields = {"texels8": wp.array(dtype=wp.uint8), "texels16": wp.array(dtype=wp.uint16),
+              "texels32": wp.array(dtype=wp.uint32)}  # fmt: skip
+    fields.update(dict.fromkeys(("width", "height", "depth")[:ndim], wp.int32))
+    for name in ("num_channels", "texel_format", "texel_sign", "texel_scale", "filter_mode",
+                 "mip_filter_mode", "num_mip_levels", "normalized"):  # fmt: skip
+        fields[name] = wp.float32 if name == "texel_scale" else wp.int32
+    fields.update({f"address_mode_{axis}": wp.int32 for axis in "uvw"[:ndim]})
+    doc = f"The record of a ``kdsl.Texture{ndim}D`` (see the module docstring)."
+    cls = type(f"Texture{ndim}D", (), {"__annotations__": fields, "__doc__": doc,
+                                       "__module__": __name__})  # fmt: skip
+    return wp.struct(cls)
 
 
-@wp.struct
-class Texture2D:
-    """The record of a ``kdsl.Texture2D`` (see the module docstring)."""
-
-    texels8: wp.array(dtype=wp.uint8)
-    texels16: wp.array(dtype=wp.uint16)
-    texels32: wp.array(dtype=wp.uint32)
-    width: wp.int32
-    height: wp.int32
-    num_channels: wp.int32
-    texel_format: wp.int32
-    texel_sign: wp.int32
-    texel_scale: wp.float32
-    filter_mode: wp.int32
-    mip_filter_mode: wp.int32
-    num_mip_levels: wp.int32
-    normalized: wp.int32
-    address_mode_u: wp.int32
-    address_mode_v: wp.int32
-
-
-@wp.struct
-class Texture3D:
-    """The record of a ``kdsl.Texture3D`` (see the module docstring)."""
-
-    texels8: wp.array(dtype=wp.uint8)
-    texels16: wp.array(dtype=wp.uint16)
-    texels32: wp.array(dtype=wp.uint32)
-    width: wp.int32
-    height: wp.int32
-    depth: wp.int32
-    num_channels: wp.int32
-    texel_format: wp.int32
-    texel_sign: wp.int32
-    texel_scale: wp.float32
-    filter_mode: wp.int32
-    mip_filter_mode: wp.int32
-    num_mip_levels: wp.int32
-    normalized: wp.int32
-    address_mode_u: wp.int32
-    address_mode_v: wp.int32
-    address_mode_w: wp.int32
+Texture1D = _record(1)
+Texture2D = _record(2)
+Texture3D = _record(3)
 
 
 # -- texels ----------------------------------------------------------------------------

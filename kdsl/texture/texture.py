@@ -90,15 +90,17 @@ class Texture:
     """A 1-, 2- or 3-d texture on one device, sampled in kernels with ``texture_sample``.
 
     Experimental, as in Warp. Make one with ``Texture1D``, ``Texture2D`` or ``Texture3D``
-    (as in Warp, this base class is not made directly). Texel types: ``uint8``, ``uint16``, ``int8``,
-    ``int16`` (read normalized to [0, 1] or [-1, 1]), ``float16``, ``float32``, and
-    ``uint32``/``int32`` (read as numbers; ``CLOSEST`` filtering only).
+    (as in Warp, this base class is not made directly). Texel types: ``uint8``,
+    ``uint16``, ``int8``, ``int16`` (read normalized to [0, 1] or [-1, 1]), ``float16``,
+    ``float32``, and ``uint32``/``int32`` (read as numbers; ``CLOSEST`` filtering only).
     """
 
     __kdsl_type__: ClassVar[Any] = None
+    #: The dimensions of the subclass's textures.
+    _dims: ClassVar[int] = 0
 
     def __init__(
-        self, ndim: int, data: Any = None, width: int = 0, height: int = 0, depth: int = 0,
+        self, data: Any = None, width: int = 0, height: int = 0, depth: int = 0,
         num_channels: int = 0, dtype: Any = None, filter_mode: Any = None,
         address_mode: Any = TextureAddressMode.CLAMP, address_mode_u: Any = None,
         address_mode_v: Any = None, address_mode_w: Any = None, normalized_coords: bool = True,
@@ -111,8 +113,10 @@ class Texture:
         ``width``/``height``/``depth``, ``num_channels`` (1, 2 or 4) and ``dtype``.
         ``num_mip_levels`` (0: the full chain) makes coarser levels from ``data`` with a
         2x box filter. ``surface_access`` and ``cuda_array`` (CUDA array interop) are not
-        supported."""
-        if type(self) is Texture:
+        supported. (Here: ``Texture3D``'s signature; ``Texture1D`` and ``Texture2D`` take
+        the arguments of their axes only.)"""
+        ndim = self._dims
+        if not ndim:
             raise TextureError("make a texture with kdsl.Texture1D, Texture2D or Texture3D")
         if cuda_array or surface_access:
             raise TextureError("kdsl textures live in plain device memory: cuda_array and "
@@ -180,25 +184,18 @@ class Texture:
     def _view(self, itemsize: int) -> array | None:
         return self._buffer if self._np_dtype.itemsize == itemsize else None
 
-    @property
-    def texels8(self) -> array | None:
-        """The texel buffer of an 8-bit format (else None)."""
-        return self._view(1)
-
-    @property
-    def texels16(self) -> array | None:
-        """The texel buffer of a 16-bit format (else None)."""
-        return self._view(2)
-
-    @property
-    def texels32(self) -> array | None:
-        """The texel buffer of a 32-bit format (else None)."""
-        return self._view(4)
-
-    @property
-    def texel_format(self) -> int:
-        """Warp's code of the texel format."""
-        return FORMATS[self._np_dtype]
+    texels8 = property(
+        lambda self: self._view(1), doc="The texel buffer of an 8-bit format (else None)."
+    )
+    texels16 = property(
+        lambda self: self._view(2), doc="The texel buffer of a 16-bit format (else None)."
+    )
+    texels32 = property(
+        lambda self: self._view(4), doc="The texel buffer of a 32-bit format (else None)."
+    )
+    texel_format = property(
+        lambda self: FORMATS[self._np_dtype], doc="Warp's code of the texel format."
+    )
 
     @property
     def texel_sign(self) -> int:
@@ -212,82 +209,40 @@ class Texture:
         small = self._np_dtype.kind in "iu" and self._np_dtype.itemsize < 4
         return float(np.iinfo(self._np_dtype).max) if small else 1.0
 
-    @property
-    def normalized(self) -> int:
-        """1 with normalized coordinates, else 0."""
-        return int(self._normalized_coords)
+    normalized = property(
+        lambda self: int(self._normalized_coords), doc="1 with normalized coordinates, else 0."
+    )
 
     # -- Warp's properties ----------------------------------------------------------------
 
-    @property
-    def ndim(self) -> int:
-        """Dimensions: 1, 2 or 3."""
-        return self._ndim
-
-    @property
-    def width(self) -> int:
-        """Texels along u (level 0)."""
-        return self._size[0]
-
-    @property
-    def height(self) -> int:
-        """Texels along v (level 0; 1 for a 1-d texture)."""
-        return self._size[1]
-
-    @property
-    def depth(self) -> int:
-        """Texels along w (level 0; 1 below 3-d)."""
-        return self._size[2]
-
-    @property
-    def num_channels(self) -> int:
-        """Channels per texel: 1, 2 or 4."""
-        return self._num_channels
-
-    @property
-    def dtype(self) -> Any:
-        """The texel type (``kdsl.uint8``, ``kdsl.float32``...)."""
-        return dtype_from_numpy(self._np_dtype)
-
-    @property
-    def filter_mode(self) -> TextureFilterMode:
-        """Filtering within a mip level."""
-        return self._filter_mode
-
-    @property
-    def mip_filter_mode(self) -> TextureFilterMode:
-        """Filtering between mip levels."""
-        return self._mip_filter_mode
-
-    @property
-    def num_mip_levels(self) -> int:
-        """Mip levels (1: not mipmapped)."""
-        return len(self._shapes)
-
-    @property
-    def is_mipmapped(self) -> bool:
-        """Whether the texture has more than one mip level."""
-        return len(self._shapes) > 1
-
-    @property
-    def address_mode_u(self) -> TextureAddressMode:
-        """Address mode along u."""
-        return self._address[0]
-
-    @property
-    def address_mode_v(self) -> TextureAddressMode:
-        """Address mode along v (``CLAMP`` below 2-d)."""
-        return self._address[1]
-
-    @property
-    def address_mode_w(self) -> TextureAddressMode:
-        """Address mode along w (``CLAMP`` below 3-d)."""
-        return self._address[2]
-
-    @property
-    def normalized_coords(self) -> bool:
-        """Whether coordinates are normalized to [0, 1]."""
-        return self._normalized_coords
+    ndim = property(lambda self: self._ndim, doc="Dimensions: 1, 2 or 3.")
+    width = property(lambda self: self._size[0], doc="Texels along u (level 0).")
+    height = property(
+        lambda self: self._size[1], doc="Texels along v (level 0; 1 for a 1-d texture)."
+    )
+    depth = property(lambda self: self._size[2], doc="Texels along w (level 0; 1 below 3-d).")
+    num_channels = property(lambda self: self._num_channels, doc="Channels per texel: 1, 2 or 4.")
+    dtype = property(
+        lambda self: dtype_from_numpy(self._np_dtype), doc="The texel type (``kdsl.uint8``...)."
+    )
+    filter_mode = property(lambda self: self._filter_mode, doc="Filtering within a mip level.")
+    mip_filter_mode = property(
+        lambda self: self._mip_filter_mode, doc="Filtering between mip levels."
+    )
+    num_mip_levels = property(lambda self: len(self._shapes), doc="Mip levels (1: not mipmapped).")
+    is_mipmapped = property(
+        lambda self: len(self._shapes) > 1, doc="Whether the texture has more than one mip level."
+    )
+    address_mode_u = property(lambda self: self._address[0], doc="Address mode along u.")
+    address_mode_v = property(
+        lambda self: self._address[1], doc="Address mode along v (``CLAMP`` below 2-d)."
+    )
+    address_mode_w = property(
+        lambda self: self._address[2], doc="Address mode along w (``CLAMP`` below 3-d)."
+    )
+    normalized_coords = property(
+        lambda self: self._normalized_coords, doc="Whether coordinates are normalized to [0, 1]."
+    )
 
     @property
     def cuda_array(self) -> int:
@@ -354,6 +309,7 @@ class Texture1D(Texture):
     width). ``texture_sample(tex, u, dtype=float)`` samples it."""
 
     __kdsl_type__ = S.Texture1D.__kdsl_type__
+    _dims = 1
 
     def __init__(
         self, data: Any = None, width: int = 0, num_channels: int = 0, dtype: Any = None,
@@ -363,7 +319,7 @@ class Texture1D(Texture):
         cuda_array: int = 0,
     ) -> None:  # fmt: skip
         """See ``Texture``."""
-        super().__init__(1, data, width, 1, 1, num_channels, dtype, filter_mode, address_mode,
+        super().__init__(data, width, 1, 1, num_channels, dtype, filter_mode, address_mode,
                          address_mode_u, None, None, normalized_coords, num_mip_levels,
                          mip_filter_mode, device, surface_access, cuda_array)  # fmt: skip
 
@@ -373,6 +329,7 @@ class Texture2D(Texture):
     ``tex.height``). ``texture_sample(tex, uv, dtype=float)`` samples it."""
 
     __kdsl_type__ = S.Texture2D.__kdsl_type__
+    _dims = 2
 
     def __init__(
         self, data: Any = None, width: int = 0, height: int = 0, num_channels: int = 0,
@@ -383,7 +340,7 @@ class Texture2D(Texture):
         cuda_array: int = 0,
     ) -> None:  # fmt: skip
         """See ``Texture``."""
-        super().__init__(2, data, width, height, 1, num_channels, dtype, filter_mode,
+        super().__init__(data, width, height, 1, num_channels, dtype, filter_mode,
                          address_mode, address_mode_u, address_mode_v, None, normalized_coords,
                          num_mip_levels, mip_filter_mode, device, surface_access,
                          cuda_array)  # fmt: skip
@@ -394,18 +351,4 @@ class Texture3D(Texture):
     ``tex.height``, ``tex.depth``). ``texture_sample(tex, uvw, dtype=float)`` samples it."""
 
     __kdsl_type__ = S.Texture3D.__kdsl_type__
-
-    def __init__(
-        self, data: Any = None, width: int = 0, height: int = 0, depth: int = 0,
-        num_channels: int = 0, dtype: Any = None, filter_mode: Any = None,
-        address_mode: Any = TextureAddressMode.CLAMP, address_mode_u: Any = None,
-        address_mode_v: Any = None, address_mode_w: Any = None, normalized_coords: bool = True,
-        num_mip_levels: int = 1, mip_filter_mode: Any = None, device: Any = None,
-        surface_access: bool = False, cuda_array: int = 0,
-    ) -> None:  # fmt: skip
-        """See ``Texture``."""
-        super().__init__(3, data, width, height, depth, num_channels, dtype, filter_mode,
-                         address_mode, address_mode_u, address_mode_v, address_mode_w,
-                         normalized_coords, num_mip_levels, mip_filter_mode, device,
-                         surface_access, cuda_array)  # fmt: skip
-
+    _dims = 3

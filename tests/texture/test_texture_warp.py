@@ -77,9 +77,10 @@ def test_samples_equal_warps_on_the_cpu(ndim, fmt):
                 uv = uv[:, 0].copy() if ndim == 1 else uv
                 for mips, lod, mip_filter in ((1, -1.0, 1), (0, 1.4, 0 if integer32 else 1),
                                               (0, 0.6, 0)):
-                    ours, theirs = _both(ndim, data, uv, lod, filter_mode=filter_mode,
-                                         address_mode=mode, normalized_coords=normalized,
-                                         num_mip_levels=mips, mip_filter_mode=mip_filter)  # fmt: skip
+                    modes = {"filter_mode": filter_mode, "address_mode": mode,
+                             "normalized_coords": normalized, "num_mip_levels": mips,
+                             "mip_filter_mode": mip_filter}  # fmt: skip
+                    ours, theirs = _both(ndim, data, uv, lod, **modes)
                     scale = max(1.0, float(np.abs(theirs).max()))
                     worst = max(worst, float(np.abs(ours - theirs).max()) / scale)
     assert worst <= 1e-6, worst
