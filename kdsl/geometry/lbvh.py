@@ -23,62 +23,91 @@ the device one scalar, the number of kept nodes.
 
 from __future__ import annotations
 
-from kdsl.frontend.api import atomic_add, func, kernel, tid
+from kdsl.frontend.api import atomic_add, atomic_max, cast, func, inf, kernel, tid
 from kdsl.frontend.api import max as vmax
 from kdsl.frontend.api import min as vmin
 from kdsl.geometry.device_tree import DeviceTree, node_field
-from kdsl.runtime.alloc import empty, full, zeros
+from kdsl.runtime.alloc import empty, zeros
 from kdsl.runtime.array import array
 from kdsl.runtime.launch import launch
 from kdsl.stdlib.bvh import BvhNode
-from kdsl.types import int32, uint64, vec3
+from kdsl.types import float32, int32, uint64, vec3
 from kdsl.utils import array_scan, radix_sort_pairs
 
-#: Boxes a thread reduces per pass of the centres' bounds, per device kind: on a GPU few
-#: (many threads, a pass or two more), on a CPU many (one chunk per core's share).
+#: Boxes a thread reduces in the centres' bounds, per device kind: on a GPU few (many
+#: threads, each reading with a stride of the thread count, so a warp's loads are
+#: contiguous), on a CPU many (a contiguous chunk per thread, a few hundred threads).
 _CHUNK = {"cuda": 64, "cpu": 1024}
+#: The largest bit pattern of a float32 that is not NaN (+inf), as an int.
+_INF_BITS = 0x7F800000
+#: The int32 slots the centres' bounds are reduced into: four per axis (see ``_bound_key``).
+BOUND_SLOTS = 12
+
+
+@func
+def _bound_max(slots: array(dtype=int32), s: int, x: float):
+    """Fold the non-NaN float ``x`` into the maximum kept in zeroed int32 slots ``s`` and
+    ``s + 1`` by ``atomic_max``: a float with its sign bit clear in slot ``s`` as its bits
+    plus one, one with the sign bit set in slot ``s + 1`` as ``inf`` bits plus one less its
+    magnitude bits (both orders agree with the floats'; zero means none)."""
+    b = cast(x, int32)
+    if b >= 0:
+        atomic_max(slots, s, b + 1)
+    else:
+        atomic_max(slots, s + 1, _INF_BITS + 1 - (b & 0x7FFFFFFF))
+
+
+@func
+def _bound_value(slots: array(dtype=int32), s: int) -> float:
+    """The maximum ``_bound_max`` kept in slots ``s`` and ``s + 1`` (0.0 when none)."""
+    p = slots[s]
+    if p > 0:
+        return cast(p - 1, float32)
+    q = slots[s + 1]
+    if q > 0:
+        return cast((_INF_BITS + 1 - q) | int32(-2147483648), float32)
+    return 0.0
 
 
 @kernel
-def _bounds_pass(
+def _centre_bounds_kernel(
     lowers: array(dtype=vec3), uppers: array(dtype=vec3), n: int32, chunk: int32,
-    centres: int32, part_lo: array(dtype=vec3), part_hi: array(dtype=vec3),
+    first_step: int32, step: int32, slots: array(dtype=int32),
 ):  # fmt: skip
-    # The bounds of chunk ``tid()`` of the boxes (of their centres, with ``centres``).
+    # Thread t reduces the centres of boxes t * first_step + k * step (k < chunk) and folds
+    # its bounds into ``slots`` (zeros before): per axis a the maximum in slots 4a, 4a + 1
+    # and the maximum of the negated centres (the minimum) in slots 4a + 2, 4a + 3. A NaN
+    # coordinate is left out (the comparisons are false for it).
     t = tid()
-    begin = t * chunk
-    lo = lowers[begin]
-    hi = uppers[begin]
-    if centres != 0:
-        lo = 0.5 * (lo + hi)
-        hi = lo
-    for i in range(begin + 1, vmin(begin + chunk, n)):
-        box_lo = lowers[i]
-        box_hi = uppers[i]
-        if centres != 0:
-            box_lo = 0.5 * (box_lo + box_hi)
-            box_hi = box_lo
-        lo = vmin(lo, box_lo)
-        hi = vmax(hi, box_hi)
-    part_lo[t] = lo
-    part_hi[t] = hi
+    lo = vec3(inf, inf, inf)
+    hi = vec3(-inf, -inf, -inf)
+    for k in range(chunk):
+        i = t * first_step + k * step
+        if i < n:
+            c = 0.5 * (lowers[i] + uppers[i])
+            for a in range(3):
+                if c[a] < lo[a]:
+                    lo[a] = c[a]
+                if c[a] > hi[a]:
+                    hi[a] = c[a]
+    for a in range(3):
+        if lo[a] <= hi[a]:  # a non-NaN centre coordinate was seen
+            _bound_max(slots, 4 * a, hi[a])
+            _bound_max(slots, 4 * a + 2, -lo[a])
 
 
-def _centre_bounds(lowers: array, uppers: array) -> tuple[array, array]:
-    """One-element arrays holding the bounds of the boxes' centres, reduced on the device
-    in passes of ``_CHUNK`` boxes a thread."""
+def centre_bounds(lowers: array, uppers: array, slots: array, backend: str | None = None) -> None:
+    """Reduce the bounds of the boxes' centres into ``slots`` (``BOUND_SLOTS`` zeroed
+    int32) in one launch of ``_CHUNK`` boxes a thread; ``_morton_keys`` decodes them.
+    NaN centre coordinates are left out; an axis without any decodes as 0.0."""
     device = lowers.device
+    n = lowers.shape[0]
     chunk = _CHUNK["cuda" if device.is_cuda else "cpu"]
-    lo, hi, n, centres = lowers, uppers, lowers.shape[0], 1
-    while True:
-        parts = -(-n // chunk)
-        part_lo = empty(parts, dtype=vec3, device=device)
-        part_hi = empty(parts, dtype=vec3, device=device)
-        launch(_bounds_pass, dim=parts, device=device,
-               inputs=[lo, hi, n, chunk, centres, part_lo, part_hi])  # fmt: skip
-        if parts == 1:
-            return part_lo, part_hi
-        lo, hi, n, centres = part_lo, part_hi, parts, 0
+    threads = -(-n // chunk)
+    # A GPU thread strides by the thread count (coalesced), a CPU thread reads a chunk.
+    first_step, step = (1, threads) if device.is_cuda else (chunk, 1)
+    launch(_centre_bounds_kernel, dim=threads, device=device, backend=backend,
+           inputs=[lowers, uppers, n, chunk, first_step, step, slots])  # fmt: skip
 
 
 @func
@@ -104,14 +133,17 @@ def _quantize(x: float, lo: float, scale: float) -> uint64:
 @kernel
 def _morton_keys(
     lowers: array(dtype=vec3), uppers: array(dtype=vec3),
-    bounds_lo: array(dtype=vec3), bounds_hi: array(dtype=vec3),
-    groups: array(dtype=int32), has_groups: int32,
+    bounds: array(dtype=int32), groups: array(dtype=int32), has_groups: int32,
     keys: array(dtype=uint64), values: array(dtype=int32),
 ):  # fmt: skip
     i = tid()
     c = 0.5 * (lowers[i] + uppers[i])
-    lo = bounds_lo[0]
-    extent = bounds_hi[0] - lo
+    lo = vec3()
+    hi = vec3()
+    for a in range(3):
+        hi[a] = _bound_value(bounds, 4 * a)
+        lo[a] = -_bound_value(bounds, 4 * a + 2)
+    extent = hi - lo
     code = uint64(0)
     for k in range(3):
         scale = 0.0
@@ -176,10 +208,14 @@ def _is_leaf(
 def _karras_nodes(
     keys: array(dtype=uint64), n: int32, leaf_size: int32, range_a: array(dtype=int32),
     range_b: array(dtype=int32), parent: array(dtype=int32), starts: array(dtype=int32),
+    group_roots: array(dtype=int32),
 ):  # fmt: skip
     # Also counts the kept nodes by their first position ``a`` into ``starts[a + 1]``
-    # (zeros before): the root, and both children of every inner node that is no leaf.
+    # (zeros before): the root, and both children of every inner node that is no leaf;
+    # and sets every group's root to -1 (``_preorder`` writes the roots found).
     i = tid()
+    for g in range(i, group_roots.shape[0], 2 * n - 1):
+        group_roots[g] = -1
     if i >= n - 1:  # a leaf: node n - 1 + k holds sorted item k
         k = i - (n - 1)
         range_a[i] = k
@@ -309,45 +345,53 @@ def build_lbvh(lowers: array, uppers: array, leaf_size: int, groups: array | Non
     """Build a ``DeviceTree`` over the boxes on their device (see the module docstring),
     its packed nodes' links written (``DeviceTree.nodes``) and, for the bottom-up refit
     (on a GPU by default, anywhere with ``bottom_up=True``), its parents and arrival
-    counters."""
+    counters.
+
+    Four allocations (each costs the host tens of microseconds on a GPU): the int32
+    arrays are views of one block, those that start at zero (the counts of kept nodes,
+    the arrival counters, the centres' bounds) of one zeroed block; the sort keys and the
+    packed nodes have their own."""
     device = lowers.device
     n = lowers.shape[0]
     leaf_size = max(1, int(leaf_size))
-
-    def ints(size: int) -> array:  # every element is written before it is read
-        return empty(size, dtype=int32, device=device)
-
+    if bottom_up is None:  # a GPU refits bottom up (``device_tree``), from parents
+        bottom_up = device.is_cuda
+    nodes = 2 * n - 1
+    roots = max(num_groups, 1)
     if n == 0:
-        none = ints(0)
-        return DeviceTree(none, none, none, none, full(num_groups, -1, dtype=int32,
-                          device=device), none, none, 0)  # fmt: skip
-    bounds_lo, bounds_hi = _centre_bounds(lowers, uppers)
+        none = empty(roots, dtype=int32, device=device)
+        none.fill_(-1)
+        return DeviceTree(none[:0], none[:0], none[:0], none[:0], none[:num_groups], none[:0],
+                          none[:0], 0)  # fmt: skip
+    # Every element of ``block`` is written before it is read; ``zero`` starts at zero.
+    sizes = {"values": 2 * n, "range_a": nodes, "range_b": nodes, "parent": nodes,
+             "before": n + 1, "skip": nodes, "first": nodes, "count": nodes,
+             "pre_parent": nodes if bottom_up else 0, "group_roots": roots}  # fmt: skip
+    ints = _carve(empty(sum(sizes.values()), dtype=int32, device=device), sizes)
+    zero_sizes = {"counts": n + 1, "arrivals": nodes if bottom_up else 0, "bounds": BOUND_SLOTS}
+    zero = _carve(zeros(sum(zero_sizes.values()), dtype=int32, device=device), zero_sizes)
+    centre_bounds(lowers, uppers, zero["bounds"])
     keys = empty(2 * n, dtype=uint64, device=device)
-    values = empty(2 * n, dtype=int32, device=device)
-    group_arg = groups if groups is not None else ints(1)
+    values = ints["values"]
+    group_arg = groups if groups is not None else zero["bounds"]
     launch(
         _morton_keys, dim=n, device=device,
-        inputs=[lowers, uppers, bounds_lo, bounds_hi, group_arg, int(groups is not None), keys,
-                values],
+        inputs=[lowers, uppers, zero["bounds"], group_arg, int(groups is not None), keys, values],
     )  # fmt: skip
     # Only the Morton code's 30 bits and the group id's bits above bit 32 decide the order.
     key_bits = 32 + max(num_groups - 1, 0).bit_length() if groups is not None else 30
     radix_sort_pairs(keys, values, n, end_bit=key_bits)
-    nodes = 2 * n - 1
-    range_a, range_b, parent = ints(nodes), ints(nodes), ints(nodes)
-    counts = zeros(n + 1, dtype=int32, device=device)  # kept nodes starting at a, at a + 1
+    range_a, range_b, parent = ints["range_a"], ints["range_b"], ints["parent"]
+    counts = zero["counts"]  # kept nodes starting at a, at a + 1
+    group_roots = ints["group_roots"]
     launch(_karras_nodes, dim=nodes, device=device,
-           inputs=[keys, n, leaf_size, range_a, range_b, parent, counts])  # fmt: skip
-    before = ints(n + 1)  # kept nodes starting before each position
+           inputs=[keys, n, leaf_size, range_a, range_b, parent, counts, group_roots])  # fmt: skip
+    before = ints["before"]  # kept nodes starting before each position
     array_scan(counts, before, inclusive=True)
     # The packed nodes, allocated for the most nodes (the count comes back below).
     packed = empty(nodes, dtype=BvhNode, device=device)
     node_first, node_next = node_field(packed, 12, int32), node_field(packed, 28, int32)
-    skip, first, count = ints(nodes), ints(nodes), ints(nodes)
-    if bottom_up is None:  # a GPU refits bottom up (``device_tree``), from parents
-        bottom_up = device.is_cuda
-    pre_parent = ints(nodes if bottom_up else 0)
-    group_roots = full(max(num_groups, 1), -1, dtype=int32, device=device)
+    skip, first, count, pre_parent = ints["skip"], ints["first"], ints["count"], ints["pre_parent"]
     launch(
         _preorder, dim=nodes, device=device,
         inputs=[keys, range_a, range_b, parent, leaf_size, before, int(groups is not None),
@@ -355,11 +399,20 @@ def build_lbvh(lowers: array, uppers: array, leaf_size: int, groups: array | Non
                 pre_parent],
     )  # fmt: skip
     num_nodes = int(before[n : n + 1].numpy()[0])  # the build's one read back
-    if num_groups == 0:
-        group_roots = group_roots[:0]
-    none = ints(0)
-    arrivals = zeros(num_nodes, dtype=int32, device=device) if bottom_up else none
+    if bottom_up:
+        pre_parent, arrivals = pre_parent[:num_nodes], zero["arrivals"][:num_nodes]
+    else:
+        arrivals = pre_parent  # empty
     return DeviceTree(
-        skip[:num_nodes], first[:num_nodes], count[:num_nodes], values[:n], group_roots,
-        pre_parent[:num_nodes] if bottom_up else none, arrivals, num_nodes, packed[:num_nodes],
+        skip[:num_nodes], first[:num_nodes], count[:num_nodes], values[:n],
+        group_roots[:num_groups], pre_parent, arrivals, num_nodes, packed[:num_nodes],
     )  # fmt: skip
+
+
+def _carve(block: array, sizes: dict[str, int]) -> dict[str, array]:
+    """Consecutive views of the 1-d ``block``, one per entry of ``sizes``."""
+    views, at = {}, 0
+    for name, size in sizes.items():
+        views[name] = block[at : at + size]
+        at += size
+    return views
