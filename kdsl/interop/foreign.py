@@ -15,7 +15,8 @@ import numpy as np
 from kdsl.errors import KdslError
 from kdsl.interop import dlpack
 from kdsl.interop.dtypes import InteropTypeError
-from kdsl.interop.torch import VIEWS, is_tensor, scalar_of
+from kdsl.interop.torch import TORCH, VIEWS, is_tensor, scalar_of
+from kdsl.interop.torch_streams import kdsl_waits_for_torch, raw_stream_reader
 from kdsl.ir import types as T
 from kdsl.runtime.args import ArgError, check_foreign, has_attribute
 from kdsl.runtime.device import Device
@@ -71,15 +72,17 @@ def foreign_buffer(t: T.ArrayType, value: Any, device: Device) -> Any:
 
 
 def cached_buffer(t: T.ArrayType, value: Any, device: Device) -> Any:
-    """A PyTorch CPU tensor for a cpu launch, through ``from_torch``'s view cache; else None.
+    """A PyTorch tensor on the launch's device, through ``from_torch``'s view cache; else None.
 
     The launch path asks this first, before the general (slower) checks: a tensor
     handed to launches again and again costs a few comparisons and gives the same
-    buffer object every time, which lets the launch reuse its packed arguments. None
-    (another object, a CUDA launch, a tensor the cache cannot view) sends the value
-    down the general path, which words every error.
+    buffer object every time, which lets the launch reuse its packed arguments. A
+    CUDA tensor's view is its address (as Warp reads it), and kdsl's stream is made
+    to wait for PyTorch's current one where CUDA does not already order them
+    (``torch_streams``). None (another object, a tensor on another device, one the
+    cache cannot view) sends the value down the general path, which words every error.
     """
-    if not (device.is_cpu and is_tensor(value)) or value.is_cuda:
+    if not is_tensor(value) or value.is_cuda == device.is_cpu:
         return None
     try:
         buf, _, dev = torch_view(value)
@@ -88,4 +91,6 @@ def cached_buffer(t: T.ArrayType, value: Any, device: Device) -> Any:
     if dev != device:
         return None
     check_foreign(t, buf.dtype, buf.shape, "torch", ".to(torch.{})")
+    if device.is_cuda:
+        kdsl_waits_for_torch(device, raw_stream_reader(TORCH.load())(device.ordinal))
     return buf

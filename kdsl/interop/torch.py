@@ -2,8 +2,10 @@
 
 Conversions share memory both ways. A CPU tensor is read through ``Tensor.numpy``
 and a CUDA tensor through its data pointer (a CuPy view that keeps the tensor
-alive); ``to_torch`` goes through DLPack, so on a GPU PyTorch's current stream
-waits for kdsl's. Gradients are shared too: ``from_torch(t, requires_grad=True)``
+alive). ``to_torch`` of a GPU array builds the tensor from the buffer's address
+(``__cuda_array_interface__``, as Warp does) when CUDA already orders PyTorch's
+current stream after kdsl's (``torch_streams``), and goes through DLPack, which
+makes PyTorch's stream wait with an event, when it does not. Gradients are shared too: ``from_torch(t, requires_grad=True)``
 wraps ``t.grad`` (allocated as zeros when missing) as the array's ``grad``, and
 ``to_torch(a, requires_grad=True)`` makes ``a.grad`` the tensor's ``.grad``.
 PyTorch is imported only when one of these functions runs.
@@ -11,6 +13,7 @@ PyTorch is imported only when one of these functions runs.
 
 from __future__ import annotations
 
+import functools
 from typing import Any
 
 import numpy as np
@@ -20,6 +23,7 @@ from kdsl.interop.dlpack import Exporter
 from kdsl.interop.dtypes import InteropDeviceError, framework_name
 from kdsl.interop.frameworks import Framework, attach_grad
 from kdsl.interop.tensor_cache import TensorViews
+from kdsl.interop.torch_streams import needs_wait, raw_stream_reader
 from kdsl.interop.views import describe_buffer, view_buffer
 from kdsl.ir import types as T
 from kdsl.runtime import cuda_memory as mem
@@ -149,9 +153,51 @@ def _grad_view(t: Any, dev: Device, g: Any, dtype: Any) -> tuple[Any, T.Type, De
     return gbuf, gt, gdev
 
 
+class _CudaFace:
+    """A CUDA buffer seen through ``__cuda_array_interface__`` version 2 (no stream: the
+    caller has ordered the streams), keeping the buffer alive as long as the tensor."""
+
+    __slots__ = ("__cuda_array_interface__", "owner")
+
+    def __init__(self, face: dict, owner: Any) -> None:
+        self.__cuda_array_interface__ = face
+        self.owner = owner
+
+
+@functools.cache
+def _torch_device(ordinal: int) -> Any:
+    return _torch().device("cuda", ordinal)
+
+
+def _cuda_tensor(buf: Any, np_dtype: np.dtype, dev: Device) -> Any:
+    """A tensor over CUDA buffer ``buf`` built from its address (Warp's way), or None.
+
+    None where the streams need an event (DLPack orders them) or the layout is one
+    ``torch.as_tensor`` reads differently (no elements, negative strides).
+    """
+    strides = buf.strides
+    if buf.size == 0 or min(strides, default=0) < 0:
+        return None
+    torch = _torch()
+    if needs_wait(dev, raw_stream_reader(torch)(dev.ordinal)) is not None:
+        return None
+    face = {
+        "data": (buf.data.ptr, False),
+        "shape": buf.shape,
+        "strides": strides,
+        "typestr": np_dtype.str,
+        "version": 2,
+    }
+    return torch.as_tensor(_CudaFace(face, buf), device=_torch_device(dev.ordinal))
+
+
 def _tensor_of(buf: Any, t: T.Type, dev: Device) -> Any:
     et = T.elem_type(t)
     twin = TORCH.twin(et)
+    if dev.is_cuda:
+        out = _cuda_tensor(buf, twin.np_dtype, dev)
+        if out is not None:
+            return out
     if twin != et:  # torch has no full uint16/32/64 support: same bits, signed
         with mem.scope(dev):
             buf = buf.view(twin.np_dtype)
