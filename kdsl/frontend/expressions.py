@@ -27,6 +27,7 @@ from kdsl.frontend.structs import is_indexed
 from kdsl.frontend.values import ShapeOf, describe, is_hashable, is_weak
 from kdsl.ir import Value
 from kdsl.ir.catalog import fold_literal
+from kdsl.ir.rewrite import constant_of
 from kdsl.ir.types import (
     BOOL,
     I32,
@@ -141,6 +142,9 @@ class ExpressionLowering(Emitter):
         if isinstance(node.op, ast.Not):
             if is_weak(x):
                 return fold_literal("arith.not", x)
+            truth = self.static_truth(x)
+            if truth is not None:  # `not wp.static(c)` with a typed constant
+                return not truth
             return self.emit("arith.not", self.to_bool(x, node.operand), node=node)
         if is_weak(x) and not isinstance(node.op, ast.Invert):
             return fold_literal("arith.neg", x) if isinstance(node.op, ast.USub) else x
@@ -156,9 +160,10 @@ class ExpressionLowering(Emitter):
         is_and = isinstance(node.op, ast.And)
         result = self.visit(node.values[0])
         for rhs in node.values[1:]:
-            if is_weak(result):
-                if bool(result) != is_and:
-                    return bool(result)
+            truth = self.static_truth(result)
+            if truth is not None:  # a compile-time operand: the other is lowered only if needed
+                if truth != is_and:
+                    return truth
                 result = self.visit(rhs)
                 continue
             cond = self.to_bool(result, node)
@@ -210,12 +215,29 @@ class ExpressionLowering(Emitter):
 
     def visit_IfExp(self, node: ast.IfExp) -> Any:
         cond = self.visit(node.test)
-        if is_weak(cond):
-            return self.visit(node.body if cond else node.orelse)
+        truth = self.static_truth(cond)
+        if truth is not None:  # the arm not taken is never lowered (nor type-checked)
+            return self.visit(node.body if truth else node.orelse)
         c = self.to_bool(cond, node.test)
         # Both arms are typed together; a literal arm takes the other arm's type.
         return self.if_value(c, lambda: self.visit(node.body), lambda: self.visit(node.orelse),
                              node, None)  # fmt: skip
+
+    def static_truth(self, cond: Any) -> bool | None:
+        """The truth of a condition known at compile time, else None.
+
+        A literal, a ``static(...)`` result or closure constant, and a typed scalar
+        constant (``np.bool_(True)``, ``wp.static(wp.float64(x) > 0)``) are known: as in
+        Warp, ``if``/``elif``, conditional expressions, ``and``/``or`` and ``not`` then
+        lower only the side taken, and the other is never type-checked.
+        """
+        if is_weak(cond):
+            return bool(cond)
+        if isinstance(cond, Value) and isinstance(cond.type, ScalarType):
+            known, c = constant_of(cond)
+            if known:
+                return bool(c)
+        return None
 
     # --- indexing -----------------------------------------------------------------
 

@@ -14,7 +14,7 @@ from kdsl.frontend.expressions import BINOPS, COMPONENTS
 from kdsl.frontend.library import query_iterator
 from kdsl.frontend.static import static
 from kdsl.frontend.structs import is_indexed
-from kdsl.frontend.values import ShapeOf, describe, is_hashable, is_weak
+from kdsl.frontend.values import ShapeOf, describe, is_hashable
 from kdsl.ir import Value
 from kdsl.ir.types import BOOL, I32, ArrayType, MatrixType, StructType, VectorType
 
@@ -219,8 +219,9 @@ class StatementLowering(ControlFlowLowering):
     def visit_If(self, node: ast.If, else_body: list[ast.stmt] | None = None) -> None:
         orelse = node.orelse if else_body is None else else_body
         cond = self.visit(node.test)
-        if is_weak(cond):  # a compile-time condition picks its branch now
-            self.visit_body(node.body if cond else orelse)
+        truth = self.static_truth(cond)
+        if truth is not None:  # a compile-time condition picks its branch now
+            self.visit_body(node.body if truth else orelse)
             return
         c = self.to_bool(cond, node.test)
         self.emit_if(
