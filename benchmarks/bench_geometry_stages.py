@@ -5,8 +5,8 @@ allocation, sort, scan, sum, fill, read back, record write), timed alone.
         [--tris 200000] [--reps 5] [--json PATH]
 
 Every step the geometry modules call is wrapped (their module-level names, and
-``array.numpy`` / ``array.fill_`` / ``array.zero_`` / ``ObjectRecord.write``); only the
-outermost step of a nest counts. Two passes per workload: ``sync`` synchronizes the
+``array.numpy`` / ``array.fill_`` / ``array.zero_`` / ``ObjectRecord.write`` / the
+prepared sum ``SumInto``); only the outermost step of a nest counts. Two passes per workload: ``sync`` synchronizes the
 device after every step, so a step's time is its host work plus its device work;
 ``issue`` does not, so a step's time is only what it costs the host to enqueue it (on
 the CPU the two agree: every step is synchronous). ``total`` is one unwrapped call
@@ -33,6 +33,7 @@ from kdsl.geometry import device_tree, lbvh, mesh_refit
 from kdsl.geometry import mesh as mesh_mod
 from kdsl.runtime.array import array
 from kdsl.runtime.objects import ObjectRecord
+from kdsl.utils.reduce import SumInto
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
@@ -43,7 +44,8 @@ RESULTS = Path(__file__).resolve().parent / "results" / "geometry_stages.json"
 #: The module-level names of the steps, in the modules that call them.
 STEPS = ("launch", "empty", "zeros", "full", "radix_sort_pairs", "array_scan", "array_sum")
 MODULES = (bvh_mod, device_tree, lbvh, mesh_mod, mesh_refit)
-METHODS = ((array, "numpy"), (array, "fill_"), (array, "zero_"), (ObjectRecord, "write"))
+METHODS = ((array, "numpy"), (array, "fill_"), (array, "zero_"), (ObjectRecord, "write"),
+           (SumInto, "__call__"))  # fmt: skip
 
 
 class StepClock:
@@ -87,7 +89,8 @@ class StepClock:
         for cls, name in METHODS:
             fn = getattr(cls, name)
             self._undo.append((cls, name, fn))
-            setattr(cls, name, self._wrap(fn, lambda *a, n=name, **k: n))
+            step = f"{cls.__name__} call" if name == "__call__" else name
+            setattr(cls, name, self._wrap(fn, lambda *a, n=step, **k: n))
 
     def remove(self) -> None:
         for owner, name, fn in reversed(self._undo):

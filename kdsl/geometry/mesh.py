@@ -14,13 +14,12 @@ from typing import Any
 
 from kdsl.errors import KdslTypeError
 from kdsl.geometry.bvh import Bvh
-from kdsl.geometry.mesh_refit import checked_face_boxes
+from kdsl.geometry.mesh_refit import FaceBoxes
 from kdsl.ir import types as T
-from kdsl.runtime.alloc import empty
 from kdsl.runtime.array import array
 from kdsl.runtime.objects import ObjectRecord
 from kdsl.stdlib.mesh import MeshRecord
-from kdsl.types import float32, int32, type_of
+from kdsl.types import type_of
 
 VEC3 = T.VectorType(3, T.F32)
 
@@ -108,16 +107,11 @@ class Mesh:
         self._points, self.indices, self.velocities = pts, idx, vel
         self.support_winding_number = bool(support_winding_number)
         self._num_tris = num_tris
-        self._first_bad = empty(2, dtype=int32, device=self.device)  # the device checks' answer
-        self._lowers = empty(num_tris, dtype=VEC3, device=self.device)  # the checks fill them
-        self._uppers = empty(num_tris, dtype=VEC3, device=self.device)
-        self._no_velocities = empty(0, dtype=VEC3, device=self.device)
-        self._edges = empty(num_tris, dtype=float32, device=self.device)
-        self._edge_sum = empty(1, dtype=float32, device=self.device)  # the checks write it
+        self._faces = FaceBoxes(num_tris, self.device)  # the checks write them
         self._recorded: tuple | None = None
         self._write_boxes()
         self.bvh = Bvh(
-            self._lowers, self._uppers, constructor=bvh_constructor, groups=groups,
+            self._faces.lowers, self._faces.uppers, constructor=bvh_constructor, groups=groups,
             leaf_size=bvh_leaf_size,
         )  # fmt: skip
         self._record = ObjectRecord(self, MeshRecord.__kdsl_type__, "mesh", self.device)
@@ -155,10 +149,7 @@ class Mesh:
     def _write_boxes(self) -> None:
         """The faces' boxes (the BVH's items) and the average edge length, by one checking
         kernel on the mesh's device: an index out of range or a non-finite point raises."""
-        bad_index, bad_point = checked_face_boxes(
-            self._points, self.indices, self._lowers, self._uppers, self._edges,
-            self._edge_sum, self._first_bad,
-        )  # fmt: skip
+        bad_index, bad_point = self._faces.write(self._points, self.indices)
         if bad_index >= 0:
             value = int(self.indices[bad_index : bad_index + 1].numpy()[0])
             raise KdslTypeError(
@@ -177,10 +168,10 @@ class Mesh:
             {
                 "points": self._points,
                 "velocities": self.velocities if self.velocities is not None
-                else self._no_velocities,
+                else self._faces.none,
                 "indices": self.indices, "bvh": self.bvh.id,
                 "num_points": self._points.shape[0], "num_tris": self._num_tris,
-                "edge_length_sum": self._edge_sum,
+                "edge_length_sum": self._faces.edge_sum,
                 "support_winding_number": int(self.support_winding_number),
             }
         )  # fmt: skip
