@@ -35,7 +35,9 @@ __all__ = [
     "quath", "transform", "transformf", "transformd", "transformh", "spatial_vector",
     "spatial_vectorf", "spatial_vectord", "spatial_vectorh", "spatial_matrix", "spatial_matrixf",
     "spatial_matrixd", "spatial_matrixh", "type_of", "class_of",
-    "dtype_to_numpy", "dtype_from_numpy",
+    "dtype_to_numpy", "dtype_from_numpy", "types_equal", "type_is_scalar", "type_is_float",
+    "type_is_int", "type_is_vector", "type_is_matrix", "type_is_quaternion",
+    "type_is_transformation", "type_size", "type_size_in_bytes",
 ]  # fmt: skip
 
 
@@ -370,6 +372,78 @@ def dtype_from_numpy(dtype: Any) -> type:
             f"NumPy dtype {np.dtype(dtype).name if _is_dtype(dtype) else repr(dtype)} has no kdsl "
             "equivalent (kdsl has bool, int8..int64, uint8..uint64, float16, float32, float64)"
         ) from None
+
+
+# --- Warp's type queries (``wp.types.types_equal`` ...), for ``wp.static`` conditions ----
+
+
+def _ir_type(t: Any) -> T.Type | None:
+    if isinstance(t, str):  # type_of reads NumPy's names; Warp's queries do not
+        return None
+    try:
+        return type_of(t)
+    except TypeError:
+        return None
+
+
+def types_equal(a: Any, b: Any) -> builtins.bool:
+    """True when ``a`` and ``b`` name one type (``float`` and ``float32`` do), as Warp's."""
+    ta, tb = _ir_type(a), _ir_type(b)
+    return a is b or (ta is not None and ta == tb)
+
+
+def type_is_scalar(t: Any) -> builtins.bool:
+    """True for a numeric scalar type (integers, floats; ``bool`` is not one, as in Warp)."""
+    ir = _ir_type(t)
+    return isinstance(ir, T.ScalarType) and not ir.is_bool
+
+
+def type_is_float(t: Any) -> builtins.bool:
+    """True for a floating-point scalar type (``float`` and ``bfloat16`` included)."""
+    ir = _ir_type(t)
+    return isinstance(ir, T.ScalarType) and (ir.is_float or ir.kind == "bfloat")
+
+
+def type_is_int(t: Any) -> builtins.bool:
+    """True for a signed or unsigned integer type (not ``bool``)."""
+    ir = _ir_type(t)
+    return isinstance(ir, T.ScalarType) and ir.is_int
+
+
+def type_is_vector(t: Any) -> builtins.bool:
+    """True for a vector type; quaternions and transforms are not (as in Warp)."""
+    ir = _ir_type(t)
+    return isinstance(ir, T.VectorType) and not isinstance(ir, T.NamedVectorType)
+
+
+def type_is_matrix(t: Any) -> builtins.bool:
+    """True for a matrix type."""
+    return isinstance(_ir_type(t), T.MatrixType)
+
+
+def type_is_quaternion(t: Any) -> builtins.bool:
+    """True for a quaternion type."""
+    return isinstance(_ir_type(t), T.QuatType)
+
+
+def type_is_transformation(t: Any) -> builtins.bool:
+    """True for a transform type."""
+    return isinstance(_ir_type(t), T.TransformType)
+
+
+def type_size(t: Any) -> int:
+    """The number of scalars in a value of type ``t`` (1 for a scalar, 9 for ``mat33``)."""
+    ir = _ir_type(t)
+    if isinstance(ir, T.ScalarType):
+        return 1
+    if isinstance(ir, T.VectorType | T.MatrixType):
+        return int(np.prod(ir.shape))
+    raise TypeError(f"type_size() takes a scalar, vector or matrix type, not {t!r}")
+
+
+def type_size_in_bytes(t: Any) -> int:
+    """The size in bytes of a value of scalar, vector or matrix type ``t``."""
+    return type_size(t) * T.elem_type(type_of(t)).np_dtype.itemsize
 
 
 def _is_dtype(dtype: Any) -> bool:

@@ -225,6 +225,26 @@ def exits_in_loop(wp, flag, kopts):
     return k
 
 
+def types_queries(wp, flag, kopts):
+    """Warp's ``wp.types`` queries as static conditions in a while loop."""
+    dtype = wp.float32
+
+    @wp.kernel(**kopts)
+    def k(a: wp.array(dtype=dtype), n: wp.array(dtype=int)):
+        i = wp.tid()
+        j = int(0)
+        while j < n[i]:
+            if wp.static(wp.types.types_equal(dtype, wp.float64)):
+                a[i] = a[i] + wp.float64(1.0)
+            elif wp.static(wp.types.type_is_float(dtype) and flag):
+                a[i] = a[i] + dtype(2.0)
+            elif wp.static(wp.types.type_is_int(dtype) or wp.types.type_size_in_bytes(dtype) != 4):
+                a[i] = a[i] + wp.float64(3.0)
+            j += 1
+
+    return k
+
+
 def conditional_expression(wp, flag, kopts):
     """Nested conditional expressions at a kernel's top level."""
     dtype = wp.float32
@@ -343,6 +363,8 @@ RESULTS = {
     (returns_in_loops, True): (2.0, 3),
     (exits_in_loop, True): (4.0, 3),
     (exits_in_loop, False): (1.0, 3),
+    (types_queries, True): (7.0, 3),
+    (types_queries, False): (1.0, 3),
     (conditional_expression, True): (2.0, 3),
     (closure_condition, True): (4.0, 3),
     (static_and_or, True): (6.0, 3),
