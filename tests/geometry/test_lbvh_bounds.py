@@ -111,3 +111,27 @@ def test_every_build_kernel_compiles_for_cuda():
         run_pipeline(m, DEFAULT_PIPELINE)
         units.append(f"namespace kd_unit{i} {{\n{generate(m, [k.key]).text}}}\n")
     nvrtc.compile_source("".join(units), "sm_90")
+
+
+@pytest.mark.parametrize("device", ["cpu", pytest.param("cuda:0", marks=cuda)])
+@pytest.mark.parametrize("group_ids", [[0], [7], [0, 40], [3, 3, 25], [1, 0, 2, 2]])
+def test_group_roots_when_groups_outnumber_nodes(device, group_ids):
+    """The Karras kernel sets every group's root to -1 (more groups than its 2n - 1
+    threads: each thread sets several); the groups with boxes get theirs."""
+    n = len(group_ids)
+    lo = np.arange(3 * n, dtype=np.float32).reshape(n, 3)
+    bvh = wp.Bvh(wp.array(lo, dtype=wp.vec3, device=device),
+                 wp.array(lo + 1, dtype=wp.vec3, device=device), constructor="lbvh",
+                 groups=wp.array(group_ids, dtype=wp.int32, device=device))  # fmt: skip
+    roots = bvh._tree.group_roots.numpy()
+    assert len(roots) == max(group_ids) + 1
+    items, first, count = (bvh._tree.items.numpy(), bvh._tree.first.numpy(),
+                           bvh._tree.count.numpy())  # fmt: skip
+    for g, root in enumerate(roots):
+        if g not in group_ids:
+            assert root == -1
+            continue
+        assert root >= 0
+        if first[root] >= 0:  # a leaf root holds exactly the group's boxes
+            got = sorted(items[first[root] : first[root] + count[root]].tolist())
+            assert got == [i for i, x in enumerate(group_ids) if x == g]
