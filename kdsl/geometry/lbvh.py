@@ -96,16 +96,19 @@ def _centre_bounds_kernel(
             _bound_max(slots, 4 * a + 2, -lo[a])
 
 
-def centre_bounds(lowers: array, uppers: array, slots: array, backend: str | None = None) -> None:
+def centre_bounds(lowers: array, uppers: array, slots: array, backend: str | None = None,
+                  strided: bool | None = None) -> None:  # fmt: skip
     """Reduce the bounds of the boxes' centres into ``slots`` (``BOUND_SLOTS`` zeroed
     int32) in one launch of ``_CHUNK`` boxes a thread; ``_morton_keys`` decodes them.
-    NaN centre coordinates are left out; an axis without any decodes as 0.0."""
+    NaN centre coordinates are left out; an axis without any decodes as 0.0. A thread
+    reads every ``threads``-th box when ``strided`` (coalesced: a GPU's default), else a
+    contiguous chunk (a CPU's)."""
     device = lowers.device
     n = lowers.shape[0]
     chunk = _CHUNK["cuda" if device.is_cuda else "cpu"]
     threads = -(-n // chunk)
-    # A GPU thread strides by the thread count (coalesced), a CPU thread reads a chunk.
-    first_step, step = (1, threads) if device.is_cuda else (chunk, 1)
+    strided = device.is_cuda if strided is None else strided
+    first_step, step = (1, threads) if strided else (chunk, 1)
     launch(_centre_bounds_kernel, dim=threads, device=device, backend=backend,
            inputs=[lowers, uppers, n, chunk, first_step, step, slots])  # fmt: skip
 

@@ -26,10 +26,10 @@ def _decode(p: int, q: int) -> np.float32:
     return np.array([bits], dtype=np.uint32).view(np.float32)[0]
 
 
-def _bounds(lo: np.ndarray, hi: np.ndarray, backend: str, device: str):
+def _bounds(lo: np.ndarray, hi: np.ndarray, backend: str, device: str, strided=None):
     slots = wp.zeros(BOUND_SLOTS, dtype=wp.int32, device=device)
     centre_bounds(wp.array(lo, dtype=wp.vec3, device=device),
-                  wp.array(hi, dtype=wp.vec3, device=device), slots, backend)  # fmt: skip
+                  wp.array(hi, dtype=wp.vec3, device=device), slots, backend, strided)  # fmt: skip
     s = slots.numpy().tolist()
     top = np.array([_decode(s[4 * a], s[4 * a + 1]) for a in range(3)], np.float32)
     bottom = -np.array([_decode(s[4 * a + 2], s[4 * a + 3]) for a in range(3)], np.float32)
@@ -47,12 +47,13 @@ def _boxes(n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
 
 @pytest.mark.parametrize(("backend", "device"), TARGETS)
 @pytest.mark.parametrize("n", [1, 2, 63, 64, 65, 1500, 3000])
-def test_bounds_are_numpys(backend, device, n):
+@pytest.mark.parametrize("strided", [False, True])  # a CPU's chunks, a GPU's strides
+def test_bounds_are_numpys(backend, device, n, strided):
     if backend == "interp" and n > 100:
         pytest.skip("interp: the small sizes")
     lo, hi = _boxes(n, seed=n)
     c = np.float32(0.5) * (lo + hi)
-    got_lo, got_hi = _bounds(lo, hi, backend, device)
+    got_lo, got_hi = _bounds(lo, hi, backend, device, strided)
     np.testing.assert_array_equal(got_lo, c.min(axis=0))
     np.testing.assert_array_equal(got_hi, c.max(axis=0))
 
