@@ -35,6 +35,7 @@ from kdsl.runtime.device import Device, get_device
 from kdsl.runtime.graphs import state as _graphs
 from kdsl.runtime.launch_reuse import LaunchReuse
 from kdsl.runtime.objects import foreign_id
+from kdsl.runtime.stream import current_stream
 
 _CACHE_ATTR = "_kdsl_compiled"
 
@@ -137,9 +138,7 @@ def resolve_stream(device: Device, stream: Any) -> Any:
     """The stream a launch on ``device`` runs on: the user's, else the device's current one."""
     if stream is not None or device.is_cpu:
         return stream
-    from kdsl.runtime.stream import get_stream
-
-    return get_stream(device)
+    return current_stream(device)  # no import statement here: one costs microseconds
 
 
 class _Plan:
@@ -498,6 +497,16 @@ def launch(
         if _graphs.ACTIVE and not record_cmd:  # a capture: repeated launches skip the checks
             stream = resolve_stream(dev, stream)
             rec = _graphs.recording(dev, stream)
+        elif (
+            plan.reuse.same is not None
+            and not record_cmd
+            and _timing.RECORDING is None
+            and plan.reuse.relaunch(args, dims, resolve_stream(dev, stream))
+        ):  # the very argument objects of the last launch: nothing to convert or key
+            if _tape.ACTIVE and record_tape:
+                _record_on_tape(kernel, dims, inputs, outputs, dev, max_blocks, block_dim,
+                                backend, resolve_stream(dev, stream))  # fmt: skip
+            return None
         converted = None if rec is None else rec.converted(plan, args)
         if converted is None:
             converted = [conv(v) for conv, v in zip(convs, args)]
@@ -511,20 +520,16 @@ def launch(
         if rec is not None:
             rec.record_launch(plan, dims, converted, stream)
         elif _timing.RECORDING is None:
-            plan.reuse.launch(dims, converted, stream)
+            plan.reuse.launch(dims, converted, stream, args)
         else:
             _timing.timed_launch(
                 plan.backend, plan.compiled, dims, converted, stream, dev,
                 f"forward kernel {_kernel_name(kernel)}",
             )  # fmt: skip
         if _tape.ACTIVE and record_tape:
-            caller = sys._getframe(1)
-            _tape.ACTIVE[-1].record_launch(
-                kernel, dims, inputs, outputs, dev, max_blocks, block_dim,
-                {"caller": {"file": caller.f_code.co_filename, "lineno": caller.f_lineno,
-                            "func": caller.f_code.co_name}},
-                backend, stream,
-            )  # fmt: skip
+            _record_on_tape(
+                kernel, dims, inputs, outputs, dev, max_blocks, block_dim, backend, stream
+            )
         return None
     except KdslError as e:
         if isinstance(e, KdslLaunchError):
@@ -532,6 +537,20 @@ def launch(
             e.__suppress_context__ = True
         hide_internal_frames(e)
         raise
+
+
+def _record_on_tape(
+    kernel: Any, dims: tuple, inputs: Sequence[Any], outputs: Sequence[Any], dev: Device,
+    max_blocks: int, block_dim: int, backend: Any, stream: Any,
+) -> None:  # fmt: skip
+    """Record a forward launch on the active tape, with the user's calling frame."""
+    caller = sys._getframe(2)  # launch()'s caller
+    _tape.ACTIVE[-1].record_launch(
+        kernel, dims, inputs, outputs, dev, max_blocks, block_dim,
+        {"caller": {"file": caller.f_code.co_filename, "lineno": caller.f_lineno,
+                    "func": caller.f_code.co_name}},
+        backend, stream,
+    )  # fmt: skip
 
 
 def _adjoint_list(adj: Sequence[Any] | None, primal: Sequence[Any], what: str, name: str) -> list:

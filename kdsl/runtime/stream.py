@@ -208,6 +208,13 @@ def get_stream(device: Any = None) -> Stream:
     return s
 
 
+def current_stream(device: Device) -> Stream:
+    """``get_stream`` of a CUDA ``Device`` object (the launch path's): a dict lookup once
+    the stream exists."""
+    s = _current.get(device.ordinal)
+    return s if s is not None else get_stream(device)
+
+
 def set_stream(stream: Stream, device: Any = None, sync: bool = False) -> None:
     """Make ``stream`` its device's current stream; ``sync`` first makes it wait for the old one."""
     if not isinstance(stream, Stream):
