@@ -25,7 +25,7 @@ from collections.abc import Callable
 from typing import Any
 
 from kdsl.runtime.device import Device, cupy
-from kdsl.runtime.stream import Stream, get_stream
+from kdsl.runtime.stream import Stream, current_stream
 
 #: The legacy default stream's handle.
 LEGACY = 0
@@ -52,7 +52,7 @@ def implicitly_ordered(stream: Stream, torch_raw: int) -> bool:
 
 def needs_wait(device: Device, torch_raw: int) -> Stream | None:
     """kdsl's current stream on ``device`` when it and ``torch_raw`` need an event, else None."""
-    stream = get_stream(device)
+    stream = current_stream(device)
     return None if implicitly_ordered(stream, torch_raw) else stream
 
 

@@ -69,7 +69,7 @@ def test_same_stream_or_legacy_with_an_own_blocking_stream_needs_no_event(fake_c
 def test_each_direction_waits_only_when_needed(fake_cupy, monkeypatch, torch_raw, waits):
     log: list = []
     kdsl_stream = _Stream(0x5000, _CpStream(), log)
-    monkeypatch.setattr(ts, "get_stream", lambda device: kdsl_stream)
+    monkeypatch.setattr(ts, "current_stream", lambda device: kdsl_stream)
     monkeypatch.setattr(ts, "Stream", lambda device, cuda_stream: _Stream(cuda_stream, None, log))
     ts.kdsl_waits_for_torch("cuda:0", torch_raw)
     ts.torch_waits_for_kdsl("cuda:0", torch_raw)
