@@ -13,6 +13,17 @@ the tests launch it on two threads with ``a = 1.0`` and ``n = 3``.
 import numpy as np
 
 
+def _kernel_calling(wp, f, kopts):
+    """The kernel ``a[i] = f(a[i], n[i])`` for a ``@func`` ``f``."""
+
+    @wp.kernel(**kopts)
+    def k(a: wp.array(dtype=wp.float32), n: wp.array(dtype=int)):
+        i = wp.tid()
+        a[i] = f(a[i], n[i])
+
+    return k
+
+
 def top_if(wp, flag, kopts):
     """if/elif/else at a kernel's top level: a ``wp.types`` check, a closure constant."""
     dtype = wp.float32
@@ -142,12 +153,7 @@ def func_loops(wp, flag, kopts):
             j += 1
         return y
 
-    @wp.kernel(**kopts)
-    def k(a: wp.array(dtype=dtype), n: wp.array(dtype=int)):
-        i = wp.tid()
-        a[i] = f(a[i], n[i])
-
-    return k
+    return _kernel_calling(wp, f, kopts)
 
 
 def nested_funcs(wp, flag, kopts):
@@ -172,12 +178,7 @@ def nested_funcs(wp, flag, kopts):
             j += 1
         return y
 
-    @wp.kernel(**kopts)
-    def k(a: wp.array(dtype=dtype), n: wp.array(dtype=int)):
-        i = wp.tid()
-        a[i] = f(a[i], n[i])
-
-    return k
+    return _kernel_calling(wp, f, kopts)
 
 
 def returns_in_loops(wp, flag, kopts):
@@ -196,12 +197,7 @@ def returns_in_loops(wp, flag, kopts):
                 return x, x, wp.float64(1.0)
         return x + dtype(1.0)
 
-    @wp.kernel(**kopts)
-    def k(a: wp.array(dtype=dtype), n: wp.array(dtype=int)):
-        i = wp.tid()
-        a[i] = f(a[i], n[i])
-
-    return k
+    return _kernel_calling(wp, f, kopts)
 
 
 def exits_in_loop(wp, flag, kopts):
