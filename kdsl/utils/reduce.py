@@ -43,8 +43,8 @@ def array_inner(a, b, out=None, count: int | None = None, axis: int | None = Non
 class SumInto:
     """A prepared ``array_sum(values, out=out)`` for arrays summed again and again (a
     mesh's edge lengths at every refit): the checks and the buffer views are made once,
-    each call is one reduction on the device (one CuPy/NumPy sum written straight into
-    ``out[0]``, the same value ``array_sum`` gives). ``values`` is a contiguous 1-d float
+    each call is one reduction on the device and a one-element store, the very
+    operations of ``array_sum`` (the same bits). ``values`` is a contiguous 1-d float
     array, ``out`` a one-element array of its dtype on its device."""
 
     __slots__ = ("_out", "_owner", "_values", "_xp")
@@ -52,18 +52,20 @@ class SumInto:
     def __init__(self, values: array, out: array) -> None:
         a = check_array("values", values)
         same_device(values=a, out=out)
-        if a.ndim != 1 or not a.is_contiguous or type_of(a.dtype).np_dtype.kind != "f":
+        t = type_of(a.dtype)
+        if a.ndim != 1 or not a.is_contiguous or elem_type(t) != t or t.np_dtype.kind != "f":
             raise UtilsError(f"SumInto needs a contiguous 1-d float array, not {a.dtype} of "
                              f"shape {a.shape}")  # fmt: skip
         _check_out("SumInto", out, a, (1,))
         self._owner = a  # for the device scope
         self._xp, self._values = device_buffer(a)
-        self._out = device_buffer(out)[1].reshape(())
+        self._out = device_buffer(out)[1]
 
     def __call__(self) -> None:
         """Write the sum of ``values`` into ``out[0]`` (on the device's kdsl stream)."""
         with on_device(self._owner):
-            self._xp.sum(self._values, dtype=self._values.dtype, out=self._out)
+            # array_sum's own two operations (a sum, then a store), so the same bits.
+            self._out[...] = self._xp.sum(self._values, axis=0, dtype=self._values.dtype)
 
 
 def _reduce(what: str, a: array, b: array | None, out: Any, count: int | None, axis: int | None):

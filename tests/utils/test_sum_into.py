@@ -42,6 +42,7 @@ def test_views_of_one_block():
     ("values", "out", "message"),
     [
         (lambda: wp.zeros(4, dtype=wp.int32), lambda: wp.zeros(1, dtype=wp.int32), "float"),
+        (lambda: wp.zeros(4, dtype=wp.vec3), lambda: wp.zeros(1, dtype=wp.vec3), "float"),
         (lambda: wp.zeros((2, 2), dtype=wp.float32), lambda: wp.zeros(1), "1-d"),
         (lambda: wp.zeros(8, dtype=wp.float32)[::2], lambda: wp.zeros(1), "contiguous"),
         (lambda: wp.zeros(4, dtype=wp.float32), lambda: wp.zeros(2), "shape"),
