@@ -1,8 +1,9 @@
 """Geometry queries, kdsl beside Warp: BVH builds and queries, triangle meshes.
 
-    python benchmarks/bench_geometry.py [--section bvh|mesh|marching_cubes|volume]
+    python benchmarks/bench_geometry.py [--section bvh|mesh|marching_cubes|volume|hash_grid]
         [--boxes 200000] [--tris 200000] [--queries 1000000] [--mc-nodes 256]
-        [--samples 10000000] [--stores 1000000] [--reps 3] [--device cpu|cuda:0] [--json PATH]
+        [--samples 10000000] [--stores 1000000] [--points 200000] [--neighbours 30]
+        [--grid-dim 128] [--reps 3] [--device cpu|cuda:0] [--json PATH]
 
 Each section is a function returning rows; ``main`` runs the sections asked for, prints
 one table per section and writes every row to benchmarks/results/geometry.json.
@@ -24,6 +25,11 @@ a gyroid), ``surface(field, 0.0)`` with a reusable context; kdsl beside Warp.
 
 Volume section (``bench_geometry_volume.py``): a 256^3 sphere SDF narrow band,
 ``--samples`` trilinear samples (in the box, in the band) and ``--stores`` stores.
+
+Hash grid section (``bench_geometry_hashgrid.py``, which also runs alone): ``--points``
+uniform points in the unit box, the radius giving ``--neighbours`` neighbours on
+average, a ``--grid-dim``^3 grid: rebuild and the seed's neighbour-sum query; kdsl
+beside Warp, and Numba and Taichi on the CPU when installed.
 """
 
 from __future__ import annotations
@@ -40,6 +46,7 @@ import kdsl as wp
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from bench_geometry_hashgrid import hash_grid_section, print_hash_grid
 from bench_geometry_mc import marching_cubes_section, print_marching_cubes
 from bench_geometry_mesh import mesh_section, print_mesh
 from bench_geometry_volume import print_volume, volume_section
@@ -150,6 +157,7 @@ SECTIONS = {
     "mesh": (mesh_section, print_mesh),
     "marching_cubes": (marching_cubes_section, print_marching_cubes),
     "volume": (volume_section, print_volume),
+    "hash_grid": (hash_grid_section, print_hash_grid),
 }
 
 
@@ -162,6 +170,10 @@ def main() -> None:
     p.add_argument("--mc-nodes", type=int, default=256, help="marching_cubes: nodes per axis")
     p.add_argument("--samples", type=int, default=10_000_000, help="volume: trilinear samples")
     p.add_argument("--stores", type=int, default=1_000_000, help="volume: volume_store calls")
+    p.add_argument("--points", type=int, default=200_000, help="hash_grid: particles")
+    p.add_argument("--neighbours", type=float, default=30.0,
+                   help="hash_grid: mean neighbours (sets the radius)")
+    p.add_argument("--grid-dim", type=int, default=128, help="hash_grid: cells per axis")
     p.add_argument("--constructors", default="lbvh,median,sah")
     p.add_argument("--reps", type=int, default=3)
     p.add_argument("--device", default="cpu")
