@@ -1,9 +1,6 @@
 """Hash grids, kdsl beside Warp (and Numba, Taichi): the ``hash_grid`` section of the
 geometry benchmark (``bench_geometry.py --section hash_grid``).
 
-    python benchmarks/bench_geometry_hashgrid.py [--points 200000] [--neighbours 30]
-        [--grid-dim 128] [--reps 3] [--device cpu|cuda:0] [--quick] [--json PATH]
-
 Workload (issue 16): ``--points`` particles uniform in the unit box (seed 0) and the
 radius ``r`` at which a point has ``--neighbours`` others within ``r`` on average
 (``n * 4/3 pi r^3 = neighbours``: 0.0330 for 200k and 30), bucketed with cell width
@@ -24,29 +21,21 @@ query. Times are medians of ``--reps`` runs after a warm-up (compiles excluded).
 Before any time is printed, each point's neighbour count from kdsl must equal a
 float64 brute force on a subsample of points (pairs within rounding of ``r`` aside),
 and every side's sums must equal kdsl's within float32 rounding; otherwise the run
-exits 1 with the reason. ``--quick`` shrinks the workload to 20k points. Alone, this
-file writes benchmarks/results/geometry_hash_grid.json.
+exits 1 with the reason.
 """
 
 from __future__ import annotations
 
-import argparse
 import importlib
 import importlib.util
-import json
 import math
-import platform
 import sys
-from pathlib import Path
 
 import numpy as np
+from suite.harness import median_seconds
 
 import kdsl as wp
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from suite.harness import median_seconds
-
-RESULTS = Path(__file__).resolve().parent / "results" / "geometry_hash_grid.json"
 #: Points checked against the brute force (a seeded subsample).
 CHECK_POINTS = 512
 #: Sums agree when within this of each other, relative to the sum of the neighbours'
@@ -156,49 +145,53 @@ def check_sums(ours: np.ndarray, theirs: np.ndarray, counts: np.ndarray, peer: s
     return []
 
 
-def _peer_rows(pts: np.ndarray, radius: float, dim: int, reps: int) -> list[tuple[dict, np.ndarray]]:
-    """Numba's and Taichi's rows and sums, for those installed."""
-    out = []
+def _peer_sides(pts: np.ndarray, radius: float, dim: int, reps: int,
+                ours: dict) -> tuple[list[dict], list[str]]:  # fmt: skip
+    """Numba's and Taichi's rows (for those installed) and where their sums differ."""
+    rows, problems = [], []
     for package, module in (("numba", "suite.hashgrid_numba"), ("taichi", "suite.hashgrid_taichi")):
         if importlib.util.find_spec(package) is None:
             continue  # not installed: the bench extra brings it
         impl = importlib.import_module(module)
         times, sums = impl.run(pts, radius, dim, reps)
-        row = {"section": "hash_grid", "side": impl.NAME, "device": "cpu", "points": len(pts),
-               "radius": radius, "grid_dim": dim, **times}  # fmt: skip
-        out.append((row, sums))
-    return out
+        rows.append({"section": "hash_grid", "side": impl.NAME, "device": "cpu",
+                     "points": len(pts), "radius": radius, "grid_dim": dim, **times})  # fmt: skip
+        problems += check_sums(ours["sum"], sums, ours["count"], impl.NAME)
+    return rows, problems
+
+
+def _warp_side(pts: np.ndarray, radius: float, dim: int, dev: str, reps: int,
+               ours: dict) -> tuple[list[dict], list[str]]:  # fmt: skip
+    """Warp's row (none where warp-lang is missing) and where its answers differ."""
+    if importlib.util.find_spec("warp") is None:
+        return [], []
+    import warp
+
+    warp.config.quiet = True
+    warp.init()
+    wrow, theirs = _run_side(warp, "warp", pts, radius, dim, dev, reps, warp.synchronize)
+    problems = check_sums(ours["sum"], theirs["sum"], ours["count"], "Warp")
+    differ = int((theirs["count"] != ours["count"]).sum())
+    if differ:
+        problems.insert(0, f"kdsl vs Warp: neighbour counts differ at {differ} points")
+    return [wrow], problems
 
 
 def hash_grid_section(args) -> list[dict]:
     """Hash-grid rebuild and the seed's neighbour sum: kdsl, Warp, Numba, Taichi."""
-    n = getattr(args, "points", 200_000)
-    if getattr(args, "quick", False):
-        n = min(n, 20_000)
-    radius = radius_for(n, getattr(args, "neighbours", 30.0))
-    dim, dev, reps = getattr(args, "grid_dim", 128), args.device, args.reps
+    n, dim, dev, reps = args.points, args.grid_dim, args.device, args.reps
+    radius = radius_for(n, args.neighbours)
     pts = workload(n)
     sync = (lambda: None) if dev == "cpu" else (lambda: wp.synchronize_device(dev))
     row, ours = _run_side(wp, "kdsl", pts, radius, dim, dev, reps, sync)
     row["mean_neighbours"] = float(ours["count"].mean()) - 1.0  # without the point itself
     rows, problems = [row], check_counts(ours["count"], pts, radius)
-    try:
-        import warp
-    except ImportError:
-        warp = None
-    if warp is not None and not getattr(args, "no_warp", False):
-        warp.config.quiet = True
-        warp.init()
-        wrow, theirs = _run_side(warp, "warp", pts, radius, dim, dev, reps, warp.synchronize)
-        rows.append(wrow)
-        if not np.array_equal(theirs["count"], ours["count"]):
-            problems.append("kdsl vs Warp: neighbour counts differ at "
-                            f"{int((theirs['count'] != ours['count']).sum())} points")  # fmt: skip
-        problems += check_sums(ours["sum"], theirs["sum"], ours["count"], "Warp")
+    sides = [_warp_side(pts, radius, dim, dev, reps, ours)]
     if dev == "cpu" and not getattr(args, "no_peers", False):
-        for prow, sums in _peer_rows(pts, radius, dim, reps):
-            rows.append(prow)
-            problems += check_sums(ours["sum"], sums, ours["count"], prow["side"])
+        sides.append(_peer_sides(pts, radius, dim, reps, ours))
+    for side_rows, side_problems in sides:
+        rows += side_rows
+        problems += side_problems
     if problems:
         sys.exit("\n".join(problems))
     return rows
@@ -206,39 +199,13 @@ def hash_grid_section(args) -> list[dict]:
 
 def print_hash_grid(rows: list[dict]) -> None:
     """The hash-grid section's table (ms) and kdsl's speed-ups over each peer."""
-    r0 = rows[0]
+    r0, peers = rows[0], rows[1:]
     print(f"{r0['points']:,} points in the unit box, radius {r0['radius']:.4f} (mean "
           f"{r0['mean_neighbours']:.1f} neighbours), {r0['grid_dim']}^3 grid on "
           f"{r0['device']}; median ms")  # fmt: skip
     print(f"{'side':<7}{'build ms':>12}{'query ms':>12}")
     for r in rows:
         print(f"{r['side']:<7}{1e3 * r['build_s']:12.2f}{1e3 * r['query_s']:12.1f}")
-    for r in rows[1:]:
+    for r in peers:
         print(f"kdsl speed-up over {r['side']}: build {r['build_s'] / r0['build_s']:.2f}x, "
               f"query {r['query_s'] / r0['query_s']:.2f}x")  # fmt: skip
-
-
-def main() -> None:
-    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
-    p.add_argument("--points", type=int, default=200_000)
-    p.add_argument("--neighbours", type=float, default=30.0)
-    p.add_argument("--grid-dim", type=int, default=128)
-    p.add_argument("--reps", type=int, default=3)
-    p.add_argument("--device", default="cpu")
-    p.add_argument("--quick", action="store_true", help="20k points")
-    p.add_argument("--no-warp", action="store_true")
-    p.add_argument("--no-peers", action="store_true", help="skip Numba and Taichi")
-    p.add_argument("--json", type=Path, default=RESULTS)
-    args = p.parse_args()
-    print(f"on {args.device} ({platform.processor() or platform.machine()}, "
-          f"{wp.utils.buffers.host_threads()} host threads)")  # fmt: skip
-    rows = hash_grid_section(args)
-    print_hash_grid(rows)
-    args.json.parent.mkdir(parents=True, exist_ok=True)
-    data = {"device": args.device, "sections": {"hash_grid": rows}}
-    args.json.write_text(json.dumps(data, indent=2))
-    print(f"wrote {args.json}")
-
-
-if __name__ == "__main__":
-    main()

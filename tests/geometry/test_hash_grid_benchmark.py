@@ -4,6 +4,7 @@ its radius gives the asked-for neighbour count, and its checks catch wrong answe
 from __future__ import annotations
 
 import argparse
+import importlib
 import importlib.util
 import sys
 from pathlib import Path
@@ -23,7 +24,7 @@ cuda = pytest.mark.skipif(not wp.is_cuda_available(), reason="no GPU")
 
 def _args(device: str, **kw) -> argparse.Namespace:
     return argparse.Namespace(points=3000, neighbours=30.0, grid_dim=32, reps=1, device=device,
-                              quick=False, no_warp=False, no_peers=True, **kw)  # fmt: skip
+                              no_peers=True, **kw)  # fmt: skip
 
 
 def test_radius_gives_the_neighbour_count():
@@ -62,14 +63,19 @@ def test_checks_catch_wrong_answers():
     assert "kdsl vs x: neighbour sums differ" in hg.check_sums(sums, off, counts, "x")[0]
 
 
-@pytest.mark.skipif(importlib.util.find_spec("numba") is None, reason="numba not installed")
-def test_numba_peer_matches_the_brute_force():
-    from suite import hashgrid_numba
+def _installed(package: str):
+    return pytest.mark.skipif(importlib.util.find_spec(package) is None,
+                              reason=f"{package} not installed")  # fmt: skip
 
+
+@pytest.mark.parametrize("package", [pytest.param("numba", marks=_installed("numba")),
+                                     pytest.param("taichi", marks=_installed("taichi"))])  # fmt: skip
+def test_peer_matches_the_brute_force(package):
+    impl = importlib.import_module(f"suite.hashgrid_{package}")
     pts = hg.workload(2000)
     radius = hg.radius_for(2000, 30)
-    times, sums = hashgrid_numba.run(pts, radius, 32, 1)
-    assert times["build_s"] > 0 and times["query_s"] > 0
+    times, sums = impl.run(pts, radius, 32, 1)
+    assert package == impl.NAME and times["build_s"] > 0 and times["query_s"] > 0
     p64 = pts.astype(np.float64)
     ref = np.stack([(np.linalg.norm(p64 - p, axis=1) < radius) @ p64 for p in p64])
     assert np.allclose(sums, ref, rtol=0, atol=1e-4)
