@@ -124,8 +124,24 @@ def wrap_cuda(obj: Any) -> tuple[Any, Device]:
     """A zero-copy CuPy view of a ``__cuda_array_interface__`` object, and its device."""
     from kdsl.runtime.device import get_device
 
-    arr = cupy().asarray(obj)
-    return arr, get_device(f"cuda:{arr.device.id}")
+    cp = cupy()
+    arr = cp.asarray(obj)
+    return arr, get_device(f"cuda:{_owning_device(cp, arr)}")
+
+
+def _owning_device(cp: Any, arr: Any) -> int:
+    # The GPU that holds the memory, asked of the driver: CuPy may label memory it did
+    # not allocate with the current device (on 4 GPUs a torch tensor of cuda:1 came
+    # back as cuda:3, the device an earlier launch left current).
+    ptr = arr.data.ptr
+    if ptr:
+        try:
+            device = cp.cuda.runtime.pointerGetAttributes(ptr).device
+        except cp.cuda.runtime.CUDARuntimeError:  # not device memory CUDA knows: keep CuPy's
+            device = -1
+        if device >= 0:
+            return int(device)
+    return int(arr.device.id)
 
 
 def _flat_view(buf: Any, inner: tuple[int, ...]) -> Any:
