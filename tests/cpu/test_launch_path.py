@@ -285,7 +285,10 @@ def test_a_kernel_whose_pool_launches_cost_more_stays_inline(adaptive_two_thread
     assert cost.pool_overhead is not None  # measured (0 here: the pool ran quickly)
     cost.pool_overhead = 10.0  # pool launches of this kernel cost 10 s more
     for _ in range(pool.retry_pool_every - 1):
+        # Heavy again each time: an inline run folds in the real (tiny, load-dependent) cost.
+        cost.seconds_per_thread = 1e-3
         assert _runs(fn, calls, 5000, cost) == [(0, 5000)]
     # Then the pool is tried again, and its (fast) launch lowers the estimate.
+    cost.seconds_per_thread = 1e-3
     assert _runs(fn, calls, 5000, cost) == [(0, 2500), (2500, 5000)]
     assert cost.pool_overhead < 10.0
