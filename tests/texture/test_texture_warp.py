@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 import kdsl as wp
+from tests.warp_peer import import_warp_cpu
 
-warp = pytest.importorskip("warp")
-warp.config.quiet = True
+warp = import_warp_cpu()
 
 COORDS = {1: "float", 2: "vec2", 3: "vec3"}
 
