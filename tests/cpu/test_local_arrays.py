@@ -11,6 +11,7 @@ import kdsl as wp
 from kdsl.backends import registry
 from kdsl.errors import KdslError, KdslRuntimeError, KdslTypeError
 from kdsl.passes.features import analyze_features
+from tests.warp_peer import import_warp_cpu
 
 BACKENDS = ["interp", "cpu"]
 DEPTH = wp.constant(8)
@@ -276,7 +277,7 @@ def digits(n: w.array(dtype=int), out: w.array(dtype=int)):
 
 
 def test_against_warp(cpu_backend, tmp_path, monkeypatch):
-    pytest.importorskip("warp")
+    import_warp_cpu()
     import importlib
 
     monkeypatch.syspath_prepend(str(tmp_path))

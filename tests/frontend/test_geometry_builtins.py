@@ -19,6 +19,7 @@ import pytest
 
 import kdsl
 from kdsl.errors import KdslTypeError
+from tests.warp_peer import import_warp_cpu
 
 N = 12
 
@@ -222,10 +223,7 @@ def _compare(got: dict, want: dict, rtol: float, atol: float) -> None:
 
 @pytest.fixture(scope="module")
 def warp():
-    wp = pytest.importorskip("warp")
-    wp.config.quiet = True
-    wp.init()
-    return wp
+    return import_warp_cpu()
 
 
 @pytest.mark.parametrize("F", ["float32", "float64"])

@@ -14,6 +14,7 @@ import pytest
 import kdsl as wp
 from kdsl.testing.cases.scalar_math import ref_erfcinv
 from tests.frontend.located_errors import expect_error_at_marker
+from tests.warp_peer import import_warp_cpu
 
 F = wp.array(dtype=float)
 
@@ -57,10 +58,7 @@ def _scalar_kernel(lib):
 
 @pytest.fixture(scope="module")
 def warp():
-    warp = pytest.importorskip("warp")
-    warp.config.quiet = True
-    warp.init()
-    return warp
+    return import_warp_cpu()
 
 
 def _launch_both(warp, make, inputs, out_shape):

@@ -14,6 +14,7 @@ import pytest
 import kdsl as wp
 from kdsl.errors import KdslSyntaxError, KdslTypeError
 from kdsl.testing import random_ref as R
+from tests.warp_peer import import_warp_cpu
 
 N = 64
 
@@ -292,9 +293,7 @@ def _import_kernels(api: str, tmp_path_factory):
 @pytest.fixture(scope="module")
 def apis(tmp_path_factory):
     """(kdsl kernels, warp module, warp kernels); skipped without warp."""
-    warp = pytest.importorskip("warp")
-    warp.config.quiet = True
-    warp.init()
+    warp = import_warp_cpu()
     return (_import_kernels("kdsl", tmp_path_factory), warp,
             _import_kernels("warp", tmp_path_factory))  # fmt: skip
 

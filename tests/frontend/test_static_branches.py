@@ -11,6 +11,7 @@ import kdsl as wp
 from tests.device_targets import TARGETS
 from tests.frontend import static_branch_cases as cases
 from tests.frontend.located_errors import expect_error_at_marker
+from tests.warp_peer import import_warp_cpu
 
 RUNS = {**cases.RESULTS, **cases.KDSL_ONLY}
 
@@ -59,8 +60,7 @@ def test_the_taken_branch_alone_is_in_the_ir(build_text, check_ir):
 
 @pytest.mark.parametrize("run", list(cases.RESULTS), ids=_id)
 def test_side_by_side_with_warp(run):
-    warp = pytest.importorskip("warp")
-    warp.config.quiet = True
+    warp = import_warp_cpu()
     factory, flag = run
     got = _launch(warp, factory(warp, flag, {"module": "unique"}), "cpu")
     want = _launch(wp, factory(wp, flag, {}), "cpu")
@@ -71,8 +71,7 @@ def test_side_by_side_with_warp(run):
 
 @pytest.mark.parametrize("run", list(cases.LIVE_ERRORS)[:1], ids=_id)
 def test_warp_rejects_the_live_errors_too(run):
-    warp = pytest.importorskip("warp")
-    warp.config.quiet = True
+    warp = import_warp_cpu()
     factory, flag = run
     with pytest.raises(Exception, match="Input types must be the same"):
         _launch(warp, factory(warp, flag, {"module": "unique"}), "cpu")
