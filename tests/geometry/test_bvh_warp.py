@@ -16,9 +16,9 @@ from tests.geometry.test_bvh import (
     run_query,
     sphere_hits,
 )  # fmt: skip
+from tests.warp_peer import import_warp_cpu
 
-warp = pytest.importorskip("warp")
-warp.config.quiet = True
+warp = import_warp_cpu()
 
 
 @warp.func

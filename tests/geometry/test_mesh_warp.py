@@ -10,9 +10,9 @@ import pytest
 
 import kdsl as wp
 from tests.geometry.mesh_reference import closest_on_triangles, icosphere
+from tests.warp_peer import import_warp_cpu
 
-warp = pytest.importorskip("warp")
-warp.config.quiet = True
+warp = import_warp_cpu()
 
 #: Distances and ray parameters closer than this are ties in float32.
 TIE = 1e-5

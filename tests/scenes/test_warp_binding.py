@@ -3,8 +3,9 @@
 import pytest
 
 from kdsl.scenes.measure import make_scene, run_scene
+from tests.warp_peer import import_warp_cpu
 
-warp = pytest.importorskip("warp")
+warp = import_warp_cpu()
 
 
 @pytest.mark.parametrize(("name", "params"), [("particles", {"count": 8}), ("heat", {"grid": 4})])
