@@ -36,7 +36,7 @@ FORMATS: dict[np.dtype, int] = {
 }  # fmt: skip
 #: The formats sampled as plain numbers, which only ``CLOSEST`` filtering supports.
 INTEGER32 = (S.UINT32, S.INT32)
-_NAMES = "uint8, uint16, uint32, int8, int16, int32, float16, float32"
+_NAMES = ", ".join(sorted(d.name for d in FORMATS))  # for messages
 
 
 class TextureError(KdslValueError):
