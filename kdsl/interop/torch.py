@@ -14,6 +14,7 @@ PyTorch is imported only when one of these functions runs.
 from __future__ import annotations
 
 import functools
+import weakref
 from typing import Any
 
 import numpy as np
@@ -169,17 +170,37 @@ def _torch_device(ordinal: int) -> Any:
     return _torch().device("cuda", ordinal)
 
 
-def _cuda_tensor(buf: Any, np_dtype: np.dtype, dev: Device) -> Any:
+# A CUDA array's tensor, built once from its address and handed out as ``detach()``
+# aliases: a new tensor object per call (its own ``requires_grad`` and ``.grad``) at a
+# fifth of the cost of reading ``__cuda_array_interface__`` again. The aliases share
+# one version counter, so autograd sees an in-place write through any of them.
+_BASES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def _cuda_tensor(buf: Any, np_dtype: np.dtype, dev: Device, owner: array | None = None) -> Any:
     """A tensor over CUDA buffer ``buf`` built from its address (Warp's way), or None.
 
     None where the streams need an event (DLPack orders them) or the layout is one
-    ``torch.as_tensor`` reads differently (no elements, negative strides).
+    ``torch.as_tensor`` reads differently (no elements, negative strides). With
+    ``owner`` (the array ``buf`` belongs to) the tensor is built once per array.
     """
-    strides = buf.strides
-    if buf.size == 0 or min(strides, default=0) < 0:
-        return None
     torch = _torch()
     if needs_wait(dev, raw_stream_reader(torch)(dev.ordinal)) is not None:
+        return None
+    if owner is not None:
+        cached = _BASES.get(owner)
+        if cached is not None and cached[0] is buf:
+            return cached[1].detach()
+    base = _address_tensor(torch, buf, np_dtype, dev)
+    if base is not None and owner is not None:
+        _BASES[owner] = (buf, base)
+        return base.detach()
+    return base
+
+
+def _address_tensor(torch: Any, buf: Any, np_dtype: np.dtype, dev: Device) -> Any:
+    strides = buf.strides
+    if buf.size == 0 or min(strides, default=0) < 0:
         return None
     face = {
         "data": (buf.data.ptr, False),
@@ -191,11 +212,11 @@ def _cuda_tensor(buf: Any, np_dtype: np.dtype, dev: Device) -> Any:
     return torch.as_tensor(_CudaFace(face, buf), device=_torch_device(dev.ordinal))
 
 
-def _tensor_of(buf: Any, t: T.Type, dev: Device) -> Any:
+def _tensor_of(buf: Any, t: T.Type, dev: Device, owner: array | None = None) -> Any:
     et = T.elem_type(t)
     twin = TORCH.twin(et)
     if dev.is_cuda:
-        out = _cuda_tensor(buf, twin.np_dtype, dev)
+        out = _cuda_tensor(buf, twin.np_dtype, dev, owner)
         if out is not None:
             return out
     if twin != et:  # torch has no full uint16/32/64 support: same bits, signed
@@ -221,7 +242,7 @@ def to_torch(a: array, requires_grad: bool | None = None) -> Any:
     ``.grad`` shares ``a.grad`` (allocated when missing).
     """
     TORCH.check_export(a, "to_torch")
-    out = _tensor_of(a._buf, a._t, a.device)
+    out = _tensor_of(a._buf, a._t, a.device, a)
     if requires_grad is None:
         requires_grad = a.requires_grad
     if requires_grad:
@@ -230,7 +251,7 @@ def to_torch(a: array, requires_grad: bool | None = None) -> Any:
         if a.grad is None:
             a.requires_grad = True  # allocates a zero grad
         out.requires_grad_(True)
-        out.grad = _tensor_of(a.grad._buf, a.grad._t, a.grad.device)
+        out.grad = _tensor_of(a.grad._buf, a.grad._t, a.grad.device, a.grad)
     return out
 
 

@@ -139,6 +139,21 @@ def test_to_torch_cuda_fast_path_shares_memory_types_and_grads():
 
 
 @gpu
+def test_to_torch_cuda_hands_out_fresh_aliases_of_one_tensor():
+    a = wp.array(np.arange(4, dtype=np.float32), device=DEV)
+    t1, t2 = wp.to_torch(a), wp.to_torch(a)
+    assert t1 is not t2 and t1.data_ptr() == t2.data_ptr() == a.ptr
+    t1.requires_grad_(True)  # one alias's autograd state is not the next call's
+    assert not t2.requires_grad and not wp.to_torch(a).requires_grad
+    t2.add_(1.0)  # aliases share a version counter: autograd sees the write
+    assert t1._version == t2._version and a.numpy().tolist() == [1.0, 2.0, 3.0, 4.0]
+    g = wp.zeros(4, dtype=float, device=DEV, requires_grad=True)
+    tg1, tg2 = wp.to_torch(g), wp.to_torch(g)
+    assert tg1.requires_grad and tg2.requires_grad and tg1.grad is not tg2.grad
+    assert tg1.grad.data_ptr() == tg2.grad.data_ptr() == g.grad.ptr
+
+
+@gpu
 def test_to_torch_on_a_torch_side_stream_is_ordered():
     a = wp.zeros(1 << 20, dtype=float, device=DEV)
     s = torch.cuda.Stream()
