@@ -220,6 +220,13 @@ class array:
     def is_contiguous(self) -> bool:
         return bool(self._buf.flags.c_contiguous)
 
+    def memory_span(self) -> tuple[int, int] | None:
+        """(address, bytes) of the array's memory when it is one contiguous span, else
+        None (a strided view)."""
+        if not self._buf.flags.c_contiguous:
+            return None
+        return self.ptr, int(self._buf.nbytes)
+
     @property
     def requires_grad(self) -> bool:
         return self._requires_grad

@@ -317,7 +317,43 @@ def _converter(kernel: Any, index: int, name: str, t: Any, device: Device) -> An
 
             return conv_id
         return conv_int
+    if isinstance(t, T.VectorType | T.MatrixType):
+        return _composite_converter(t, slow)
     return slow
+
+
+#: Converted vectors and matrices kept per parameter, by value (cleared when full).
+MAX_COMPOSITES = 64
+
+
+def _composite_converter(t: T.Type, slow: Any) -> Any:
+    """The converter of a vector or matrix parameter: a kdsl value of exactly ``t``'s
+    class, dtype and shape is converted once per distinct value (its bytes) and the
+    read-only result reused, so a launch passing the same ``vec3`` every step skips the
+    general conversion; anything else goes through ``slow``."""
+    dtype, shape = T.elem_type(t).np_dtype, T.value_shape(t)
+    done: dict[bytes, np.ndarray] = {}
+    classes: set[type] = set()
+
+    def conv_composite(v: Any) -> Any:
+        tv = type(v)
+        if tv not in classes:
+            if getattr(tv, "__kdsl_type__", None) != t or not issubclass(tv, np.ndarray):
+                return slow(v)
+            classes.add(tv)
+        if v.dtype != dtype or v.shape != shape:
+            return slow(v)
+        key = v.tobytes()
+        out = done.get(key)
+        if out is None:
+            out = slow(v)
+            out.flags.writeable = False
+            if len(done) >= MAX_COMPOSITES:
+                done.clear()
+            done[key] = out
+        return out
+
+    return conv_composite
 
 
 @dataclass(eq=False)

@@ -21,11 +21,16 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable, Sequence
 from typing import Any, NamedTuple
 
+import numpy as np
+
 from kdsl import config
 from kdsl.errors import KdslError, api_boundary
 from kdsl.ir.types import StructType
 from kdsl.runtime.array import array
 from kdsl.runtime.array_access import check_launch, clear_read_marks
+from kdsl.runtime.device import Device, get_device
+from kdsl.runtime.modules import backward_enabled
+from kdsl.runtime.zero_batch import ZeroBatch
 
 # The active tapes, outermost first; launch() records on the last one.
 ACTIVE: list[Tape] = []
@@ -74,6 +79,8 @@ class Tape:
         self.launches: list[LaunchRecord | Callable[[], Any]] = []
         self.scopes: list[tuple[int, str | None, dict | None]] = []
         self.loss: array | None = None
+        #: How ``zero()`` clears ``gradients`` (kept while they stay the same arrays).
+        self._zero = ZeroBatch()
 
     # --- recording -----------------------------------------------------------
     def __enter__(self) -> Tape:
@@ -99,10 +106,9 @@ class Tape:
         stream: Any = None,
     ) -> None:
         """Record a launch as ``kdsl.launch`` does on an active tape (without running it)."""
-        from kdsl.runtime.device import get_device
-
         rec = LaunchRecord(
-            kernel, dim, max_blocks, list(inputs), list(outputs), get_device(device),
+            kernel, dim, max_blocks, list(inputs), list(outputs),
+            device if type(device) is Device else get_device(device),
             block_dim, metadata or {}, backend, stream,
         )  # fmt: skip
         self.launches.append(rec)
@@ -152,11 +158,14 @@ class Tape:
         Arrays with a ``.grad`` are tracked in ``gradients``; everything else
         (scalars, vectors, arrays without gradients) has no adjoint.
         """
-        if isinstance(a, array):
+        ta = type(a)
+        if ta is array or isinstance(a, array):
             g = a.grad
             if g is not None:
                 self.gradients[a] = g
             return g
+        if ta in _PLAIN:  # a number: no gradient, no fields
+            return None
         # A struct's adjoint is built at the adjoint launch; its array fields' gradients
         # are tracked here, so ``tape.gradients[s.field]`` and ``zero()`` reach them (Warp).
         for field, grad in _struct_field_grads(a):
@@ -201,8 +210,6 @@ class Tape:
         adj = [self.get_adjoint(a) for a in args]
         if all(g is None for g in adj) and not any(_struct_field_grads(a) for a in args):
             return  # no argument carries a gradient: the adjoint would change nothing
-        from kdsl.runtime.modules import backward_enabled
-
         if not backward_enabled(rec.kernel):
             raise KdslError(
                 f"tape.backward(): kernel '{_kernel_name(rec.kernel)}' was declared with "
@@ -210,17 +217,16 @@ class Tape:
                 "differentiated; remove enable_backward=False, or launch it with "
                 "record_tape=False if it does not depend on what is differentiated"
             )
-        from kdsl.runtime.adjoint import launch_adjoint
-
+        launch_adjoint = _launch_adjoint()
         launch_adjoint(
             rec.kernel, rec.dim, args, adj, device=rec.device, stream=rec.stream,
             backend=rec.backend,
         )  # fmt: skip
 
     def zero(self) -> None:
-        """Set every gradient the tape has used to zero."""
-        for g in self.gradients.values():
-            g.zero_()
+        """Set every gradient the tape has used to zero (in one pass per device, see
+        ``kdsl.runtime.zero_batch``)."""
+        self._zero.zero(list(self.gradients.values()))
 
     def reset(self) -> None:
         """Zero the gradients, then forget every recorded launch, function and scope."""
@@ -231,6 +237,25 @@ class Tape:
         self.scopes = []
         self.gradients = {}
         self.loss = None
+        self._zero.clear()
+
+
+_ADJOINT: list = []
+
+
+def _launch_adjoint() -> Callable[..., None]:
+    """``kdsl.runtime.adjoint.launch_adjoint`` (imported on first use: adjoint imports
+    launch, which imports this module; an import statement costs microseconds)."""
+    if not _ADJOINT:
+        from kdsl.runtime.adjoint import launch_adjoint
+
+        _ADJOINT.append(launch_adjoint)
+    return _ADJOINT[0]
+
+
+#: Argument types that never carry a gradient (numbers), checked before the general rule.
+_PLAIN = frozenset({int, float, bool, np.float16, np.float32, np.float64, np.int8, np.int16,
+                    np.int32, np.int64, np.uint8, np.uint16, np.uint32, np.uint64, np.bool_})  # fmt: skip
 
 
 def _struct_field_grads(value: Any) -> list[tuple[array, array]]:
