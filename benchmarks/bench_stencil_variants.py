@@ -14,8 +14,11 @@ as the kernel. This script separates the two and attributes the kernel's own tim
   int32), ``ldg`` (the arrays the kernel only reads loaded through ``__ldg``), ``div``
   (cloth's ``tid // grid`` as C's ``/``: exact for non-negative operands), ``rows``
   (Jacobi: a 2-d grid of 256-thread rows instead of a division per thread);
+- kdsl's fast entry as generated (32-bit offsets, ``__ldg`` on the arrays it only
+  reads and, for Jacobi, a 2-d grid of rows: ``kdsl/backends/cuda/variants.py``);
 - kdsl's own launches of the same kernels: plain ``wp.launch`` back to back, a
-  prepared launch (``record_cmd=True``) and a ``wp.ScopedCapture`` graph replay.
+  prepared launch (``record_cmd=True``) and a ``wp.ScopedCapture`` graph replay
+  (these take the fast entry whenever the launch-time checks allow).
 
 The kdsl variants run through a shim kernel that builds kdsl's array descriptors
 from pointers, extents and strides passed as 64-bit parameters (opaque to NVRTC, as
@@ -54,6 +57,7 @@ from suite import workloads as W
 import kdsl as wp
 from kdsl.backends.cuda import BACKEND as CUDA
 from kdsl.backends.cuda import nvrtc
+from kdsl.backends.cuda.lower import fast_entry_name
 from kdsl.compiler import lower
 
 SHIM_JACOBI = r"""
@@ -208,6 +212,9 @@ def rows_grid(text: str) -> str:
 KDSL_OPTIONS = tuple(o for o in nvrtc.options("sm_90") if not o.startswith("--gpu-architecture"))
 #: The variant compiled with NVRTC's defaults (FMA contraction on) like the hand-written.
 FMAD = "kdsl fmad (not bit-exact)"
+#: kdsl's own fast entry (``kdsl/backends/cuda/variants.py``) as generated; for Jacobi
+#: launched as its 2-d grid of 256-thread rows (what ``geometry.nd_geometry`` picks).
+FAST, FAST_ROWS = "kdsl fast entry", "kdsl fast entry (rows)"
 
 
 def variants() -> dict[str, dict[str, tuple[str, str]]]:
@@ -233,6 +240,10 @@ def variants() -> dict[str, dict[str, tuple[str, str]]]:
             "kdsl rows+offsets32+ldg": (ldg(offsets32(rows_grid(jac_k)), ["v0"]), "shim"),
             "kdsl rows": (rows_grid(jac_k), "shim"),
             "kdsl rows+narrow+ldg": (ldg(narrow(rows_grid(jac_k)), ["v0"]), "shim"),
+            FAST_ROWS: (
+                as_device_function(jac, fast_entry_name(K.jacobi_kernel.key), SHIM_JACOBI),
+                "shim",
+            ),
             FMAD: (jac_k, "shim"),
         },
         "cloth": {
@@ -244,6 +255,10 @@ def variants() -> dict[str, dict[str, tuple[str, str]]]:
             "kdsl narrow+ldg+div": (plain_div(ldg(narrow(clo_k), ["v0", "v1"])), "shim"),
             "kdsl offsets32": (offsets32(clo_k), "shim"),
             "kdsl offsets32+ldg+div": (plain_div(ldg(offsets32(clo_k), ["v0", "v1"])), "shim"),
+            FAST: (
+                as_device_function(clo, fast_entry_name(K.cloth_kernel.key), SHIM_CLOTH),
+                "shim",
+            ),
             FMAD: (clo_k, "shim"),
         },
     }

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from kdsl.ir.core import Module, Value
+from kdsl.ir.core import Module, OpResult, Value
 from kdsl.ir.types import ArrayType
 
 _WRITES = frozenset({"kd.store", "kd.atomic_rmw", "kd.atomic_cas"})
@@ -75,3 +75,50 @@ def _value_access(
                     read |= callee[index].read
                     write |= callee[index].write
     return ParamAccess(read, write)
+
+
+def writes_only_params(module: Module, name: str) -> bool:
+    """True when every array write of function ``name`` (and of the functions it calls)
+    lands in an array parameter of ``name``: each store or atomic's array derives
+    (through ``kd.array_view``) from a parameter of the function it is in, and each
+    array a call passes where the callee writes derives from a caller's parameter.
+
+    False when some write goes through an array the parameters do not cover (a field
+    of a struct parameter, ``kd.array_from_ptr``, an object record): then the arrays a
+    function only reads may still be written through another name.
+    """
+    return _writes_only_params(module, name, {}, set())
+
+
+def _writes_only_params(module: Module, name: str, memo: dict[str, bool], active: set[str]) -> bool:
+    if name in memo:
+        return memo[name]
+    if name in active:  # recursion: the outer visit checks every op
+        return True
+    active.add(name)
+    func = module.get_func(name)
+    params = set(func.regions[0].block.args)
+    ok = True
+    for op in func.walk():
+        if op.name in _WRITES:
+            ok = _param_root(op.operands[op.opdef.array_operand], params)
+        elif op.name == "func.call":
+            callee = op.attrs["callee"]
+            written = _function_access(module, callee, {}, set())
+            ok = _writes_only_params(module, callee, memo, active) and all(
+                _param_root(v, params) for v, acc in zip(op.operands, written) if acc.write
+            )
+        if not ok:
+            break
+    active.discard(name)
+    memo[name] = ok
+    return ok
+
+
+def _param_root(value: Value, params: set[Value]) -> bool:
+    """True when ``value`` is one of ``params`` or a view (``kd.array_view``) of one."""
+    while value not in params:
+        if not isinstance(value, OpResult) or value.op.name != "kd.array_view":
+            return False
+        value = value.op.operands[0]
+    return True

@@ -18,6 +18,7 @@ pytest.importorskip("cupy_backends.cuda.libs.nvrtc")
 
 import kdsl as wp
 from kdsl.backends.cuda import BACKEND, nvrtc
+from kdsl.backends.cuda.lower import without_fast_entries
 from kdsl.compiler import lower
 from kdsl.passes import DEFAULT_PIPELINE
 from kdsl.testing.cases import all_cases
@@ -71,7 +72,8 @@ def mat_budget(m: wp.array(dtype=wp.mat44), w: wp.array(dtype=float), out: wp.ar
 
 
 def _cuda_c(kernel, **options) -> str:
-    return lower(BACKEND, kernel, "cuda-c", options)
+    """The general entries' CUDA C (fast entries, ``cuda/variants.py``, left out)."""
+    return without_fast_entries(lower(BACKEND, kernel, "cuda-c", options))
 
 
 # -- without a GPU -----------------------------------------------------------------------

@@ -16,8 +16,10 @@ from kdsl.backends import checks_common
 from kdsl.backends.base import Args, Backend, CompiledKernel, Dims, Job, launch_size, source_version
 from kdsl.backends.cuda import nvrtc
 from kdsl.backends.cuda.devices import device_count
-from kdsl.backends.cuda.lower import BLOCK, entry_name, generate, kernel_names, tid_ndims
+from kdsl.backends.cuda.geometry import Geometry, fast_geometry, linear_geometry
+from kdsl.backends.cuda.lower import entry_name, fast_entry_name, generate, kernel_names, tid_ndims
 from kdsl.backends.cuda.params import Packer
+from kdsl.backends.cuda.variants import FastPlan, fast_plan
 from kdsl.errors import KdslError
 from kdsl.ir.core import Module
 from kdsl.ir.ops_debug import debug_sites
@@ -57,8 +59,10 @@ class CudaKernel:
     def __init__(self, job: Job, entry: str) -> None:
         self.job = job
         self.entry = entry
-        #: device ordinal -> (cupy Module, CUfunction pointer, Function); kept so it stays loaded.
-        self.functions: dict[int, tuple[Any, int, Any]] = {}
+        #: device ordinal -> (cupy Module, CUfunction pointers: general, fast or 0, Functions).
+        self.functions: dict[int, tuple[Any, int, int, Any]] = {}
+        #: The fast entry (``variants``), or None when the kernel has only the general one.
+        self.plan: FastPlan | None = None
         self.tid_ndims: set[int] = set()
         self.packer: Packer | None = None
         #: Debug builds: the check sites (``kdsl.ir.ops_debug``); None in release builds.
@@ -73,8 +77,9 @@ class CudaKernel:
         """The cubin for ``arch``, from the kernel cache or compiled now."""
         return self.job.artifact(arch)
 
-    def function(self, ordinal: int) -> int:
-        """The ``CUfunction`` of this kernel on device ``ordinal``, loaded on first use."""
+    def function(self, ordinal: int, fast: bool = False) -> int:
+        """The ``CUfunction`` of this kernel (its fast entry with ``fast``) on device
+        ``ordinal``, loaded on first use."""
         hit = self.functions.get(ordinal)
         if hit is None:
             import cupy
@@ -83,8 +88,20 @@ class CudaKernel:
                 mod = cupy.cuda.function.Module()
                 mod.load(self.cubin(device_arch(ordinal)))
                 fn = mod.get_function(self.entry)
-                hit = self.functions[ordinal] = (mod, fn.ptr, fn)
-        return hit[1]
+                fns = [fn]
+                if self.plan is not None:
+                    fns.append(mod.get_function(fast_entry_name(self.job.symbol)))
+                hit = self.functions[ordinal] = (mod, fn.ptr, fns[-1].ptr, fns)
+        return hit[2] if fast else hit[1]
+
+    def geometry(self, args: Args, dims: tuple[int, ...], total: int) -> tuple[bool, Geometry]:
+        """(fast, (grid, block)) of a launch: the fast entry where the launch-time tests
+        of ``geometry.fast_geometry`` pass, else the general one."""
+        if self.plan is not None:
+            fast = fast_geometry(self.plan, args, dims, total)
+            if fast is not None:
+                return True, fast
+        return False, linear_geometry(total)
 
 
 class CudaBackend(Backend):
@@ -135,6 +152,7 @@ class CudaBackend(Backend):
         func = module.get_func(symbol)
         payload = CudaKernel(job, entry_name(symbol))
         payload.tid_ndims = tid_ndims(func)
+        payload.plan = fast_plan(module, symbol, job.checked)
         args = func.regions[0].block.args
         payload.packer = Packer(
             [a.type for a in args], [a.name_hint or f"arg{i}" for i, a in enumerate(args)],
@@ -155,7 +173,6 @@ class CudaBackend(Backend):
         if total == 0:
             return
         ordinal, raw = _stream_of(stream)
-        fn = k.function(ordinal)
         grid = (total, *dims, *([1] * (4 - len(dims))))
         driver, runtime = _cuda_api()
 
@@ -169,8 +186,9 @@ class CudaBackend(Backend):
         buf, params = k.packer.pack(
             args, ordinal, grid, None if record is None else record.data.ptr
         )
-        blocks = (total + BLOCK - 1) // BLOCK
-        _on_device(ordinal, driver.launchKernel, fn, blocks, 1, 1, BLOCK, 1, 1, 0, raw,
+        fast, ((gx, gy, gz), (bx, by, bz)) = k.geometry(args, dims, total)
+        fn = k.function(ordinal, fast)
+        _on_device(ordinal, driver.launchKernel, fn, gx, gy, gz, bx, by, bz, 0, raw,
                    ctypes.addressof(params), 0)  # fmt: skip
         del buf
         if record is not None:
@@ -206,15 +224,15 @@ class CudaBackend(Backend):
         if total == 0:
             return lambda: None
         ordinal, raw = _stream_of(stream)
-        fn = k.function(ordinal)
         grid = (total, *dims, *([1] * (4 - len(dims))))
         buf, params = k.packer.pack(args, ordinal, grid)
-        blocks = (total + BLOCK - 1) // BLOCK
+        fast, ((gx, gy, gz), (bx, by, bz)) = k.geometry(args, tuple(int(d) for d in dims), total)
+        fn = k.function(ordinal, fast)
         driver, _ = _cuda_api()
         launch_kernel, addr = driver.launchKernel, ctypes.addressof(params)
 
         def run() -> None:
-            _on_device(ordinal, launch_kernel, fn, blocks, 1, 1, BLOCK, 1, 1, 0, raw, addr, 0)
+            _on_device(ordinal, launch_kernel, fn, gx, gy, gz, bx, by, bz, 0, raw, addr, 0)
 
         run.keep = (buf, params, hold)  # type: ignore[attr-defined]
         return run

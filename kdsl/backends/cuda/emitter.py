@@ -160,6 +160,10 @@ class FuncEmitter:
         self.loc: Loc | None = func.loc
         #: C expressions of the n-d thread index components, when a kernel uses them.
         self.tid_parts: list[str] = []
+        #: Array parameters whose element offsets are summed in 32 bits (a fast entry).
+        self.narrow: frozenset[Value] = frozenset()
+        #: Array parameters loaded through the read-only data cache (a fast entry).
+        self.read_only: frozenset[Value] = frozenset()
         #: C return type of a function (for debug-mode early returns).
         self.ret_type = "void"
 

@@ -124,6 +124,47 @@ def element_ptr(src: Source, ndim: int) -> str:
     return name
 
 
+def element_ptr32(src: Source, ndim: int) -> str:
+    """``kd_at<N>_32(array, i...)``: the address of an element, its byte offset summed
+    in 32-bit ``int`` and widened once; exact while the array spans less than 2**31
+    bytes (``geometry.offsets_fit``, checked at launch)."""
+    name = f"kd_at{ndim}_32"
+    arr = src.ctype(T.ArrayType(T.F32, ndim))
+    params = ", ".join(f"long long i{k}" for k in range(ndim))
+    off = " + ".join(f"(int)i{k} * (int)a.strides[{k}]" for k in range(ndim))
+    src.need(
+        name,
+        lambda: (
+            f"{_FI} char *{name}(const {arr} &a, {params}) {{ return a.data + (long long)({off}); }}"
+        ),
+    )
+    return name
+
+
+def read_only_load(src: Source, t: T.Type) -> str:
+    """``kd_ldg_<type>(p)``: the ``t`` at ``p`` loaded through the read-only data cache
+    (``__ldg``, one per scalar component); ``t`` passes ``variants.ldg_type``."""
+    c = src.ctype(t)
+    if isinstance(t, T.ScalarType):
+        name = f"kd_ldg_{CT.tag(t)}"
+        body = (
+            "return __ldg((const unsigned char *)p) != 0;"
+            if t.is_bool
+            else f"return __ldg((const {c} *)p);"
+        )
+    else:
+        name = f"kd_ldg_{c}"
+        elem = src.ctype(t.elem)
+        load = (
+            "__ldg((const unsigned char *)p + i) != 0"
+            if t.elem.is_bool
+            else f"__ldg((const {elem} *)p + i)"
+        )
+        body = f"{c} r; for (int i = 0; i < {CT.count(t)}; ++i) r.c[i] = {load}; return r;"
+    src.need(name, lambda: f"{_FI} {c} {name}(const char *p) {{ {body} }}")
+    return name
+
+
 def const_bits(t: T.ScalarType, bits: int) -> str:
     """A float constant of ``t`` given by its IEEE bits (for inf, NaN)."""
     if t.bits == 16:

@@ -23,11 +23,12 @@ unit itself.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from kdsl.backends.cuda import ctypes_ as CT
 from kdsl.backends.cuda.emitter import FuncEmitter, Source
 from kdsl.backends.cuda.ops import TABLE
+from kdsl.backends.cuda.variants import FastPlan, fast_plan
 from kdsl.errors import KdslCapabilityError
 from kdsl.ir.core import Loc, Module, Operation
 
@@ -41,11 +42,13 @@ _GRID = "struct kd_grid { unsigned int n; unsigned int dim[4]; };"
 
 @dataclass
 class CudaSource:
-    """Generated CUDA C and the C entry name of each kernel symbol."""
+    """Generated CUDA C, the C entry name of each kernel symbol, and of its fast entry
+    (``variants``) where it has one."""
 
     text: str
     entries: dict[str, str]
     uses_f16: bool = False
+    fast_entries: dict[str, str] = field(default_factory=dict)
 
 
 def tid_ndims(func: Operation) -> set[int]:
@@ -64,15 +67,25 @@ def entry_name(symbol: str) -> str:
     return f"k_{CT.sanitize(symbol)}_0"
 
 
+def fast_entry_name(symbol: str) -> str:
+    """The C name of kernel ``symbol``'s fast entry (``variants``), where it has one."""
+    return entry_name(symbol) + "_fast"
+
+
 def generate(module: Module, kernels: list[str], debug: bool = False) -> CudaSource:
     """The CUDA C unit holding ``kernels`` (and their callees); see the module docstring."""
     src = Source(module, TABLE, debug)
     src.need("kd_grid", lambda: _GRID)
     bodies: list[tuple[str, list]] = []
     entries = {}
+    fast = {}
     for k in kernels:
         entries[k] = src.func_name(k)
         bodies.append(_kernel(src, module.get_func(k)))
+        plan = fast_plan(module, k, debug)
+        if plan is not None:
+            fast[k] = fast_entry_name(k)
+            bodies.append(_kernel(src, module.get_func(k), plan, fast[k]))
     funcs: list[tuple[str, str, list]] = []
     done: set[str] = set()
     while len(done) < len(src.funcs_todo):
@@ -81,7 +94,23 @@ def generate(module: Module, kernels: list[str], debug: bool = False) -> CudaSou
         if not module.has_func(name):
             raise KdslCapabilityError(f"call to unknown function '{name}'")
         funcs.append(_function(src, module.get_func(name)))
-    return CudaSource(_assemble(src, funcs, bodies), entries, src.uses_f16)
+    return CudaSource(_assemble(src, funcs, bodies), entries, src.uses_f16, fast)
+
+
+def without_fast_entries(text: str) -> str:
+    """A generated unit ``text`` less its kernels' fast entries (their definitions run
+    from the ``extern "C"`` head to the closing brace at the start of a line): the
+    general entries as they read on their own, for inspection and tests."""
+    out: list[str] = []
+    skipping = False
+    for ln in text.split("\n"):
+        if not skipping and ln.startswith('extern "C"') and "_fast(" in ln:
+            skipping = True
+        if not skipping:
+            out.append(ln)
+        elif ln == "}":
+            skipping = False
+    return "\n".join(out)
 
 
 def _params(em: FuncEmitter, func: Operation) -> list[str]:
@@ -93,7 +122,11 @@ def _params(em: FuncEmitter, func: Operation) -> list[str]:
     return out
 
 
-def _kernel(src: Source, func: Operation) -> tuple[str, list]:
+def _kernel(
+    src: Source, func: Operation, plan: FastPlan | None = None, name: str | None = None
+) -> tuple[str, list]:
+    """The head and body lines of kernel ``func``: its general entry, or with ``plan``
+    its fast entry ``name`` (``variants``)."""
     em = FuncEmitter(src, func, is_kernel=True)
     params = _params(em, func) + ["kd_grid kd_g"]
     if src.debug:
@@ -101,6 +134,34 @@ def _kernel(src: Source, func: Operation) -> tuple[str, list]:
     nds = sorted(n for n in tid_ndims(func) if n > 1)
     if len(nds) > 1:
         raise KdslCapabilityError(f"kernel uses tid() with {nds} dimensions at once", func.loc)
+    if plan is not None:
+        args = func.regions[0].block.args
+        em.narrow = frozenset(args[i] for i, _, _ in plan.arrays)
+        em.read_only = frozenset(args[i] for i in plan.read_only)
+    if plan is not None and plan.grid_nd:
+        _nd_grid_prologue(em, plan.grid_nd)
+    else:
+        _linear_prologue(em, nds)
+    em.lower_block(func.regions[0].block)
+    head = (
+        f'extern "C" __global__ void __launch_bounds__({BLOCK}) '
+        f"{name or src.func_name(func.attrs['sym_name'])}({', '.join(params)})"
+    )
+    return head, em.lines
+
+
+def _nd_grid_prologue(em: FuncEmitter, nd: int) -> None:
+    """The thread index of an n-d grid: dim ``nd - 1`` along x, ``nd - 2`` along y..."""
+    axes = "xyz"[:nd]
+    for a in axes:
+        em.line(f"const unsigned int kd_{a} = blockIdx.{a} * blockDim.{a} + threadIdx.{a};")
+    outside = " || ".join(f"kd_{a} >= kd_g.dim[{nd - 1 - k}]" for k, a in enumerate(axes))
+    em.line(f"if ({outside}) return;")
+    em.tid_parts = [f"(int)kd_{axes[nd - 1 - d]}" for d in range(nd)]
+
+
+def _linear_prologue(em: FuncEmitter, nds: list[int]) -> None:
+    """The linear thread index ``kd_i``, and an n-d one split from it row-major."""
     em.line("const unsigned int kd_i = blockIdx.x * blockDim.x + threadIdx.x;")
     em.line("if (kd_i >= kd_g.n) return;")
     if nds:
@@ -110,12 +171,6 @@ def _kernel(src: Source, func: Operation) -> tuple[str, list]:
             em.line(f"const int kd_t{d} = (int)(kd_r % kd_g.dim[{d}]); kd_r /= kd_g.dim[{d}];")
         em.line("const int kd_t0 = (int)kd_r;")
         em.tid_parts = [f"kd_t{d}" for d in range(nd)]
-    em.lower_block(func.regions[0].block)
-    head = (
-        f'extern "C" __global__ void __launch_bounds__({BLOCK}) '
-        f"{src.func_name(func.attrs['sym_name'])}({', '.join(params)})"
-    )
-    return head, em.lines
 
 
 def _function(src: Source, func: Operation) -> tuple[str, str, list]:

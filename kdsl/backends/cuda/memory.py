@@ -2,8 +2,11 @@
 
 An array is its descriptor (``ctypes_``); the address of element ``(i, j, ...)`` is
 ``data + i * strides[0] + j * strides[1] + ...`` in bytes, computed in 64 bits so
-arrays of any size work while the thread index stays 32-bit. Indices are not
-bounds-checked in release builds (debug builds insert ``kd.check_bounds``).
+arrays of any size work while the thread index stays 32-bit. A kernel's fast entry
+(``variants``) sums the offsets of its array parameters in 32 bits instead and loads
+the parameters it only reads through ``__ldg`` (``FuncEmitter.narrow``,
+``read_only``). Indices are not bounds-checked in release builds (debug builds
+insert ``kd.check_bounds``).
 
 Atomics use CUDA's native ``atomic*`` functions where one exists for the type
 (float add included) and a compare-and-swap loop on the value's bits otherwise:
@@ -43,13 +46,15 @@ def _array_shape(em: FuncEmitter, op: Operation) -> str:
 def element_ptr(em: FuncEmitter, arr: Value, idx: list[Value]) -> str:
     """C expression of the (``char *``) address of an element; no bounds check."""
     at: T.ArrayType = arr.type
-    fn = H.element_ptr(em.src, at.ndim)
+    fn = (H.element_ptr32 if arr in em.narrow else H.element_ptr)(em.src, at.ndim)
     return f"{fn}({em.get(arr)}, {', '.join(em.get(i) for i in idx)})"
 
 
 def _load(em: FuncEmitter, op: Operation) -> str:
     t = op.results[0].type
     p = element_ptr(em, op.operands[0], list(op.operands[1:]))
+    if op.operands[0] in em.read_only:
+        return f"{H.read_only_load(em.src, t)}({p})"
     if t == T.BOOL:  # bools are bytes in memory (NumPy's layout)
         return f"*(const unsigned char *){p} != 0"
     return f"*(const {em.ctype(t)} *){p}"

@@ -1,0 +1,97 @@
+"""Launch geometry of a cuda kernel: which entry (general or fast) and its grid and block.
+
+``fast_geometry`` applies the launch-time tests of ``variants`` (32-bit offsets fit,
+read-only arrays disjoint from written ones, an n-d grid within CUDA's limits) to the
+arguments of one launch; ``linear_geometry`` is the general entry's grid.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+from kdsl.backends.cuda.lower import BLOCK
+from kdsl.backends.cuda.variants import FastPlan
+
+#: The largest byte offset (and span) a 32-bit offset holds.
+INT32_MAX = 2**31 - 1
+#: CUDA's limit on ``gridDim.y`` and ``gridDim.z``.
+GRID_YZ_MAX = 65535
+
+Geometry = tuple[tuple[int, int, int], tuple[int, int, int]]
+
+
+def offsets_fit(shape: Sequence[int], strides: Sequence[int]) -> bool:
+    """True when every in-bounds element's byte offset, and each partial sum of it,
+    fits in a 32-bit ``int``: the extents ``|stride| * (n - 1)`` sum to at most
+    ``INT32_MAX`` (an empty array has no element to reach)."""
+    if 0 in shape:
+        return True
+    return sum(abs(s) * (n - 1) for n, s in zip(shape, strides)) <= INT32_MAX
+
+
+def byte_range(array: Any, ndim: int, item: int) -> tuple[int, int] | None:
+    """[start, end) byte addresses of the ``item``-byte elements of a CuPy ``array``
+    (its first ``ndim`` dims), or None when it is empty."""
+    shape, strides = array.shape[:ndim], array.strides[:ndim]
+    if 0 in shape:
+        return None
+    lo = hi = int(array.data.ptr)
+    for n, s in zip(shape, strides):
+        if s < 0:
+            lo += s * (n - 1)
+        else:
+            hi += s * (n - 1)
+    return lo, hi + item
+
+
+def disjoint(a: tuple[int, int] | None, b: tuple[int, int] | None) -> bool:
+    """True when byte ranges ``a`` and ``b`` (``byte_range``) share no byte."""
+    if a is None or b is None:
+        return True
+    return a[1] <= b[0] or b[1] <= a[0]
+
+
+def linear_geometry(total: int) -> Geometry:
+    """(grid, block) of the general entry: ``total`` threads in 256-thread blocks."""
+    return ((total + BLOCK - 1) // BLOCK, 1, 1), (BLOCK, 1, 1)
+
+
+def nd_geometry(dims: Sequence[int]) -> Geometry | None:
+    """(grid, block) of an n-d grid over ``dims`` (the last dim along x), or None when
+    it needs more than ``GRID_YZ_MAX`` blocks in y or z. Block extents are powers of
+    two, the innermost first, ``BLOCK`` threads at most (fewer for small grids)."""
+    block, grid, left = [], [], BLOCK
+    for d in reversed(dims):
+        b = 1
+        while b < d and b < left:
+            b *= 2
+        block.append(b)
+        grid.append((d + b - 1) // b)
+        left //= b
+    if any(g > GRID_YZ_MAX for g in grid[1:]):
+        return None
+    pad = [1] * (3 - len(dims))
+    return (grid[0], *grid[1:], *pad), (block[0], *block[1:], *pad)  # type: ignore[return-value]
+
+
+def fast_geometry(
+    plan: FastPlan, args: Sequence[Any], dims: Sequence[int], total: int
+) -> Geometry | None:
+    """(grid, block) to launch the fast entry of ``plan`` on ``args`` (CuPy arrays at
+    the array positions) over ``dims`` (``total`` threads), or None where only the
+    general entry is exact (see ``variants``)."""
+    for i, nd, _ in plan.arrays:
+        a = args[i]
+        if not offsets_fit(a.shape[:nd], a.strides[:nd]):
+            return None
+    if plan.read_only and plan.written:
+        info = {i: (nd, item) for i, nd, item in plan.arrays}
+        written = [byte_range(args[w], *info[w]) for w in plan.written]
+        for r in plan.read_only:
+            span = byte_range(args[r], *info[r])
+            if not all(disjoint(span, w) for w in written):
+                return None
+    if plan.grid_nd:
+        return nd_geometry(dims) if len(dims) == plan.grid_nd else None
+    return linear_geometry(total)

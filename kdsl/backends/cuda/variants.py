@@ -1,0 +1,94 @@
+"""A kernel's fast variant, and the launch-time test that picks it.
+
+A release build emits each kernel twice in one unit (``lower``): the general entry,
+exact for every launch (a linear grid of 256-thread blocks, 64-bit byte offsets,
+plain loads), and, where it would differ, a fast entry (``fast_entry_name``) that
+
+- takes an n-d thread index from an n-d CUDA grid (``blockIdx.x/y/z``) instead of
+  dividing a linear index, when the kernel's only ``tid()`` is 2-d or 3-d and it
+  uses nothing that assumes 1-d blocks (``block_dim()``, a ``block-cache`` tile);
+- sums the byte offsets of its array parameters' elements in 32 bits (one
+  ``int`` multiply-add per index, widened once), exact while every array parameter
+  spans less than 2**31 bytes (``geometry.offsets_fit``);
+- loads the array parameters it only reads (``kdsl.ir.array_access``) through the
+  read-only data cache (``__ldg``), exact while no array it writes overlaps them
+  (``geometry.disjoint``); only when every write of the kernel lands in an array parameter.
+
+The values it computes are the general entry's, bit for bit: the same operations on
+the same data, with addresses that agree for every in-bounds element. At launch,
+``geometry.fast_geometry`` checks the arguments and the grid and gives the fast entry's grid
+and block, or None for the general entry: an array of 2**31 bytes or more, a read
+array overlapping a written one, or an n-d grid taller than CUDA's 65535 blocks in
+y or z all fall back to it. Blocks are at most ``lower.BLOCK`` threads, the bound
+that both entries' ``__launch_bounds__`` declare.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from kdsl.ir import types as T
+from kdsl.ir.array_access import array_param_access, writes_only_params
+from kdsl.ir.core import Module
+from kdsl.passes.block_cache import ATTR as TILE_ATTR
+
+#: Ops that reach an array parameter's elements (the fast entry narrows their offsets).
+_ACCESSES = frozenset({"kd.load", "kd.store", "kd.atomic_rmw", "kd.atomic_cas"})
+
+
+@dataclass(frozen=True)
+class FastPlan:
+    """What a kernel's fast entry does differently, by parameter position.
+
+    ``grid_nd``: 2 or 3 for an n-d grid, 0 for the general entry's linear one;
+    ``arrays``: (position, ndim, element bytes) of every array parameter, whose
+    spans a launch checks; ``read_only``: positions loaded through ``__ldg``; ``written``: positions
+    of the array parameters the kernel writes (checked against ``read_only``).
+    """
+
+    grid_nd: int
+    arrays: tuple[tuple[int, int, int], ...]
+    read_only: tuple[int, ...]
+    written: tuple[int, ...]
+
+
+def ldg_type(t: T.Type) -> bool:
+    """True when loads of a ``t`` can go through ``__ldg`` (plain scalars, bool, and
+    vectors or matrices of them; not float16 nor structs)."""
+    if isinstance(t, T.VectorType | T.MatrixType):
+        return ldg_type(t.elem)
+    return isinstance(t, T.ScalarType) and t.c != "kd_f16"
+
+
+def fast_plan(module: Module, symbol: str, debug: bool) -> FastPlan | None:
+    """The fast entry of kernel ``symbol``, or None where it would be the general one
+    (debug builds, whose checks need every access as written, and kernels that
+    neither use an n-d ``tid()`` nor reach an array parameter's elements)."""
+    if debug:
+        return None
+    func = module.get_func(symbol)
+    params = func.regions[0].block.args
+    ndims = {op.attrs["ndim"] for op in func.walk() if op.name == "kd.tid"}
+    one_d_blocks = any(op.name == "kd.block_dim" or TILE_ATTR in op.attrs for op in module.walk())
+    grid_nd = 0
+    if len(ndims) == 1 and min(ndims) in (2, 3) and not one_d_blocks:
+        grid_nd = min(ndims)
+    arrays = tuple(
+        (i, p.type.ndim, T.storage_dtype(p.type.dtype).itemsize)
+        for i, p in enumerate(params) if isinstance(p.type, T.ArrayType)
+    )  # fmt: skip
+    accessed = {
+        i for i, p in enumerate(params)
+        if any(u.name in _ACCESSES and k == u.opdef.array_operand for u, k in p.uses)
+    }  # fmt: skip
+    if not grid_nd and not accessed:
+        return None
+    access = array_param_access(module, symbol)
+    read_only: tuple[int, ...] = ()
+    if writes_only_params(module, symbol):
+        read_only = tuple(
+            i for i in sorted(accessed)
+            if access[i].read and not access[i].write and ldg_type(params[i].type.dtype)
+        )  # fmt: skip
+    written = tuple(i for i, _, _ in arrays if access[i].write)
+    return FastPlan(grid_nd, arrays, read_only, written)
