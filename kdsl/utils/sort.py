@@ -13,10 +13,13 @@ from typing import Any
 
 import numpy as np
 
+from kdsl.runtime.array import array
+from kdsl.types import uint32, uint64
 from kdsl.utils.buffers import (
     UtilsError,
     check_array,
     chunks,
+    device_buffer,
     flat_view,
     on_device,
     run_parallel,
@@ -77,6 +80,29 @@ def radix_sort_pairs(keys, values, count: int, begin_bit: int = 0, end_bit: int 
         perm = _argsort(xp, order_key, k.device.is_cuda)
         kb[:count] = kb[:count][perm]
         vb[:count] = vb[:count][perm]
+
+
+class SortKeys:
+    """A prepared in-place ascending sort of unsigned integer keys (a contiguous 1-d
+    uint32 or uint64 array) sorted again and again (a BVH build's Morton keys, each
+    made unique by its position in its low bits): the checks and the buffer view are made
+    once, each call is one sort on the device (CuPy's, CUB's radix sort, on a GPU;
+    NumPy's on the CPU), no copies. The sort is not stable: equal keys are equal."""
+
+    __slots__ = ("_keys", "_owner")
+
+    def __init__(self, keys: array) -> None:
+        k = check_array("keys", keys)
+        if k.ndim != 1 or not k.is_contiguous or k.dtype not in (uint32, uint64):
+            raise UtilsError(f"SortKeys sorts a contiguous 1-d uint32 or uint64 array, not "
+                             f"{k.dtype} of shape {k.shape}")  # fmt: skip
+        self._owner = k
+        self._keys = device_buffer(k)[1]
+
+    def __call__(self) -> None:
+        """Sort the keys in place."""
+        with on_device(self._owner):
+            self._keys.sort()
 
 
 def segmented_sort_pairs(keys, values, count: int, segment_start_indices,
