@@ -27,6 +27,7 @@ from kdsl.backends.cuda.lower import BLOCK, fast_entry_name, without_fast_entrie
 from kdsl.backends.cuda.variants import FastPlan, fast_plan
 from kdsl.compiler import lower
 from kdsl.passes import run_pipeline
+from kdsl.testing.cases.programs import make_programs
 
 ARCH = "sm_90"
 needs_gpu = pytest.mark.skipif(not wp.is_cuda_available(), reason="needs a CUDA GPU")
@@ -193,6 +194,12 @@ def test_float16_loads_stay_plain():
 def test_block_dim_keeps_the_linear_grid():
     plan = _plan(uses_block_dim)
     assert plan is not None and plan.grid_nd == 0
+
+
+def test_tiled_kernels_have_no_fast_entry():
+    nbody = make_programs()["nbody"].func
+    src = lower(BACKEND, wp.kernel(nbody), "cuda-c")
+    assert "__syncthreads" in src and "_fast(" not in src
 
 
 def test_no_fast_entry_without_arrays_or_in_debug_builds():

@@ -6,7 +6,7 @@ plain loads), and, where it would differ, a fast entry (``fast_entry_name``) tha
 
 - takes an n-d thread index from an n-d CUDA grid (``blockIdx.x/y/z``) instead of
   dividing a linear index, when the kernel's only ``tid()`` is 2-d or 3-d and it
-  uses nothing that assumes 1-d blocks (``block_dim()``, a ``block-cache`` tile);
+  uses nothing that assumes 1-d blocks (``block_dim()``);
 - sums the byte offsets of its array parameters' elements in 32 bits (one
   ``int`` multiply-add per index, widened once), exact while every array parameter
   spans less than 2**31 bytes (``geometry.offsets_fit``);
@@ -62,14 +62,19 @@ def ldg_type(t: T.Type) -> bool:
 
 def fast_plan(module: Module, symbol: str, debug: bool) -> FastPlan | None:
     """The fast entry of kernel ``symbol``, or None where it would be the general one
-    (debug builds, whose checks need every access as written, and kernels that
-    neither use an n-d ``tid()`` nor reach an array parameter's elements)."""
+    (kernels that neither use an n-d ``tid()`` nor reach an array parameter's
+    elements) or is not made: debug builds, whose checks need every access as
+    written, and kernels with a ``block-cache`` tile, whose hot loop reads shared
+    memory (a second entry would change little there and double NVRTC's time on
+    their long bodies)."""
     if debug:
         return None
     func = module.get_func(symbol)
+    if any(TILE_ATTR in op.attrs for op in func.walk()):
+        return None
     params = func.regions[0].block.args
     ndims = {op.attrs["ndim"] for op in func.walk() if op.name == "kd.tid"}
-    one_d_blocks = any(op.name == "kd.block_dim" or TILE_ATTR in op.attrs for op in module.walk())
+    one_d_blocks = any(op.name == "kd.block_dim" for op in module.walk())
     grid_nd = 0
     if len(ndims) == 1 and min(ndims) in (2, 3) and not one_d_blocks:
         grid_nd = min(ndims)
