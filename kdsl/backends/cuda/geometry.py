@@ -7,6 +7,7 @@ arguments of one launch; ``linear_geometry`` is the general entry's grid.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from typing import Any
 
@@ -57,10 +58,12 @@ def linear_geometry(total: int) -> Geometry:
     return ((total + BLOCK - 1) // BLOCK, 1, 1), (BLOCK, 1, 1)
 
 
-def nd_geometry(dims: Sequence[int]) -> Geometry | None:
+@functools.lru_cache(maxsize=256)
+def nd_geometry(dims: tuple[int, ...]) -> Geometry | None:
     """(grid, block) of an n-d grid over ``dims`` (the last dim along x), or None when
     it needs more than ``GRID_YZ_MAX`` blocks in y or z. Block extents are powers of
-    two, the innermost first, ``BLOCK`` threads at most (fewer for small grids)."""
+    two, the innermost first, ``BLOCK`` threads at most (fewer for small grids).
+    Cached: a simulation launches the same shapes again and again."""
     block, grid, left = [], [], BLOCK
     for d in reversed(dims):
         b = 1
@@ -80,18 +83,31 @@ def fast_geometry(
 ) -> Geometry | None:
     """(grid, block) to launch the fast entry of ``plan`` on ``args`` (CuPy arrays at
     the array positions) over ``dims`` (``total`` threads), or None where only the
-    general entry is exact (see ``variants``)."""
-    for i, nd, _ in plan.arrays:
+    general entry is exact (see ``variants``). One pass over the arrays: the tests of
+    ``offsets_fit``, ``byte_range`` and ``disjoint``, inlined (this runs per launch)."""
+    read: list[tuple[int, int]] = []
+    written: list[tuple[int, int]] = []
+    ro, wr = plan.read_only, plan.written
+    for i, nd, item in plan.arrays:
         a = args[i]
-        if not offsets_fit(a.shape[:nd], a.strides[:nd]):
-            return None
-    if plan.read_only and plan.written:
-        info = {i: (nd, item) for i, nd, item in plan.arrays}
-        written = [byte_range(args[w], *info[w]) for w in plan.written]
-        for r in plan.read_only:
-            span = byte_range(args[r], *info[r])
-            if not all(disjoint(span, w) for w in written):
+        lo = hi = 0
+        for n, s in zip(a.shape[:nd], a.strides[:nd]):
+            if n == 0:
+                break
+            if s < 0:
+                lo += s * (n - 1)
+            else:
+                hi += s * (n - 1)
+        else:
+            if hi - lo > INT32_MAX:
+                return None
+            if i in ro or i in wr:
+                ptr = a.data.ptr
+                (read if i in ro else written).append((ptr + lo, ptr + hi + item))
+    for r0, r1 in read:
+        for w0, w1 in written:
+            if r0 < w1 and w0 < r1:
                 return None
     if plan.grid_nd:
-        return nd_geometry(dims) if len(dims) == plan.grid_nd else None
+        return nd_geometry(tuple(dims)) if len(dims) == plan.grid_nd else None
     return linear_geometry(total)
