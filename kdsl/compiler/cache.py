@@ -46,6 +46,8 @@ MAGIC = b"KDSLKC\x00\x01"
 #: magic, format version, key digest, payload length, payload sha256.
 _HEADER = struct.Struct("<8sI32sQ32s")
 SUFFIX = ".kobj"
+#: The source index's entries (``kdsl.compiler.source_index``): same format, own suffix.
+INDEX_SUFFIX = ".kidx"
 _TMP_SUFFIX = ".tmp"
 
 T = TypeVar("T")
@@ -74,7 +76,7 @@ def kernel_key(
         "format": FORMAT_VERSION,
         "backend": backend,
         "backend_version": backend_version,
-        "options": _canonical(dict(options or {})),
+        "options": canonical(dict(options or {})),
         "target": target,
     }
     h = hashlib.sha256()
@@ -84,12 +86,12 @@ def kernel_key(
     return h.hexdigest()
 
 
-def _canonical(x: Any) -> Any:
+def canonical(x: Any) -> Any:
     """``x`` as JSON-able data that keeps types apart (1, 1.0 and True differ)."""
     if isinstance(x, Mapping):
-        return {str(k): _canonical(v) for k, v in sorted(x.items(), key=lambda kv: str(kv[0]))}
+        return {str(k): canonical(v) for k, v in sorted(x.items(), key=lambda kv: str(kv[0]))}
     if isinstance(x, list | tuple):
-        return [_canonical(v) for v in x]
+        return [canonical(v) for v in x]
     if x is None or isinstance(x, str):
         return x
     return f"{type(x).__name__}:{x!r}"
@@ -160,14 +162,20 @@ class CacheInfo:
 
 
 class DiskCache:
-    """Entries of one cache directory. Never raises on a bad entry or an I/O error."""
+    """Entries of one cache directory. Never raises on a bad entry or an I/O error.
 
-    def __init__(self, directory: Path) -> None:
+    ``suffix`` tells the kinds of entries apart: compiled code (``SUFFIX``) or the
+    source index (``INDEX_SUFFIX``); ``entries`` and ``info`` see one kind, ``clear``
+    deletes every kind.
+    """
+
+    def __init__(self, directory: Path, suffix: str = SUFFIX) -> None:
         self.directory = Path(directory)
+        self.suffix = suffix
 
     def path(self, key: str) -> Path:
         """The file of entry ``key``."""
-        return self.directory / f"{key}{SUFFIX}"
+        return self.directory / f"{key}{self.suffix}"
 
     def load(self, key: str) -> bytes | None:
         """The payload of ``key``, or None (missing, foreign, or bad: then deleted)."""
@@ -222,7 +230,7 @@ class DiskCache:
     def entries(self) -> list[Path]:
         """The entry files (not temporaries)."""
         try:
-            return sorted(p for p in self.directory.iterdir() if p.name.endswith(SUFFIX))
+            return sorted(p for p in self.directory.iterdir() if p.name.endswith(self.suffix))
         except OSError:
             return []
 
@@ -236,21 +244,22 @@ class DiskCache:
         return CacheInfo(self.directory, len(files), total)
 
     def clear(self) -> tuple[int, int]:
-        """Delete every entry and leftover temporary file; gives (entries, bytes) removed."""
+        """Delete every entry (of every kind) and leftover temporary file; gives the
+        number and bytes of this kind's entries removed."""
         count = size = 0
         try:
             names = list(self.directory.iterdir())
         except OSError:
             return 0, 0
         for p in names:
-            if not (p.name.endswith(SUFFIX) or p.name.endswith(_TMP_SUFFIX)):
+            if not p.name.endswith((SUFFIX, INDEX_SUFFIX, _TMP_SUFFIX)):
                 continue  # never delete files the cache did not write
             try:
                 n = p.stat().st_size
                 p.unlink()
             except OSError:
                 continue
-            if p.name.endswith(SUFFIX):
+            if p.name.endswith(self.suffix):  # counted: this kind's entries
                 count += 1
                 size += n
         return count, size

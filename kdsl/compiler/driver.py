@@ -27,7 +27,7 @@ from typing import Any
 from kdsl import config
 from kdsl.backends.base import Backend, CompiledKernel, Job
 from kdsl.compiler import cache as kernel_cache
-from kdsl.compiler import records
+from kdsl.compiler import records, source_index
 from kdsl.compiler.capabilities import check_capabilities
 from kdsl.compiler.pipelines import check_pipeline
 from kdsl.errors import KdslError
@@ -111,15 +111,27 @@ def compile_kernel(
     Inside ``kdsl.compiler.record_compiles()`` each call is recorded.
     """
     start = time.perf_counter()
-    module, symbol = _module_of(target, symbol)
-    if not symbol:
-        raise KdslError("compile_kernel: name the kernel (symbol=...) to compile from a module")
     opts = dict(options or {})
-    checked = prepare_module(backend, module, opts)
-    ir_text = print_module(module, debuginfo=True) if backend.cacheable else ""
+    index_key = _index_key(backend, target, symbol, opts)
+    entry = source_index.lookup(index_key) if index_key is not None else None
+    pickled: bytes | None = None
+    if entry is not None:  # a warm start: no frontend, no passes
+        module, symbol, checked, ir_text = entry.module, target.key, entry.checked, entry.ir_text
+        target.restore_build_facts(entry.facts)
+    else:
+        module, symbol = _module_of(target, symbol)
+        if not symbol:
+            raise KdslError("compile_kernel: name the kernel (symbol=...) to compile from a module")
+        checked = prepare_module(backend, module, opts)
+        ir_text = print_module(module, debuginfo=True) if backend.cacheable else ""
+        if index_key is not None:  # pickled before the backend sees the module
+            facts = target.build_facts()
+            pickled = source_index.dumps(source_index.Entry(module, ir_text, checked, facts))
     binaries = _Artifacts(backend, opts, symbol, ir_text)
     job = binaries.job = Job(module, symbol, opts, checked, binaries.artifact, binaries.key)
     compiled = backend.load(job)
+    if pickled is not None:  # indexed only once the kernel compiled and loaded
+        source_index.store(index_key, pickled)  # type: ignore[arg-type]
     if records.recording():
         seconds = time.perf_counter() - start
         records.add_record(symbol, backend.name, seconds, module, binaries.built)
@@ -195,6 +207,23 @@ def lower(
     if stage == KIR_OPT:
         return print_module(module)
     return backend.emit(module, stage, opts, checked)
+
+
+def _index_key(
+    backend: Backend, target: Any, symbol: str | None, options: dict[str, Any]
+) -> str | None:
+    """The source index key of ``target`` (``source_index``), or None where it has none:
+    a module given as IR, a backend without binaries, no disk cache, or a kernel whose
+    fingerprint cannot be computed."""
+    fingerprint = getattr(target, "source_fingerprint", None)
+    if symbol is not None or fingerprint is None or not backend.cacheable:
+        return None
+    if kernel_cache.default_cache() is None:
+        return None
+    digest = fingerprint()
+    if digest is None:
+        return None
+    return source_index.source_key(backend, digest, target.key, options)
 
 
 def _module_of(target: Any, symbol: str | None) -> tuple[Module, str]:

@@ -152,6 +152,22 @@ class Kernel(CompileTarget):
         """A fresh, verified, unoptimized module: this kernel plus the funcs it calls."""
         return _trimmed(self._build)
 
+    def source_fingerprint(self) -> str | None:
+        """The digest of everything ``build_module`` reads (``kdsl.frontend.fingerprint``),
+        or None when it cannot be known without building (the cache then keys the IR)."""
+        from kdsl.frontend.fingerprint import source_fingerprint
+
+        return None if self.is_generic else source_fingerprint(self)
+
+    def build_facts(self) -> dict[str, Any]:
+        """What the last ``build_module`` learnt that launches need (``tid_ndim``)."""
+        return {"tid_ndim": self._tid_ndim}
+
+    def restore_build_facts(self, facts: dict[str, Any]) -> None:
+        """Take ``build_facts`` of an earlier build of this same source (a cache hit)."""
+        if self._tid_ndim is None:
+            self._tid_ndim = facts.get("tid_ndim")
+
     def _build(self) -> Module:
         from kdsl.frontend.compiler import FunctionCompiler, ModuleCompiler
 

@@ -28,6 +28,8 @@ class ParsedSource:
                 "must be defined in a file"
             ) from None
         text = "".join(lines)
+        #: The function's source text as written (the kernel cache's source index digests it).
+        self.text = text
         self.indent = len(lines[0]) - len(lines[0].lstrip())
         self.line_offset = first - 1
         tree = ast.parse(textwrap.dedent(text))

@@ -343,7 +343,11 @@ EXPECTED = [3 * i + 7 for i in range(16)]
 
 
 def _entries() -> list[Path]:
-    return sorted(Path(os.environ["KDSL_CACHE_DIR"]).iterdir())
+    """The compiled kernels' entries (the source index's ``.kidx`` entries left out);
+    no temporary file may be left behind."""
+    files = sorted(Path(os.environ["KDSL_CACHE_DIR"]).iterdir())
+    assert not [p for p in files if p.name.endswith(".tmp")]
+    return [p for p in files if p.name.endswith(".kobj")]
 
 
 def test_warm_start_compiles_nothing(program):

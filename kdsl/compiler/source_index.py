@@ -1,0 +1,192 @@
+"""The kernel cache's source index: a warm start finds a kernel without building its IR.
+
+The kernel cache keys compiled code on the optimized IR (``cache.kernel_key``), which
+takes the frontend and the pass pipeline to compute (tens of milliseconds, most of a
+warm first launch). The source index maps a key computed without them to what those
+steps produced, so a hit skips both:
+
+- the **source key** (``source_key``) is a sha256 over the kernel's source fingerprint
+  (``kdsl.frontend.fingerprint``: its source text and location, parameter types, and
+  the digest of every global, closure value, ``@kdsl.func`` (transitively), struct and
+  constant it reads), its symbol, the compile options, the backend's name, code
+  version and pipeline, kdsl's own code (``kdsl_code_digest``) and ``FORMAT_VERSION``;
+- an **index entry** is a small cache entry (a ``.kidx`` file, with the header and
+  sha256 check of every entry) under that key holding the optimized, instrumented module
+  (pickled, ops by name), its printed IR (from which the driver derives the IR key per
+  target, exactly as on a miss), the instrumentation flag and the frontend's facts
+  (``tid_ndim``).
+
+On a hit the driver unpickles the module and hands it to the backend as if it had
+just built it; the backend then loads the IR-keyed binary (or builds it from that
+module if it is gone). A kernel whose fingerprint cannot be computed (it reads a value
+the fingerprint cannot digest) has no index entry and is keyed by its IR as before.
+Entries live in the disk cache only (``KDSL_CACHE=0`` turns the index off), and in
+ahead-of-time directories beside the kernels.
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import io
+import json
+import os
+import pickle
+from dataclasses import dataclass
+from typing import Any
+
+from kdsl.compiler import cache as kernel_cache
+from kdsl.ir.catalog import CATALOG, OpDef
+from kdsl.ir.core import Module
+
+#: Bump when the index entry's layout or the source key's recipe changes.
+FORMAT_VERSION = 1
+#: The parts of kdsl whose code decides a kernel's IR (the backends' own code is in
+#: their ``code_version``): the frontend, the IR, the passes, the compile driver, the
+#: runtime's types and structs, the library of ``@kdsl.func`` functions and the
+#: top-level modules (``types.py``, ``config.py``).
+_CODE_DIRS = ("frontend", "ir", "passes", "compiler", "runtime", "stdlib", "geometry",
+              "utils", "texture")  # fmt: skip
+
+
+@dataclass
+class IndexStats:
+    """Lookups of the source index in this process (for tests)."""
+
+    hits: int = 0
+    misses: int = 0
+    stored: int = 0
+    discarded: int = 0
+
+
+STATS = IndexStats()
+
+
+@dataclass
+class Entry:
+    """What an index entry restores: the prepared module and what the driver needs."""
+
+    module: Module
+    ir_text: str
+    checked: bool
+    facts: dict[str, Any]
+
+
+@functools.cache
+def kdsl_code_digest() -> str:
+    """``code_digest`` of the kdsl package this process runs, computed once per process."""
+    return code_digest(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+
+def code_digest(root: str) -> str:
+    """A digest of the path, size and modification time of kdsl's IR-deciding sources
+    under the package directory ``root`` (its top-level modules and ``_CODE_DIRS``).
+
+    Any edit of them (or another installed kdsl) changes it, so every source key
+    misses. It reads ``stat`` alone (under a millisecond).
+    """
+    rows: list[str] = []
+    _scan(root, rows, recurse=False)
+    for sub in _CODE_DIRS:
+        _scan(os.path.join(root, sub), rows, recurse=True)
+    rows.sort()
+    return hashlib.sha256("\n".join(rows).encode()).hexdigest()
+
+
+def _scan(directory: str, rows: list[str], recurse: bool) -> None:
+    """Add ``name:size:mtime`` of each ``.py`` file under ``directory`` to ``rows``."""
+    try:
+        entries = list(os.scandir(directory))
+    except OSError:
+        return
+    for e in entries:
+        if e.name.endswith(".py"):
+            st = e.stat()
+            rows.append(f"{e.path}:{st.st_size}:{st.st_mtime_ns}")
+        elif recurse and e.name != "__pycache__" and e.is_dir(follow_symlinks=False):
+            _scan(e.path, rows, recurse)
+
+
+def source_key(backend: Any, fingerprint: str, symbol: str, options: dict[str, Any]) -> str:
+    """The index key of a kernel (see the module docstring)."""
+    doc = {
+        "index": FORMAT_VERSION,
+        "cache": kernel_cache.FORMAT_VERSION,
+        "kdsl": kdsl_code_digest(),
+        "backend": backend.name,
+        "backend_version": backend.code_version(),
+        "pipeline": backend.pipeline,
+        "symbol": symbol,
+        "options": kernel_cache.canonical(options),
+        "fingerprint": fingerprint,
+    }
+    return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()
+
+
+def lookup(key: str) -> Entry | None:
+    """The index entry of ``key``, or None (missing, unreadable, or written by another
+    version of kdsl's IR classes: then discarded)."""
+    disk = _index_cache()
+    if disk is None:
+        return None
+    payload = disk.load(key)
+    if payload is None:
+        STATS.misses += 1
+        return None
+    try:
+        entry = _Unpickler(io.BytesIO(payload)).load()
+        if not isinstance(entry, Entry):
+            raise TypeError("not an index entry")
+    except Exception:
+        STATS.discarded += 1
+        disk.discard(key)
+        return None
+    STATS.hits += 1
+    return entry
+
+
+def dumps(entry: Entry) -> bytes | None:
+    """``entry`` as an index payload, or None when its module does not pickle (e.g. an
+    attribute holding a local object: the kernel is then keyed by its IR only)."""
+    out = io.BytesIO()
+    try:
+        _Pickler(out, protocol=pickle.HIGHEST_PROTOCOL).dump(entry)
+    except Exception:
+        return None
+    return out.getvalue()
+
+
+def store(key: str, payload: bytes) -> bool:
+    """Write the index entry ``payload`` (from ``dumps``) under ``key``; False when the
+    disk cache is off or unwritable."""
+    disk = _index_cache()
+    if disk is None or not disk.store(key, payload):
+        return False
+    STATS.stored += 1
+    return True
+
+
+def _index_cache() -> kernel_cache.DiskCache | None:
+    """The index entries beside the kernels (None when the disk cache is off)."""
+    disk = kernel_cache.default_cache()
+    return (
+        None if disk is None else kernel_cache.DiskCache(disk.directory, kernel_cache.INDEX_SUFFIX)
+    )
+
+
+class _Pickler(pickle.Pickler):
+    """Ops' definitions are named, not copied: they hold functions (folders, rules)."""
+
+    def persistent_id(self, obj: Any) -> Any:
+        if isinstance(obj, OpDef):
+            return ("op", obj.name)
+        return None
+
+
+class _Unpickler(pickle.Unpickler):
+    def persistent_load(self, pid: Any) -> Any:
+        kind, name = pid
+        opdef = CATALOG.get(name) if kind == "op" else None
+        if opdef is None:
+            raise pickle.UnpicklingError(f"unknown op {name!r}")
+        return opdef
