@@ -22,28 +22,36 @@ GRID_YZ_MAX = 65535
 Geometry = tuple[tuple[int, int, int], tuple[int, int, int]]
 
 
+def extent(shape: Sequence[int], strides: Sequence[int]) -> tuple[int, int] | None:
+    """(lowest, highest) byte offset of an element of an array with ``shape`` and byte
+    ``strides`` (element starts), or None when it is empty."""
+    lo = hi = 0
+    for n, s in zip(shape, strides):
+        if n == 0:
+            return None
+        if s < 0:
+            lo += s * (n - 1)
+        else:
+            hi += s * (n - 1)
+    return lo, hi
+
+
 def offsets_fit(shape: Sequence[int], strides: Sequence[int]) -> bool:
     """True when every in-bounds element's byte offset, and each partial sum of it,
     fits in a 32-bit ``int``: the extents ``|stride| * (n - 1)`` sum to at most
     ``INT32_MAX`` (an empty array has no element to reach)."""
-    if 0 in shape:
-        return True
-    return sum(abs(s) * (n - 1) for n, s in zip(shape, strides)) <= INT32_MAX
+    span = extent(shape, strides)
+    return span is None or span[1] - span[0] <= INT32_MAX
 
 
 def byte_range(array: Any, ndim: int, item: int) -> tuple[int, int] | None:
     """[start, end) byte addresses of the ``item``-byte elements of a CuPy ``array``
     (its first ``ndim`` dims), or None when it is empty."""
-    shape, strides = array.shape[:ndim], array.strides[:ndim]
-    if 0 in shape:
+    span = extent(array.shape[:ndim], array.strides[:ndim])
+    if span is None:
         return None
-    lo = hi = int(array.data.ptr)
-    for n, s in zip(shape, strides):
-        if s < 0:
-            lo += s * (n - 1)
-        else:
-            hi += s * (n - 1)
-    return lo, hi + item
+    ptr = int(array.data.ptr)
+    return ptr + span[0], ptr + span[1] + item
 
 
 def disjoint(a: tuple[int, int] | None, b: tuple[int, int] | None) -> bool:
@@ -83,31 +91,25 @@ def fast_geometry(
 ) -> Geometry | None:
     """(grid, block) to launch the fast entry of ``plan`` on ``args`` (CuPy arrays at
     the array positions) over ``dims`` (``total`` threads), or None where only the
-    general entry is exact (see ``variants``). One pass over the arrays: the tests of
-    ``offsets_fit``, ``byte_range`` and ``disjoint``, inlined (this runs per launch)."""
+    general entry is exact (see ``variants``): one pass over the arrays (this runs
+    per launch) applying ``offsets_fit``, then ``disjoint`` to the ``byte_range``
+    of each read-only array against each written one."""
     read: list[tuple[int, int]] = []
     written: list[tuple[int, int]] = []
     ro, wr = plan.read_only, plan.written
     for i, nd, item in plan.arrays:
         a = args[i]
-        lo = hi = 0
-        for n, s in zip(a.shape[:nd], a.strides[:nd]):
-            if n == 0:
-                break
-            if s < 0:
-                lo += s * (n - 1)
-            else:
-                hi += s * (n - 1)
-        else:
-            if hi - lo > INT32_MAX:
-                return None
-            if i in ro or i in wr:
-                ptr = a.data.ptr
-                (read if i in ro else written).append((ptr + lo, ptr + hi + item))
-    for r0, r1 in read:
-        for w0, w1 in written:
-            if r0 < w1 and w0 < r1:
-                return None
+        span = extent(a.shape[:nd], a.strides[:nd])
+        if span is None:
+            continue
+        lo, hi = span
+        if hi - lo > INT32_MAX:
+            return None
+        if i in ro or i in wr:
+            ptr = a.data.ptr
+            (read if i in ro else written).append((ptr + lo, ptr + hi + item))
+    if any(not disjoint(r, w) for r in read for w in written):
+        return None
     if plan.grid_nd:
         return nd_geometry(tuple(dims)) if len(dims) == plan.grid_nd else None
     return linear_geometry(total)
