@@ -529,20 +529,22 @@ def launch(
                 f"{len(outputs)} outputs)"
             )
         dev = plan.device
-        rec = None
+        rec = known = None
         if _graphs.ACTIVE and not record_cmd:  # a capture: repeated launches skip the checks
             stream = resolve_stream(dev, stream)
             rec = _graphs.recording(dev, stream)
-        elif (
-            plan.reuse.same is not None
-            and not record_cmd
-            and _timing.RECORDING is None
-            and plan.reuse.relaunch(args, dims, resolve_stream(dev, stream))
-        ):  # the very argument objects of the last launch: nothing to convert or key
-            if _tape.ACTIVE and record_tape:
-                _record_on_tape(kernel, dims, inputs, outputs, dev, max_blocks, block_dim,
-                                backend, resolve_stream(dev, stream))  # fmt: skip
-            return None
+        elif not record_cmd and _timing.RECORDING is None:
+            stream = resolve_stream(dev, stream)
+            reuse = plan.reuse
+            if (reuse.same is not None and reuse.relaunch(args, dims, stream)) or (
+                reuse.tokens is not None
+                and (known := reuse.object_key(args, dims, stream)) is not None
+                and reuse.run_known(known)
+            ):  # argument objects launched before: nothing to convert or key
+                if _tape.ACTIVE and record_tape:
+                    _record_on_tape(kernel, dims, inputs, outputs, dev, max_blocks, block_dim,
+                                    backend, stream)  # fmt: skip
+                return None
         converted = None if rec is None else rec.converted(plan, args)
         if converted is None:
             converted = [conv(v) for conv, v in zip(convs, args)]
@@ -556,7 +558,7 @@ def launch(
         if rec is not None:
             rec.record_launch(plan, dims, converted, stream)
         elif _timing.RECORDING is None:
-            plan.reuse.launch(dims, converted, stream, args)
+            plan.reuse.launch(dims, converted, stream, args, (known, args))
         else:
             _timing.timed_launch(
                 plan.backend, plan.compiled, dims, converted, stream, dev,

@@ -32,6 +32,17 @@ keying anything. Only signatures of arrays and scalars take it (no structs,
 vectors, matrices or object ids, whose values may change behind the same object or
 name another device's object), and foreign arrays (a PyTorch tensor may be
 re-pointed in place) never do.
+
+``run_known`` serves the next commonest loop, a cycle of argument sets (a taped
+flight launches one kernel on a different pair of arrays each step, and replays their
+adjoints): a table of entries keyed by the argument *objects* (``object_key``): a
+``kdsl.array`` by identity (the entry holds it weakly, as ``relaunch`` does), a
+number by its value and kind (a Python number or the parameter's own NumPy type; a
+float zero is never keyed, since ``-0.0 == 0.0``), a kdsl vector or matrix of the
+parameter's exact class, dtype and shape by its bytes. Equal keys mean equal converted
+values, so a hit runs the entry without converting anything; any other argument (a
+struct, an object id, a foreign array, a tuple for a vector) makes the launch take the
+general path. Entries are learnt when the general path runs a prepared launch.
 """
 
 from __future__ import annotations
@@ -67,6 +78,55 @@ def _same_kind(t: Any) -> bool:
     return isinstance(t, T.ScalarType) and t != T.U64  # a u64 may be an object id
 
 
+#: ``_token`` functions return this for an argument that cannot key a launch by itself.
+_NO = object()
+
+
+def _token(t: Any) -> Callable[[Any], Any] | None:
+    """How an argument object of parameter type ``t`` keys ``run_known``'s table (see the
+    module docstring); None when no argument of that type can."""
+    if isinstance(t, T.ArrayType):
+
+        def array_token(a: Any) -> Any:
+            return id(a) if type(a) is array else _NO
+
+        return array_token
+    if isinstance(t, T.ScalarType) and t != T.U64:
+        np_type = t.np_dtype.type
+        if t.is_float:
+
+            def float_token(a: Any) -> Any:
+                ta = type(a)
+                if (ta is float or ta is np_type or ta is int) and a != 0:
+                    return a
+                return _NO
+
+            return float_token
+        py = bool if t.is_bool else int
+
+        def int_token(a: Any) -> Any:
+            ta = type(a)
+            return a if ta is py or ta is np_type else _NO
+
+        return int_token
+    if isinstance(t, T.VectorType | T.MatrixType):
+        dtype, shape = T.elem_type(t).np_dtype, T.value_shape(t)
+        classes: set[type] = set()
+
+        def composite_token(a: Any) -> Any:
+            ta = type(a)
+            if ta not in classes:
+                if getattr(ta, "__kdsl_type__", None) != t or not issubclass(ta, np.ndarray):
+                    return _NO
+                classes.add(ta)
+            if a.dtype != dtype or a.shape != shape:
+                return _NO
+            return a.tobytes()
+
+        return composite_token
+    return None
+
+
 def _kind(t: T.Type) -> int | None:
     """How a converted argument of type ``t`` is keyed (None: not keyable)."""
     if isinstance(t, T.ArrayType):
@@ -80,8 +140,8 @@ class LaunchReuse:
     """The prepared launches of one plan (kernel, device, backend), by argument key."""
 
     __slots__ = (
-        "backend", "compiled", "enabled", "entries", "hits", "kinds", "last", "same", "same_ok",
-        "seen",
+        "backend", "compiled", "enabled", "entries", "hits", "kinds", "known", "last", "same",
+        "same_ok", "seen", "tokens",
     )  # fmt: skip
 
     def __init__(self, backend: Backend, compiled: CompiledKernel, arg_types: Sequence[Any]):
@@ -101,6 +161,11 @@ class LaunchReuse:
         self.same_ok = self.enabled and all(_same_kind(t) for t in arg_types)
         #: (dims, stream, held arguments, run) of the launch that used ``last``, or None.
         self.same: tuple | None = None
+        tokens = [_token(t) for t in arg_types]
+        #: Per parameter, how its argument object keys ``known`` (None: no signature key).
+        self.tokens: list | None = tokens if self.enabled and None not in tokens else None
+        #: Object key (``object_key``) -> (run, weak references to the arrays it names).
+        self.known: dict[tuple, tuple[Callable[[], None], list]] = {}
 
     def relaunch(self, args: Sequence[Any], dims: tuple, stream: Any) -> bool:
         """Run the last entry again if ``args`` are the objects it last ran with (see the
@@ -117,6 +182,57 @@ class LaunchReuse:
         self.hits += 1
         same[3]()
         return True
+
+    def object_key(
+        self, args: Sequence[Any], dims: tuple, stream: Any, extra: Sequence[Any] | None = None
+    ) -> tuple | None:
+        """The key of ``run_known``'s table for these argument objects, or None when one
+        of them cannot key a launch by itself (see the module docstring).
+
+        ``extra``: the key of the parameters after ``args`` (an adjoint launch keys its
+        gradient arrays and hidden arguments itself); without it ``args`` must be all of
+        them.
+        """
+        tokens = self.tokens
+        if tokens is None or len(args) > len(tokens) or (extra is None and len(args) < len(tokens)):
+            return None
+        key = [dims, stream]
+        for tok, a in zip(tokens, args):
+            k = tok(a)
+            if k is _NO:
+                return None
+            key.append(k)
+        if extra is not None:
+            key += extra
+        return tuple(key)
+
+    def run_known(self, key: tuple) -> bool:
+        """Run the entry learnt under object key ``key``; False (nothing done) when there
+        is none or an array it names has died."""
+        entry = self.known.get(key)
+        if entry is None:
+            return False
+        run, refs = entry
+        for ref in refs:
+            if ref() is None:  # an array died: its id may now name another one
+                del self.known[key]
+                return False
+        self.hits += 1
+        run()
+        return True
+
+    def _learn(self, known: tuple | None, run: Any) -> None:
+        """Keep ``run`` under object key ``known[0]``, watching the arrays in ``known[1]``."""
+        if known is None or known[0] is None:
+            return
+        key, objects = known
+        if len(self.known) >= MAX_ENTRIES:
+            dead = [k for k, (_, refs) in self.known.items() if any(r() is None for r in refs)]
+            for k in dead:
+                del self.known[k]
+            if not dead:
+                self.known.clear()
+        self.known[key] = (run, [weakref.ref(a) for a in objects if type(a) is array])
 
     def _remember(self, args: Sequence[Any] | None, dims: tuple, stream: Any, run: Any) -> None:
         """Keep what ``relaunch`` compares, when every argument may be compared by identity."""
@@ -148,12 +264,14 @@ class LaunchReuse:
         return tuple(parts)
 
     def launch(
-        self, dims: tuple, converted: Sequence[Any], stream: Any, args: Sequence[Any] | None = None
-    ) -> None:
+        self, dims: tuple, converted: Sequence[Any], stream: Any, args: Sequence[Any] | None = None,
+        known: tuple | None = None,
+    ) -> None:  # fmt: skip
         """Run the launch, reusing its prepared form when its key was prepared before.
 
         ``args`` (the launch's own argument objects) let the next ``relaunch`` of the
-        same objects skip conversion and keying.
+        same objects skip conversion and keying; ``known`` (an ``object_key`` of them, or
+        None, and the objects whose arrays it names) lets ``run_known`` serve it.
         """
         key = self.key(dims, converted, stream) if self.enabled else None
         if key is None:
@@ -174,6 +292,7 @@ class LaunchReuse:
                 self.hits += 1
                 self.last = (key, entry)
                 self._remember(args, dims, stream, run)
+                self._learn(known, run)
                 run()
                 return
         self.same = None
@@ -183,11 +302,11 @@ class LaunchReuse:
             self.seen.add(key)
             self.backend.launch(self.compiled, dims, converted, stream)
             return
-        self._prepare(key, dims, converted, stream, args)
+        self._prepare(key, dims, converted, stream, args, known)
 
     def _prepare(
         self, key: tuple, dims: tuple, converted: Sequence[Any], stream: Any,
-        args: Sequence[Any] | None = None,
+        args: Sequence[Any] | None = None, known: tuple | None = None,
     ) -> None:  # fmt: skip
         refs = self._watch(converted)
         run = None
@@ -202,6 +321,7 @@ class LaunchReuse:
         entry = self.entries[key] = (run, refs)
         self.last = (key, entry)
         self._remember(args, dims, stream, run)
+        self._learn(known, run)
         run()
 
     def _drop_dead(self) -> None:
@@ -225,5 +345,6 @@ class LaunchReuse:
         """Forget every prepared launch."""
         self.entries.clear()
         self.seen.clear()
+        self.known.clear()
         self.last = None
         self.same = None
