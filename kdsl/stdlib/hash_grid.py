@@ -12,6 +12,13 @@ record (``HashGridRecord``, read with ``object_record``):
   an empty bucket);
 - ``num_points`` is 0 until the grid is built.
 
+Since the points are sorted by bucket, the points of consecutive buckets are one
+consecutive range of ``point_ids``: a query walks each row of its cell box (the cells
+of one ``y`` and ``z``) as one range, or two where the row wraps past the grid's last
+``x`` bucket, instead of cell by cell (9 ranges, not 27, for a box of 27 cells). Empty
+buckets' ``[0, 0)`` drop out: a run's range ends at the largest end and holds the sum
+of the buckets' counts.
+
 A query visits the buckets of the cells the box ``[point - max_dist, point +
 max_dist]`` overlaps (27 cells when ``max_dist`` is the build's radius, at most the
 grid's dims per axis, so no bucket is visited twice along an axis), x fastest, then
@@ -51,8 +58,9 @@ class HashGridRecord:
 @wp.struct
 class HashGridQuery:
     """A query in progress against a ``kdsl.HashGrid`` (Warp's ``hash_grid_query_t``):
-    the cell box ``[start, end]`` per axis, the cell being visited and the range of
-    ``point_ids`` still to report from its bucket."""
+    the cell box ``[start, end]`` per axis, the row being visited (``y``, ``z``), the
+    first cell of that row not yet visited (``x``), and the range of ``point_ids``
+    still to report from the run of buckets before it."""
 
     grid: wp.uint64
     x_start: wp.int32
@@ -84,11 +92,22 @@ def hash_grid_cell_coord(v: float) -> int:
 
 @func
 def _wrap(c: int, dim: int) -> int:
-    # Whatever sign convention ``%`` has, the result lands in [0, dim).
-    w = c % dim
-    if w < 0:
-        w = w + dim
-    return w
+    """``c`` mod ``dim``, in ``[0, dim)``, without an integer division (on a CPU one costs
+    more than the rest of a build's key or of a query's step to its next run)."""
+    if c >= 0:
+        if c < dim:
+            return c
+    elif c >= -dim:
+        return c + dim
+    # Farther cells: the quotient through a float64 product with ``1 / dim`` (hoisted out
+    # of the thread loop by the compilers), then one step of correction for its rounding.
+    q = wp.int64(wp.floor(wp.float64(c) * (wp.float64(1.0) / wp.float64(dim))))
+    w = wp.int64(c) - q * wp.int64(dim)
+    if w < wp.int64(0):
+        w = w + wp.int64(dim)
+    elif w >= wp.int64(dim):
+        w = w - wp.int64(dim)
+    return int(w)
 
 
 @func
@@ -107,11 +126,22 @@ def _query_end(start: int, end: int, dim: int) -> int:
 
 
 @func
-def _enter_cell(query: inout(HashGridQuery), rec: HashGridRecord):
-    """Point ``query`` at the bucket of its current cell."""
-    c = hash_grid_cell(query.x, query.y, query.z, rec.dim_x, rec.dim_y, rec.dim_z)
-    query.cell_index = rec.cell_starts[c]
-    query.cell_end = rec.cell_ends[c]
+def _enter_run(query: inout(HashGridQuery), rec: HashGridRecord):
+    """Point ``query`` at the points of the run of consecutive buckets that starts at cell
+    ``query.x`` of its row: up to the row's last cell or the grid's last ``x`` bucket,
+    whichever comes first; ``query.x`` moves past the run."""
+    xw = _wrap(query.x, rec.dim_x)
+    cells = wp.min(query.x_end - query.x + 1, rec.dim_x - xw)
+    c = (_wrap(query.z, rec.dim_z) * rec.dim_y + _wrap(query.y, rec.dim_y)) * rec.dim_x + xw
+    hi = 0
+    count = 0
+    for j in range(cells):
+        e = rec.cell_ends[c + j]
+        count = count + (e - rec.cell_starts[c + j])
+        hi = wp.max(hi, e)
+    query.cell_index = hi - count
+    query.cell_end = hi
+    query.x = query.x + cells
 
 
 @func
@@ -135,7 +165,7 @@ def hash_grid_query(id: wp.uint64, point: wp.vec3, max_dist: float) -> HashGridQ
     q.cell_index = 0
     q.cell_end = 0
     if rec.num_points > 0:
-        _enter_cell(q, rec)
+        _enter_run(q, rec)
     return q
 
 
@@ -153,16 +183,15 @@ def hash_grid_query_next(query: inout(HashGridQuery), index: inout(wp.int32)) ->
                 query.cell_index = query.cell_index + 1
                 found = True
             else:
-                query.x = query.x + 1
-                if query.x > query.x_end:
+                if query.x > query.x_end:  # the row is done: the next one
                     query.x = query.x_start
                     query.y = query.y + 1
-                if query.y > query.y_end:
-                    query.y = query.y_start
-                    query.z = query.z + 1
-                if query.z > query.z_end:
-                    break
-                _enter_cell(query, rec)
+                    if query.y > query.y_end:
+                        query.y = query.y_start
+                        query.z = query.z + 1
+                        if query.z > query.z_end:
+                            break
+                _enter_run(query, rec)
     return found
 
 

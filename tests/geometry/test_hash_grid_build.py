@@ -1,0 +1,142 @@
+"""``kdsl.HashGrid``'s build: the cell tables and point order against a NumPy model after
+every kind of rebuild (moved points, fewer, more than reserved, none, a new radius), the
+prepared steps and buffers a same-count rebuild reuses, and the build and query kernels
+compiled for CUDA (compile only, no GPU needed)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import kdsl as wp
+from kdsl.geometry import hash_grid as hash_grid_build
+from kdsl.stdlib import hash_grid
+from tests.geometry.test_hash_grid import (
+    brute_sums,
+    bucket,
+    cell_coord,
+    model_candidates,
+    run_candidates,
+    run_sum,
+    scene,
+)
+
+cuda = pytest.mark.skipif(not wp.is_cuda_available(), reason="no GPU")
+DEVICES = ["cpu", pytest.param("cuda:0", marks=cuda)]
+DIMS = (5, 4, 3)
+
+
+@wp.kernel
+def point_order(grid: wp.uint64, out: wp.array(dtype=int)):
+    i = wp.tid()
+    out[i] = wp.hash_grid_point_id(grid, i)
+
+
+def model_tables(p: np.ndarray, radius: float, dims) -> tuple[np.ndarray, ...]:
+    """The documented build: points stably sorted by bucket, each bucket's ``[start, end)``
+    of that order, ``[0, 0)`` for an empty one."""
+    b = bucket(cell_coord(p * (np.float32(1) / np.float32(radius))), dims)
+    order = np.argsort(b, kind="stable")
+    cells = int(np.prod(dims))
+    counts = np.bincount(b, minlength=cells)
+    ends = np.cumsum(counts)
+    starts = ends - counts
+    empty = counts == 0
+    starts[empty] = 0
+    ends[empty] = 0
+    return order, starts, ends
+
+
+def check_tables(grid, p: np.ndarray, radius: float, device: str) -> None:
+    """The grid's tables and point order equal the model's for points ``p``."""
+    order, starts, ends = model_tables(p, radius, DIMS)
+    np.testing.assert_array_equal(grid._cell_starts.numpy(), starts)
+    np.testing.assert_array_equal(grid._cell_ends.numpy(), ends)
+    got = wp.zeros(max(len(p), 1), dtype=int, device=device)
+    wp.launch(point_order, dim=len(p), inputs=[grid.id, got], device=device)
+    np.testing.assert_array_equal(got.numpy()[: len(p)], order)
+
+
+@pytest.mark.parametrize("device", DEVICES)
+def test_tables_follow_every_rebuild(device):
+    rng = np.random.default_rng(7)
+    p = scene(rng, 300)
+    pts = wp.array(p, dtype=wp.vec3, device=device)
+    grid = wp.HashGrid(*DIMS, device=device)
+    grid.build(pts, 0.2)
+    check_tables(grid, p, 0.2, device)
+    for radius in (0.2, 0.35):  # moved in place; then a new cell width as well
+        p = (p + rng.normal(0.0, 0.3, p.shape)).astype(np.float32)
+        pts.assign(p)
+        grid.build(pts, radius)
+        check_tables(grid, p, radius, device)
+    fewer = p[:40].copy()  # the other buckets of the last build must be emptied
+    grid.build(wp.array(fewer, dtype=wp.vec3, device=device), 0.35)
+    check_tables(grid, fewer, 0.35, device)
+    grid.reserve(1000)  # the buffers grow and the built grid stays as it is
+    check_tables(grid, fewer, 0.35, device)
+    more = scene(rng, 700)
+    grid.build(wp.array(more, dtype=wp.vec3, device=device), 0.2)
+    check_tables(grid, more, 0.2, device)
+    got = run_candidates(grid, more[:6], 0.2, "cuda" if device != "cpu" else "cpu", device)
+    assert got == model_candidates(more, DIMS, 0.2, more[:6], 0.2)
+    grid.build(wp.empty(0, dtype=wp.vec3, device=device), 0.2)
+    check_tables(grid, more[:0], 0.2, device)
+    assert not grid._cell_starts.numpy().any() and not grid._cell_ends.numpy().any()
+
+
+@pytest.mark.parametrize("device", DEVICES)
+def test_same_count_rebuild_reuses_buffers_and_steps(device):
+    rng = np.random.default_rng(8)
+    p = scene(rng, 400)
+    pts = wp.array(p, dtype=wp.vec3, device=device)
+    grid = wp.HashGrid(*DIMS, device=device)
+    grid.build(pts, 0.2)
+    grid.build(pts, 0.2)  # the second build prepares the steps of a rebuild after one
+    steps, buffers = grid._build, (grid._keys.ptr, grid._point_ids.ptr, grid._cell_starts.ptr)
+    backend = "cuda" if device != "cpu" else "cpu"
+    for radius in (0.2, 0.3, 0.3):
+        p = (p + rng.normal(0.0, 0.1, p.shape)).astype(np.float32)
+        pts.assign(p)
+        grid.build(pts, radius)
+        assert grid._build is steps
+        assert (grid._keys.ptr, grid._point_ids.ptr, grid._cell_starts.ptr) == buffers
+        np.testing.assert_allclose(run_sum(grid, pts, radius, backend, device),
+                                   brute_sums(p, radius), atol=2e-4)  # fmt: skip
+    other = wp.array(p, dtype=wp.vec3, device=device)  # another array: new steps, same buffers
+    grid.build(other, 0.3)
+    assert grid._build is not steps
+    assert (grid._keys.ptr, grid._point_ids.ptr, grid._cell_starts.ptr) == buffers
+
+
+def test_build_and_query_kernels_compile_for_cuda():
+    """Compile only: the build's kernels and the seed's query through NVRTC (sm_90)."""
+    pytest.importorskip("cupy_backends.cuda.libs.nvrtc")
+    from kdsl.backends.cuda import BACKEND
+    from kdsl.compiler import lower
+    from tests.geometry.test_hash_grid import sum as seed_sum
+
+    for k in (hash_grid_build._bucket_keys, hash_grid_build._bucket_ranges, seed_sum):
+        assert ".entry" in lower(BACKEND, k.build_module(), "ptx", {"arch": "sm_90"})
+
+
+@wp.kernel
+def wrap_cells(c: wp.array(dtype=int), dims: wp.array(dtype=int), out: wp.array2d(dtype=int)):
+    i, j = wp.tid()
+    out[i, j] = hash_grid.hash_grid_cell(c[i], 0, 0, dims[j], 1, 1)
+
+
+@pytest.mark.parametrize("backend", ["interp", "cpu"])
+def test_bucket_wraps_every_int32_cell(backend):
+    """A cell's bucket along an axis is its coordinate mod the dim (Python's ``%``), for
+    coordinates across int32 and dims up to 2**31 - 1 (the division-free wrap)."""
+    big = 2**31 - 1
+    dims = np.array([1, 2, 3, 7, 128, 1000003, 2**30 + 1, big - 1, big], np.int64)
+    edges = [-(2**31), -(2**31) + 1, -big, -1000004, -129, -128, -127, -3, -1, 0, 1, 127,
+             128, 129, 1000003, 2**30, big - 2, big - 1]  # fmt: skip
+    rng = np.random.default_rng(9)
+    c = np.array(edges + list(rng.integers(-(2**31), 2**31 - 1, 40)), np.int64)
+    out = wp.zeros((len(c), len(dims)), dtype=int)
+    wp.launch(wrap_cells, dim=out.shape, backend=backend,
+              inputs=[wp.array(c, dtype=int), wp.array(dims, dtype=int), out])  # fmt: skip
+    np.testing.assert_array_equal(out.numpy(), c[:, None] % dims[None, :])
