@@ -6,7 +6,9 @@ allocation, sort, scan, sum, fill, read back, record write), timed alone.
 
 Every step the geometry modules call is wrapped (their module-level names, and
 ``array.numpy`` / ``array.fill_`` / ``array.zero_`` / ``ObjectRecord.write`` / the
-prepared sum ``SumInto``); only the outermost step of a nest counts. Two passes per workload: ``sync`` synchronizes the
+prepared sum, scan and sort ``SumInto``, ``ScanInto``, ``SortKeys`` / a prepared
+``Launch.launch``; ``prepare`` rows are launches recorded with ``record_cmd``); only
+the outermost step of a nest counts. Two passes per workload: ``sync`` synchronizes the
 device after every step, so a step's time is its host work plus its device work;
 ``issue`` does not, so a step's time is only what it costs the host to enqueue it (on
 the CPU the two agree: every step is synchronous). ``total`` is one unwrapped call
@@ -32,8 +34,11 @@ from kdsl.geometry import bvh as bvh_mod
 from kdsl.geometry import device_tree, lbvh, mesh_refit
 from kdsl.geometry import mesh as mesh_mod
 from kdsl.runtime.array import array
+from kdsl.runtime.launch import Launch
 from kdsl.runtime.objects import ObjectRecord
 from kdsl.utils.reduce import SumInto
+from kdsl.utils.scan import ScanInto
+from kdsl.utils.sort import SortKeys
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
@@ -45,7 +50,8 @@ RESULTS = Path(__file__).resolve().parent / "results" / "geometry_stages.json"
 STEPS = ("launch", "empty", "zeros", "full", "radix_sort_pairs", "array_scan", "array_sum")
 MODULES = (bvh_mod, device_tree, lbvh, mesh_mod, mesh_refit)
 METHODS = ((array, "numpy"), (array, "fill_"), (array, "zero_"), (ObjectRecord, "write"),
-           (SumInto, "__call__"))  # fmt: skip
+           (SumInto, "__call__"), (ScanInto, "__call__"), (SortKeys, "__call__"),
+           (Launch, "launch"))  # fmt: skip
 
 
 class StepClock:
@@ -77,7 +83,11 @@ class StepClock:
         """Wrap every step (undone by ``remove``)."""
 
         def launch_label(kernel, *a, **k) -> str:
-            return f"launch {getattr(kernel, 'key', kernel)}"
+            verb = "prepare" if k.get("record_cmd") else "launch"
+            return f"{verb} {getattr(kernel, 'key', kernel)}"
+
+        def prepared_label(cmd, *a, **k) -> str:
+            return f"prepared launch {getattr(cmd.kernel, 'key', cmd.kernel)}"
 
         for mod in MODULES:
             for name in STEPS:
@@ -90,7 +100,8 @@ class StepClock:
             fn = getattr(cls, name)
             self._undo.append((cls, name, fn))
             step = f"{cls.__name__} call" if name == "__call__" else name
-            setattr(cls, name, self._wrap(fn, lambda *a, n=step, **k: n))
+            label = prepared_label if cls is Launch else (lambda *a, n=step, **k: n)
+            setattr(cls, name, self._wrap(fn, label))
 
     def remove(self) -> None:
         for owner, name, fn in reversed(self._undo):

@@ -122,16 +122,23 @@ class Bvh:
         self._check_current_boxes()
         if self.groups is not None:
             self._num_groups = _check_groups(self.groups, self.lowers)
+        shape = (self.constructor, self.lowers, self.uppers, self.groups, self._num_groups)
+        tree = getattr(self, "_tree", None)
+        same = tree is not None and all(a is b for a, b in zip(shape, self._built))
+        if same and tree.rebuild is not None:
+            tree.rebuild()  # the same buffers and prepared launches; the record holds
+            return
         build = CONSTRUCTORS[self.constructor]
         tree = build(self.lowers, self.uppers, self.leaf_size, self.groups, self._num_groups)
-        self._tree = tree
+        self._tree, self._built = tree, shape
         if tree.nodes is not None:  # the constructor packed the links itself
             self._nodes = tree.nodes
         else:
-            self._nodes = empty(tree.num_nodes, dtype=BvhNode, device=self.device)
+            self._nodes = empty(tree.slots, dtype=BvhNode, device=self.device)
             pack_nodes(tree, self._nodes, self._node_field(12, T.I32))
         self._bounds = [self._node_field(0, VEC3), self._node_field(16, VEC3)]
-        refit(self._tree, self.lowers, self.uppers, self._bounds[0], self._bounds[1])
+        if not tree.bounded:
+            refit(self._tree, self.lowers, self.uppers, self._bounds[0], self._bounds[1])
         self._write_record()
 
     def _check_current_boxes(self) -> None:
@@ -151,7 +158,7 @@ class Bvh:
                 "skip": tree.skip, "first": self._node_field(12, T.I32), "count": tree.count,
                 "items": tree.items, "group_roots": tree.group_roots,
                 "item_lowers": self.lowers, "item_uppers": self.uppers,
-                "root": 0 if tree.num_nodes else -1, "nodes": self._nodes,
+                "root": 0 if tree.slots else -1, "nodes": self._nodes,
             }
         )  # fmt: skip
 

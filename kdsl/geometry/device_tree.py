@@ -4,7 +4,10 @@ Every constructor ends in a ``DeviceTree``: the preorder topology ``kdsl.stdlib.
 documents (``skip``, ``first``, ``count``, ``items``, ``group_roots``) on the boxes'
 device, plus what a GPU refit needs: ``parent`` (each node's parent, -1 at the root) and
 ``arrivals``, one counter per node (both empty on a CPU). An inner node ``n``'s children
-are ``n + 1`` and ``skip[n + 1]``, so the tree needs no child arrays.
+are ``n + 1`` and ``skip[n + 1]``, so the tree needs no child arrays. The arrays have
+``slots`` entries: the nodes, then (lbvh trees, whose node count stays on the device)
+unused slots marked ``first = UNUSED``, which every kernel here skips, so none needs
+the node count on the host.
 
 ``refit`` runs as kdsl kernels on the device. On a GPU it is one launch, bottom up as
 Karras and Apetrei build theirs: a thread per leaf writes the union of its items' boxes,
@@ -17,7 +20,8 @@ which beats atomics on a few cores.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -30,10 +34,15 @@ from kdsl.runtime.array import array
 from kdsl.runtime.launch import launch
 from kdsl.types import int32, vec3
 
+#: ``first`` of a node slot past a tree's last node (an lbvh tree has ``2n - 1`` slots
+#: and fewer nodes with ``leaf_size > 1``): no node, skipped by the refits.
+UNUSED = -2
+
 
 @dataclass
 class DeviceTree:
-    """A BVH's topology on its device (see the module docstring)."""
+    """A BVH's topology on its device (see the module docstring), in ``slots`` node
+    slots: its nodes, then unused slots (``first`` is ``UNUSED``)."""
 
     skip: array
     first: array
@@ -41,11 +50,34 @@ class DeviceTree:
     items: array
     group_roots: array
     parent: array  # empty on a CPU
-    arrivals: array  # int32 per node, zero between refits; empty on a CPU
-    num_nodes: int
+    arrivals: array  # int32 per slot, zero between refits; empty on a CPU
+    slots: int
     #: The packed nodes (``kdsl.stdlib.bvh.BvhNode``) with their links written, when the
     #: constructor wrote them itself (``lbvh``); None: ``kdsl.Bvh`` packs them.
     nodes: array | None = None
+    #: A one-element int32 array on the device holding the number of nodes, when the
+    #: constructor left it there (None: ``slots`` nodes).
+    node_count: array | None = None
+    #: Whether the constructor wrote the packed nodes' bounds too (no refit needed).
+    bounded: bool = False
+    #: Builds the same tree arrays again from the boxes' current values, when the
+    #: constructor can (``lbvh``); None otherwise.
+    rebuild: Callable[[], object] | None = None
+    _num_nodes: int | None = field(default=None, init=False, repr=False)
+
+    @property
+    def num_nodes(self) -> int:
+        """The number of nodes (read back from the device once per build when the
+        constructor left it there: for tests and tools, not the build)."""
+        if self._num_nodes is None:
+            self._num_nodes = (
+                self.slots if self.node_count is None else int(self.node_count.numpy()[0])
+            )
+        return self._num_nodes
+
+    def forget_count(self) -> None:
+        """Drop the node count read back before a rebuild."""
+        self._num_nodes = None
 
 
 def node_field(nodes: array, offset: int, dtype) -> array:
@@ -65,7 +97,7 @@ def _link_parents(first: array(dtype=int32), skip: array(dtype=int32), parent: a
     n = tid()
     if n == 0:
         parent[0] = -1
-    if first[n] < 0:
+    if first[n] == -1:  # an inner node (not an unused slot)
         parent[n + 1] = n
         parent[skip[n + 1]] = n
 
@@ -74,11 +106,11 @@ def with_parents(tree: DeviceTree, bottom_up: bool | None = None) -> DeviceTree:
     """``tree`` with the arrays of the bottom-up refit (``parent``, ``arrivals``) filled
     in: on a GPU by default, anywhere with ``bottom_up=True``."""
     device = tree.skip.device
-    if not (device.is_cuda if bottom_up is None else bottom_up) or tree.num_nodes == 0:
+    if not (device.is_cuda if bottom_up is None else bottom_up) or tree.slots == 0:
         return tree
-    tree.parent = empty(tree.num_nodes, dtype=int32, device=device)
-    tree.arrivals = zeros(tree.num_nodes, dtype=int32, device=device)
-    launch(_link_parents, dim=tree.num_nodes, device=device,
+    tree.parent = empty(tree.slots, dtype=int32, device=device)
+    tree.arrivals = zeros(tree.slots, dtype=int32, device=device)
+    launch(_link_parents, dim=tree.slots, device=device,
            inputs=[tree.first, tree.skip, tree.parent])  # fmt: skip
     return tree
 
@@ -172,22 +204,22 @@ def _pack_links(
 def pack_nodes(tree: DeviceTree, nodes: array, packed_first: array) -> None:
     """Write the links of the packed nodes (``kdsl.stdlib.bvh.BvhNode``): ``first``, and
     ``next``, an inner node's ``skip`` or a leaf's count; ``refit`` writes the bounds."""
-    if tree.num_nodes == 0:
+    if tree.slots == 0:
         return
     packed_next = node_field(nodes, 28, int32)
-    launch(_pack_links, dim=tree.num_nodes, device=nodes.device,
+    launch(_pack_links, dim=tree.slots, device=nodes.device,
            inputs=[tree.first, tree.count, tree.skip, packed_first, packed_next])  # fmt: skip
 
 
 @kernel
 def _refit_inner_reverse_preorder(
-    num_nodes: int32, first: array(dtype=int32), skip: array(dtype=int32),
+    slots: int32, first: array(dtype=int32), skip: array(dtype=int32),
     lowers: array(dtype=vec3), uppers: array(dtype=vec3),
 ):  # fmt: skip
     # One thread: in reverse preorder every node comes after its children.
-    for k in range(num_nodes):
-        n = num_nodes - 1 - k
-        if first[n] < 0:
+    for k in range(slots):
+        n = slots - 1 - k
+        if first[n] == -1:  # an inner node (not an unused slot)
             a = n + 1
             b = skip[a]
             lowers[n] = vmin(lowers[a], lowers[b])
@@ -199,20 +231,20 @@ def refit(tree: DeviceTree, item_lowers: array, item_uppers: array, lowers: arra
     """Write the node bounds of ``tree`` over the item boxes into ``lowers``/``uppers``:
     bottom up where the tree has ``parent`` links (on a GPU), else leaves then a
     sequential pass (see the module docstring)."""
-    if tree.num_nodes == 0:
+    if tree.slots == 0:
         return
     device = item_lowers.device
     if tree.parent.shape[0] == 0:
         launch(
-            _refit_leaves, dim=tree.num_nodes, device=device,
+            _refit_leaves, dim=tree.slots, device=device,
             inputs=[tree.first, tree.count, tree.items, item_lowers, item_uppers, lowers,
                     uppers],
         )  # fmt: skip
         launch(_refit_inner_reverse_preorder, dim=1, device=device,
-               inputs=[tree.num_nodes, tree.first, tree.skip, lowers, uppers])  # fmt: skip
+               inputs=[tree.slots, tree.first, tree.skip, lowers, uppers])  # fmt: skip
         return
     launch(
-        _refit_bottom_up, dim=tree.num_nodes, device=device,
+        _refit_bottom_up, dim=tree.slots, device=device,
         inputs=[tree.first, tree.count, tree.items, item_lowers, item_uppers, tree.skip,
                 tree.parent, tree.arrivals, lowers, uppers],
     )  # fmt: skip

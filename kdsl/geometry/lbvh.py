@@ -1,38 +1,52 @@
 """The ``"lbvh"`` BVH constructor: a linear BVH built on the boxes' device by kdsl kernels.
 
-Karras' construction ("Maximizing parallelism in the construction of BVHs, octrees and
-k-d trees", HPG 2012): the items are sorted by the Morton code of their centre (30
-bits, 10 per axis, in the centres' bounding box; with groups, the group id above
-them, so every group is a contiguous run and becomes one subtree); each of the
-``n - 1`` inner nodes then finds its own range of sorted items and split independently
-(equal codes are told apart by their positions). Every node covers a contiguous range
-``[a, b]`` of the sorted items, which is what makes the rest parallel too:
+Karras' binary radix tree ("Maximizing parallelism in the construction of BVHs, octrees
+and k-d trees", HPG 2012) over the items sorted by the Morton code of their centre (30
+bits, 10 per axis, in the centres' bounding box), emitted bottom up as Apetrei does
+("Fast and simple agglomerative LBVH construction", 2014). Each item's sort key is one
+64-bit integer: its group id (with groups) above its Morton code above its own index,
+so the keys are distinct (ties between equal codes break by item index), every group
+is a contiguous run that becomes one subtree, and one plain sort of the keys sorts
+the items (no key-value sort, no gathers). Inner node ``s`` of the radix tree splits
+its sorted range ``[a, b]`` between ``s`` and ``s + 1``; sorted item ``k`` is leaf
+``n - 1 + k``. Every node covers a contiguous range, which makes the rest parallel:
 
 - a node with at most ``leaf_size`` items of one group becomes a leaf (its subtree is
   dropped): it is *kept* when its parent is not such a leaf;
 - depth-first preorder sorts the kept nodes by ``(a, -b)``: nodes starting at a
   smaller position come first, and of the nodes starting at ``a`` (a chain of left
   children) the larger comes first. So a node's preorder number is the number of kept
-  nodes starting before ``a`` (an exclusive scan of per-position counts) plus its rank
+  nodes starting before ``a`` (an inclusive scan of per-position counts) plus its rank
   in its chain (a short walk up its parents), and ``skip`` is the number of kept nodes
   starting before ``b + 1``.
 
-The leaves' items are the sorted item indices themselves. The build reads back from
-the device one scalar, the number of kept nodes.
+The build (``LbvhBuild``) is four kernels, one sort and one scan, all on the device,
+with no read back and no fill: the centres' bounds; the keys; the hierarchy (a thread
+per leaf climbs, and at each parent the second child's thread to arrive, after an
+arrival counter and fences as in the bottom-up refit of ``device_tree``, writes the
+parent's range, bounds and kept-node counts, then climbs on); the preorder kernel
+(writes every kept node at its preorder number, packed, with its bounds: no refit).
+The number of kept nodes stays on the device (``DeviceTree.node_count``): the tree's
+arrays have ``2n - 1`` slots, those after the last node marked ``first = -2``
+(``UNUSED``). Its buffers are four allocations; the launches are prepared once
+(``record_cmd``) and ``rebuild`` runs them again over the same buffers, which every
+build leaves as it found them (the zeroed counters zero again).
 """
 
 from __future__ import annotations
 
-from kdsl.frontend.api import atomic_add, atomic_max, cast, func, inf, kernel, tid
+from kdsl.errors import KdslError
+from kdsl.frontend.api import atomic_add, atomic_max, cast, func, inf, kernel, thread_fence, tid
 from kdsl.frontend.api import max as vmax
 from kdsl.frontend.api import min as vmin
-from kdsl.geometry.device_tree import DeviceTree, node_field
+from kdsl.geometry.device_tree import UNUSED, DeviceTree, node_field
 from kdsl.runtime.alloc import empty, zeros
 from kdsl.runtime.array import array
-from kdsl.runtime.launch import launch
+from kdsl.runtime.launch import Launch, launch
 from kdsl.stdlib.bvh import BvhNode
 from kdsl.types import float32, int32, uint64, vec3
-from kdsl.utils import array_scan, radix_sort_pairs
+from kdsl.utils.scan import ScanInto
+from kdsl.utils.sort import SortKeys
 
 #: Boxes a thread reduces in the centres' bounds, per device kind: on a GPU few (many
 #: threads, each reading with a stride of the thread count, so a warp's loads are
@@ -42,6 +56,8 @@ _CHUNK = {"cuda": 64, "cpu": 1024}
 _INF_BITS = 0x7F800000
 #: The int32 slots the centres' bounds are reduced into: four per axis (see ``_bound_key``).
 BOUND_SLOTS = 12
+#: Bits of a full Morton code (10 per axis).
+MORTON_BITS = 30
 
 
 @func
@@ -97,20 +113,21 @@ def _centre_bounds_kernel(
 
 
 def centre_bounds(lowers: array, uppers: array, slots: array, backend: str | None = None,
-                  strided: bool | None = None) -> None:  # fmt: skip
+                  strided: bool | None = None, record_cmd: bool = False) -> Launch | None:  # fmt: skip
     """Reduce the bounds of the boxes' centres into ``slots`` (``BOUND_SLOTS`` zeroed
     int32) in one launch of ``_CHUNK`` boxes a thread; ``_morton_keys`` decodes them.
     NaN centre coordinates are left out; an axis without any decodes as 0.0. A thread
     reads every ``threads``-th box when ``strided`` (coalesced: a GPU's default), else a
-    contiguous chunk (a CPU's)."""
+    contiguous chunk (a CPU's). ``record_cmd``: return the launch prepared, not run."""
     device = lowers.device
     n = lowers.shape[0]
     chunk = _CHUNK["cuda" if device.is_cuda else "cpu"]
     threads = -(-n // chunk)
     strided = device.is_cuda if strided is None else strided
     first_step, step = (1, threads) if strided else (chunk, 1)
-    launch(_centre_bounds_kernel, dim=threads, device=device, backend=backend,
-           inputs=[lowers, uppers, n, chunk, first_step, step, slots])  # fmt: skip
+    return launch(_centre_bounds_kernel, dim=threads, device=device, backend=backend,
+                  inputs=[lowers, uppers, n, chunk, first_step, step, slots],
+                  record_cmd=record_cmd)  # fmt: skip
 
 
 @func
@@ -137,8 +154,10 @@ def _quantize(x: float, lo: float, scale: float) -> uint64:
 def _morton_keys(
     lowers: array(dtype=vec3), uppers: array(dtype=vec3),
     bounds: array(dtype=int32), groups: array(dtype=int32), has_groups: int32,
-    keys: array(dtype=uint64), values: array(dtype=int32),
+    morton_drop: int32, index_bits: int32, group_shift: int32, keys: array(dtype=uint64),
 ):  # fmt: skip
+    # Item i's key: its group above its Morton code (less its ``morton_drop`` low bits)
+    # above its index (``index_bits``).
     i = tid()
     c = 0.5 * (lowers[i] + uppers[i])
     lo = vec3()
@@ -153,10 +172,10 @@ def _morton_keys(
         if extent[k] > 0.0:
             scale = 1023.0 / extent[k]
         code = code | (_spread_bits(_quantize(c[k], lo[k], scale)) << uint64(2 - k))
+    key = ((code >> uint64(morton_drop)) << uint64(index_bits)) | uint64(i)
     if has_groups != 0:
-        code = code | (uint64(groups[i]) << uint64(32))
-    keys[i] = code
-    values[i] = i
+        key = key | (uint64(groups[i]) << uint64(group_shift))
+    keys[i] = key
 
 
 @func
@@ -187,112 +206,112 @@ def _clz64(x: uint64) -> int:
 
 
 @func
-def _delta(keys: array(dtype=uint64), n: int, i: int, j: int) -> int:
-    """Length of the common prefix of sorted keys ``i`` and ``j`` (their positions break
-    ties), or -1 when ``j`` is out of range."""
-    if j < 0 or j >= n:
-        return -1
-    a = keys[i]
-    b = keys[j]
-    if a == b:
-        return 64 + _clz64(uint64(i ^ j))
-    return _clz64(a ^ b)
+def _delta(keys: array(dtype=uint64), i: int, j: int) -> int:
+    """Length of the common prefix of the (distinct) sorted keys ``i`` and ``j``."""
+    return _clz64(keys[i] ^ keys[j])
 
 
 @func
 def _is_leaf(
-    keys: array(dtype=uint64), a: int, b: int, leaf_size: int
+    keys: array(dtype=uint64), a: int, b: int, leaf_size: int, group_shift: int
 ) -> bool:  # fmt: skip
-    """Whether a node over sorted items ``[a, b]`` is a leaf: few items, one group."""
-    return b - a + 1 <= leaf_size and (keys[a] >> uint64(32)) == (keys[b] >> uint64(32))
+    """Whether a node over sorted items ``[a, b]`` is a leaf: few items, one group (the
+    key bits from ``group_shift`` up; 63 without groups, where that bit is zero)."""
+    s = uint64(group_shift)
+    return b - a + 1 <= leaf_size and (keys[a] >> s) == (keys[b] >> s)
+
+
+@func
+def _range_a(n: int, node_a: array(dtype=int32), x: int) -> int:
+    """The first sorted item under radix-tree node ``x`` (a leaf from ``n - 1``)."""
+    if x >= n - 1:
+        return x - (n - 1)
+    return node_a[x]
+
+
+@func
+def _range_b(n: int, node_b: array(dtype=int32), x: int) -> int:
+    """The last sorted item under radix-tree node ``x``."""
+    if x >= n - 1:
+        return x - (n - 1)
+    return node_b[x]
 
 
 @kernel
-def _karras_nodes(
-    keys: array(dtype=uint64), n: int32, leaf_size: int32, range_a: array(dtype=int32),
-    range_b: array(dtype=int32), parent: array(dtype=int32), starts: array(dtype=int32),
-    group_roots: array(dtype=int32),
+def _emit_hierarchy(
+    keys: array(dtype=uint64), n: int32, leaf_size: int32, group_shift: int32,
+    index_mask: uint64, item_lowers: array(dtype=vec3), item_uppers: array(dtype=vec3),
+    items: array(dtype=int32), parent: array(dtype=int32), left: array(dtype=int32),
+    right: array(dtype=int32), node_lo: array(dtype=vec3), node_hi: array(dtype=vec3),
+    node_a: array(dtype=int32), node_b: array(dtype=int32), arrivals: array(dtype=int32),
+    starts: array(dtype=int32), group_roots: array(dtype=int32),
 ):  # fmt: skip
-    # Also counts the kept nodes by their first position ``a`` into ``starts[a + 1]``
-    # (zeros before): the root, and both children of every inner node that is no leaf;
-    # and sets every group's root to -1 (``_preorder`` writes the roots found).
-    i = tid()
-    for g in range(i, group_roots.shape[0], 2 * n - 1):
-        group_roots[g] = -1
-    if i >= n - 1:  # a leaf: node n - 1 + k holds sorted item k
-        k = i - (n - 1)
-        range_a[i] = k
-        range_b[i] = k
-        if n == 1:
-            parent[i] = -1
+    # Thread k: sorted item k (its index into ``items``, its box), then up the tree (see
+    # the module docstring). Inner node s's parent is s (this node is its left child) or
+    # a - 1 (its right child): the side whose neighbouring key shares the longer prefix.
+    # The kept nodes are counted by their first position a into ``starts[a + 1]``; every
+    # group's root is set to -1 (``_preorder`` writes the roots found).
+    k = tid()
+    if k < group_roots.shape[0]:  # (more groups than threads: each sets several)
+        for g in range(k, group_roots.shape[0], n):
+            group_roots[g] = -1
+    item = int(keys[k] & index_mask)
+    items[k] = item
+    lo = item_lowers[item]
+    hi = item_uppers[item]
+    node = n - 1 + k
+    a = k
+    b = k
+    while True:
+        if node < n - 1:  # an inner node, complete: publish it
+            node_lo[node] = lo
+            node_hi[node] = hi
+            node_a[node] = a
+            node_b[node] = b
+            if not _is_leaf(keys, a, b, leaf_size, group_shift):  # its children are kept
+                atomic_add(starts, a + 1, 1)
+                atomic_add(starts, node + 2, 1)
+        if a == 0 and b == n - 1:  # the root, always kept
+            parent[node] = -1
             atomic_add(starts, 1, 1)
-        return
-    if i == 0:
-        parent[0] = -1
-        atomic_add(starts, 1, 1)
-    d = 1
-    if _delta(keys, n, i, i + 1) < _delta(keys, n, i, i - 1):
-        d = -1
-    dmin = _delta(keys, n, i, i - d)
-    lmax = 2
-    while _delta(keys, n, i, i + lmax * d) > dmin:
-        lmax = lmax * 2
-    ln = 0
-    t = lmax // 2
-    while t >= 1:
-        if _delta(keys, n, i, i + (ln + t) * d) > dmin:
-            ln = ln + t
-        t = t // 2
-    j = i + ln * d
-    dnode = _delta(keys, n, i, j)
-    s = 0
-    div = 2
-    t = (ln + div - 1) // div
-    while t >= 1:
-        if _delta(keys, n, i, i + (s + t) * d) > dnode:
-            s = s + t
-        if t == 1:
-            break
-        div = div * 2
-        t = (ln + div - 1) // div
-    gamma = i + s * d + vmin(d, 0)
-    a = vmin(i, j)
-    b = vmax(i, j)
-    range_a[i] = a
-    range_b[i] = b
-    left = gamma
-    if a == gamma:
-        left = n - 1 + gamma
-    right = gamma + 1
-    if b == gamma + 1:
-        right = n - 1 + gamma + 1
-    parent[left] = i
-    parent[right] = i
-    if not _is_leaf(keys, a, b, leaf_size):  # its children are kept
-        atomic_add(starts, a + 1, 1)
-        atomic_add(starts, gamma + 2, 1)
+            return
+        p = a - 1
+        if a == 0 or (b != n - 1 and _delta(keys, b, b + 1) > _delta(keys, a - 1, a)):
+            p = b
+            left[p] = node
+        else:
+            right[p] = node
+        parent[node] = p
+        thread_fence()  # publish this node before its arrival
+        if atomic_add(arrivals, p, 1) == 0:
+            return  # the sibling's thread, arriving second, completes ``p``
+        thread_fence()  # see the sibling, published before its arrival
+        arrivals[p] = 0  # ready for the next build
+        s = left[p]
+        if s == node:
+            s = right[p]
+        if s >= n - 1:
+            j = items[s - (n - 1)]
+            lo = vmin(lo, item_lowers[j])
+            hi = vmax(hi, item_uppers[j])
+        else:
+            lo = vmin(lo, node_lo[s])
+            hi = vmax(hi, node_hi[s])
+        a = vmin(a, _range_a(n, node_a, s))
+        b = vmax(b, _range_b(n, node_b, s))
+        node = p
 
 
 @func
-def _is_kept(
-    keys: array(dtype=uint64), range_a: array(dtype=int32),
-    range_b: array(dtype=int32), parent: array(dtype=int32), x: int,
-    leaf_size: int,
-) -> bool:  # fmt: skip
-    p = parent[x]
-    if p < 0:
-        return True
-    return not _is_leaf(keys, range_a[p], range_b[p], leaf_size)
-
-
-@func
-def _chain_rank(range_a: array(dtype=int32), parent: array(dtype=int32), x: int) -> int:
+def _chain_rank(
+    n: int, node_a: array(dtype=int32), parent: array(dtype=int32), x: int
+) -> int:  # fmt: skip
     """Kept ancestors of ``x`` starting at its position too (the chain of left children
-    above it): ``x``'s preorder number is ``before[range_a[x]]`` plus this."""
-    a = range_a[x]
+    above it): ``x``'s preorder number is ``before[a]`` plus this."""
+    a = _range_a(n, node_a, x)
     rank = 0
     p = parent[x]
-    while p >= 0 and range_a[p] == a:
+    while p >= 0 and node_a[p] == a:
         rank += 1
         p = parent[p]
     return rank
@@ -300,116 +319,181 @@ def _chain_rank(range_a: array(dtype=int32), parent: array(dtype=int32), x: int)
 
 @kernel
 def _preorder(
-    keys: array(dtype=uint64), range_a: array(dtype=int32),
-    range_b: array(dtype=int32), parent: array(dtype=int32),
-    leaf_size: int32, before: array(dtype=int32), has_groups: int32,
-    skip: array(dtype=int32), first: array(dtype=int32), count: array(dtype=int32),
-    group_roots: array(dtype=int32), node_first: array(dtype=int32),
-    node_next: array(dtype=int32), with_parents: int32, pre_parent: array(dtype=int32),
+    keys: array(dtype=uint64), n: int32, leaf_size: int32, group_shift: int32,
+    has_groups: int32, items: array(dtype=int32), item_lowers: array(dtype=vec3),
+    item_uppers: array(dtype=vec3), parent: array(dtype=int32), node_lo: array(dtype=vec3),
+    node_hi: array(dtype=vec3), node_a: array(dtype=int32), node_b: array(dtype=int32),
+    before: array(dtype=int32), skip: array(dtype=int32), first: array(dtype=int32),
+    count: array(dtype=int32), lowers: array(dtype=vec3), uppers: array(dtype=vec3),
+    packed_first: array(dtype=int32), packed_next: array(dtype=int32),
+    with_parents: int32, pre_parent: array(dtype=int32), group_roots: array(dtype=int32),
+    starts: array(dtype=int32), bounds: array(dtype=int32),
 ):  # fmt: skip
-    # Writes the kept node ``x`` at its preorder number: ``skip``, ``first``, ``count``
-    # (contiguous, for the refit), the packed node's links (``BvhNode.first``, ``.next``) and, ``with_parents``, its parent's
-    # preorder number (its Karras parent is kept too: a leaf's subtree is dropped whole).
+    # Thread x: radix-tree node x, written at its preorder number when kept (links,
+    # contiguous ``first``/``count`` for the refit, packed node and bounds, and, with
+    # ``with_parents``, its parent's preorder number: a kept node's parent is kept); and
+    # slot x, when past the last node, marked unused. Zeroes ``starts`` and ``bounds``
+    # for the next build (nothing reads them after the scan).
     x = tid()
-    if not _is_kept(keys, range_a, range_b, parent, x, leaf_size):
-        return
-    a = range_a[x]
-    b = range_b[x]
-    pre = before[a] + _chain_rank(range_a, parent, x)
+    slots = 2 * n - 1
+    if x <= n:  # (n == 1: one thread, two counts)
+        for z in range(x, n + 1, slots):
+            starts[z] = 0
+    if x < bounds.shape[0]:
+        for z in range(x, bounds.shape[0], slots):
+            bounds[z] = 0
+    if x >= before[n]:
+        skip[x] = x + 1
+        first[x] = UNUSED
+        count[x] = 0
+        packed_first[x] = UNUSED
+        packed_next[x] = 0
+        lowers[x] = vec3()
+        uppers[x] = vec3()
+        if with_parents != 0:
+            pre_parent[x] = -1
+    q = parent[x]
+    if q >= 0 and _is_leaf(keys, node_a[q], node_b[q], leaf_size, group_shift):
+        return  # inside a leaf: not kept
+    a = _range_a(n, node_a, x)
+    b = _range_b(n, node_b, x)
+    pre = before[a] + _chain_rank(n, node_a, parent, x)
     after = before[b + 1]
     skip[pre] = after
-    if _is_leaf(keys, a, b, leaf_size):
+    if x >= n - 1:
+        j = items[a]
+        lowers[pre] = item_lowers[j]
+        uppers[pre] = item_uppers[j]
+    else:
+        lowers[pre] = node_lo[x]
+        uppers[pre] = node_hi[x]
+    if _is_leaf(keys, a, b, leaf_size, group_shift):
         first[pre] = a
-        node_first[pre] = a
-        node_next[pre] = b - a + 1
+        packed_first[pre] = a
+        packed_next[pre] = b - a + 1
         count[pre] = b - a + 1
     else:
         first[pre] = -1
-        node_first[pre] = -1
-        node_next[pre] = after
+        packed_first[pre] = -1
+        packed_next[pre] = after
         count[pre] = 0
-    q = parent[x]
     if with_parents != 0:
         up = -1
         if q >= 0:
             up = pre - 1  # the left child follows its parent
-            if range_a[q] != a:
-                up = before[range_a[q]] + _chain_rank(range_a, parent, q)
+            if node_a[q] != a:
+                up = before[node_a[q]] + _chain_rank(n, node_a, parent, q)
         pre_parent[pre] = up
     if has_groups != 0:  # the root of a group: one group, its parent (if any) spans two
-        g = keys[a] >> uint64(32)
-        top = q < 0 or (keys[range_a[q]] >> uint64(32)) != (keys[range_b[q]] >> uint64(32))
-        if g == (keys[b] >> uint64(32)) and top:
+        s = uint64(group_shift)
+        g = keys[a] >> s
+        top = q < 0 or (keys[node_a[q]] >> s) != (keys[node_b[q]] >> s)
+        if g == (keys[b] >> s) and top:
             group_roots[int(g)] = pre
+
+
+def key_layout(n: int, num_groups: int) -> tuple[int, int, int]:
+    """``(morton_drop, index_bits, group_shift)``: the Morton bits dropped so the group
+    id (with groups), the Morton code and an item index fit in 63 bits of a key, the
+    index's bits, and where the group id starts (63 without groups: above every key).
+    Raises ``KdslError`` when the groups leave no room for a Morton code."""
+    index_bits = max(1, (n - 1).bit_length())
+    group_bits = max(num_groups - 1, 0).bit_length() if num_groups else 0
+    morton = min(MORTON_BITS, (63 - index_bits - group_bits) // 3 * 3)
+    if morton < 3:
+        raise KdslError(f"{num_groups} groups of {n} boxes leave no key bits for the lbvh "
+                         "build's Morton codes")  # fmt: skip
+    shift = index_bits + morton if num_groups else 63
+    return MORTON_BITS - morton, index_bits, shift
+
+
+class LbvhBuild:
+    """One lbvh build's buffers and prepared steps over boxes ``lowers``/``uppers`` (and
+    ``groups``): ``tree`` is the ``DeviceTree`` it writes; each call of ``run`` builds
+    it again from the boxes' current values (same count), allocating nothing."""
+
+    def __init__(self, lowers: array, uppers: array, leaf_size: int, groups: array | None,
+                 num_groups: int, bottom_up: bool) -> None:  # fmt: skip
+        device = lowers.device
+        n = lowers.shape[0]
+        slots = 2 * n - 1
+        roots = max(num_groups, 1)
+        morton_drop, index_bits, group_shift = key_layout(n, num_groups)
+        has_groups = int(groups is not None)
+        # Every element of ``ints`` is written before it is read; ``zero`` starts at zero
+        # and every build leaves it so.
+        sizes = {"items": n, "skip": slots, "first": slots, "count": slots, "parent": slots,
+                 "left": n - 1, "right": n - 1, "node_a": n - 1, "node_b": n - 1,
+                 "before": n + 1,
+                 "pre_parent": slots if bottom_up else 0, "group_roots": roots}  # fmt: skip
+        ints = _carve(empty(sum(sizes.values()), dtype=int32, device=device), sizes)
+        zero_sizes = {"starts": n + 1, "climbs": n - 1, "arrivals": slots if bottom_up else 0,
+                      "bounds": BOUND_SLOTS}  # fmt: skip
+        zero = _carve(zeros(sum(zero_sizes.values()), dtype=int32, device=device), zero_sizes)
+        keys = empty(n, dtype=uint64, device=device)
+        # The tree's packed nodes, then the radix tree's inner nodes' bounds.
+        packed = empty(slots + n - 1, dtype=BvhNode, device=device)
+        nodes, inner = packed[:slots], packed[slots:]
+        node_lo, node_hi = node_field(inner, 0, vec3), node_field(inner, 16, vec3)
+        node_a, node_b = ints["node_a"], ints["node_b"]
+        lo, hi = node_field(nodes, 0, vec3), node_field(nodes, 16, vec3)
+        packed_first, packed_next = node_field(nodes, 12, int32), node_field(nodes, 28, int32)
+        group_arg = groups if groups is not None else zero["bounds"]
+        with_parents = int(bottom_up)
+
+        def prepared(kernel, dim: int, inputs: list) -> Launch:
+            return launch(kernel, dim=dim, device=device, inputs=inputs, record_cmd=True)
+
+        self._steps = [
+            centre_bounds(lowers, uppers, zero["bounds"], record_cmd=True).launch,
+            prepared(_morton_keys, n, [lowers, uppers, zero["bounds"], group_arg, has_groups,
+                                       morton_drop, index_bits, group_shift, keys]).launch,
+            SortKeys(keys),
+            prepared(_emit_hierarchy, n, [
+                keys, n, leaf_size, group_shift, (1 << index_bits) - 1, lowers, uppers,
+                ints["items"], ints["parent"], ints["left"], ints["right"], node_lo, node_hi,
+                node_a, node_b, zero["climbs"], zero["starts"], ints["group_roots"]]).launch,
+            ScanInto(zero["starts"], ints["before"]),
+            prepared(_preorder, slots, [
+                keys, n, leaf_size, group_shift, has_groups, ints["items"], lowers, uppers,
+                ints["parent"], node_lo, node_hi, node_a, node_b, ints["before"], ints["skip"],
+                ints["first"], ints["count"], lo, hi, packed_first, packed_next, with_parents,
+                ints["pre_parent"], ints["group_roots"], zero["starts"], zero["bounds"]]).launch,
+        ]  # fmt: skip
+        self.tree = DeviceTree(
+            ints["skip"], ints["first"], ints["count"], ints["items"],
+            ints["group_roots"][:num_groups], ints["pre_parent"], zero["arrivals"], slots,
+            nodes, node_count=ints["before"][n:], bounded=True,
+        )  # fmt: skip
+
+    def run(self) -> DeviceTree:
+        """Build the tree (again) from the boxes' current values; returns ``tree``."""
+        for step in self._steps:
+            step()
+        self.tree.forget_count()
+        return self.tree
 
 
 def build_lbvh(lowers: array, uppers: array, leaf_size: int, groups: array | None,
                num_groups: int, bottom_up: bool | None = None) -> DeviceTree:  # fmt: skip
-    """Build a ``DeviceTree`` over the boxes on their device (see the module docstring),
-    its packed nodes' links written (``DeviceTree.nodes``) and, for the bottom-up refit
-    (on a GPU by default, anywhere with ``bottom_up=True``), its parents and arrival
-    counters.
-
-    Four allocations (each costs the host tens of microseconds on a GPU): the int32
-    arrays are views of one block, those that start at zero (the counts of kept nodes,
-    the arrival counters, the centres' bounds) of one zeroed block; the sort keys and the
-    packed nodes have their own."""
+    """Build a ``DeviceTree`` over the boxes on their device (see the module docstring):
+    its packed nodes written whole (links and bounds) and, for the bottom-up refit (on
+    a GPU by default, anywhere with ``bottom_up=True``), its parents and arrival
+    counters. ``tree.rebuild()`` builds it again over the same buffers."""
     device = lowers.device
     n = lowers.shape[0]
     leaf_size = max(1, int(leaf_size))
     if bottom_up is None:  # a GPU refits bottom up (``device_tree``), from parents
         bottom_up = device.is_cuda
-    nodes = 2 * n - 1
-    roots = max(num_groups, 1)
     if n == 0:
-        none = empty(roots, dtype=int32, device=device)
+        none = empty(max(num_groups, 1), dtype=int32, device=device)
         none.fill_(-1)
         return DeviceTree(none[:0], none[:0], none[:0], none[:0], none[:num_groups], none[:0],
                           none[:0], 0)  # fmt: skip
-    # Every element of ``block`` is written before it is read; ``zero`` starts at zero.
-    sizes = {"values": 2 * n, "range_a": nodes, "range_b": nodes, "parent": nodes,
-             "before": n + 1, "skip": nodes, "first": nodes, "count": nodes,
-             "pre_parent": nodes if bottom_up else 0, "group_roots": roots}  # fmt: skip
-    ints = _carve(empty(sum(sizes.values()), dtype=int32, device=device), sizes)
-    zero_sizes = {"counts": n + 1, "arrivals": nodes if bottom_up else 0, "bounds": BOUND_SLOTS}
-    zero = _carve(zeros(sum(zero_sizes.values()), dtype=int32, device=device), zero_sizes)
-    centre_bounds(lowers, uppers, zero["bounds"])
-    keys = empty(2 * n, dtype=uint64, device=device)
-    values = ints["values"]
-    group_arg = groups if groups is not None else zero["bounds"]
-    launch(
-        _morton_keys, dim=n, device=device,
-        inputs=[lowers, uppers, zero["bounds"], group_arg, int(groups is not None), keys, values],
-    )  # fmt: skip
-    # Only the Morton code's 30 bits and the group id's bits above bit 32 decide the order.
-    key_bits = 32 + max(num_groups - 1, 0).bit_length() if groups is not None else 30
-    radix_sort_pairs(keys, values, n, end_bit=key_bits)
-    range_a, range_b, parent = ints["range_a"], ints["range_b"], ints["parent"]
-    counts = zero["counts"]  # kept nodes starting at a, at a + 1
-    group_roots = ints["group_roots"]
-    launch(_karras_nodes, dim=nodes, device=device,
-           inputs=[keys, n, leaf_size, range_a, range_b, parent, counts, group_roots])  # fmt: skip
-    before = ints["before"]  # kept nodes starting before each position
-    array_scan(counts, before, inclusive=True)
-    # The packed nodes, allocated for the most nodes (the count comes back below).
-    packed = empty(nodes, dtype=BvhNode, device=device)
-    node_first, node_next = node_field(packed, 12, int32), node_field(packed, 28, int32)
-    skip, first, count, pre_parent = ints["skip"], ints["first"], ints["count"], ints["pre_parent"]
-    launch(
-        _preorder, dim=nodes, device=device,
-        inputs=[keys, range_a, range_b, parent, leaf_size, before, int(groups is not None),
-                skip, first, count, group_roots, node_first, node_next, int(bottom_up),
-                pre_parent],
-    )  # fmt: skip
-    num_nodes = int(before[n : n + 1].numpy()[0])  # the build's one read back
-    if bottom_up:
-        pre_parent, arrivals = pre_parent[:num_nodes], zero["arrivals"][:num_nodes]
-    else:
-        arrivals = pre_parent  # empty
-    return DeviceTree(
-        skip[:num_nodes], first[:num_nodes], count[:num_nodes], values[:n],
-        group_roots[:num_groups], pre_parent, arrivals, num_nodes, packed[:num_nodes],
-    )  # fmt: skip
+    build = LbvhBuild(lowers, uppers, leaf_size, groups, num_groups, bottom_up)
+    tree = build.run()
+    tree.rebuild = build.run
+    return tree
 
 
 def _carve(block: array, sizes: dict[str, int]) -> dict[str, array]:

@@ -11,7 +11,7 @@ import pytest
 
 import kdsl as wp
 from kdsl.geometry.bvh import CONSTRUCTORS
-from kdsl.geometry.device_tree import pack_nodes, refit, with_parents
+from kdsl.geometry.device_tree import UNUSED, pack_nodes, refit, with_parents
 from kdsl.geometry.lbvh import build_lbvh
 from kdsl.stdlib.bvh import BvhNode
 
@@ -43,8 +43,8 @@ def test_bottom_up_refit_matches_sequential(device, constructor, leaf_size):
     none = wp.empty(0, dtype=wp.int32, device=device)  # no parent links: the sequential pass
     sequential = dataclasses.replace(tree, parent=none, arrivals=none)
     bottom_up = with_parents(build(lo, hi, leaf_size, None, 0), bottom_up=True)
-    assert bottom_up.parent.shape[0] == bottom_up.num_nodes
-    parent = bottom_up.parent.numpy()
+    assert bottom_up.parent.shape[0] == bottom_up.slots >= bottom_up.num_nodes
+    parent = bottom_up.parent.numpy()[: bottom_up.num_nodes]  # then unused slots (lbvh)
     assert parent[0] == -1 and np.all(parent[1:] < np.arange(1, bottom_up.num_nodes))
     for step in range(3):  # the arrival counters must be ready again after each refit
         if step:
@@ -72,11 +72,13 @@ def test_lbvh_writes_the_parents_and_links_of_its_nodes(device, leaf_size, num_g
     tree = build_lbvh(lo, hi, leaf_size, groups, num_groups, bottom_up=True)
     none = wp.empty(0, dtype=wp.int32, device=device)
     linked = with_parents(dataclasses.replace(tree, parent=none, arrivals=none), bottom_up=True)
-    np.testing.assert_array_equal(tree.parent.numpy(), linked.parent.numpy())
-    assert tree.arrivals.shape == (tree.num_nodes,) and not tree.arrivals.numpy().any()
-    packed = wp.empty(tree.num_nodes, dtype=BvhNode, device=device)
-    pack_nodes(tree, packed, wp.empty(tree.num_nodes, dtype=wp.int32, device=device))
+    m = tree.num_nodes  # the nodes, then unused slots
+    np.testing.assert_array_equal(tree.parent.numpy()[:m], linked.parent.numpy()[:m])
+    assert tree.arrivals.shape == (tree.slots,) and not tree.arrivals.numpy().any()
+    assert tree.slots == 2 * 2000 - 1 and np.all(tree.first.numpy()[m:] == UNUSED)
+    packed = wp.empty(tree.slots, dtype=BvhNode, device=device)
+    pack_nodes(tree, packed, wp.empty(tree.slots, dtype=wp.int32, device=device))
     got, want = tree.nodes.numpy(), packed.numpy()
-    np.testing.assert_array_equal(got["next"], want["next"])
+    np.testing.assert_array_equal(got["next"][:m], want["next"][:m])
     np.testing.assert_array_equal(got["first"], tree.first.numpy())
     assert not build_lbvh(lo, hi, leaf_size, groups, num_groups, bottom_up=False).parent.size

@@ -1,0 +1,158 @@
+"""The lbvh build (``kdsl.geometry.lbvh``): the bottom-up hierarchy and preorder kernels
+give exactly the binary radix tree of a recursive NumPy/Python reference over the same
+64-bit keys (group, Morton code, index), with duplicates and groups; a rebuild over moved
+boxes reuses every buffer and gives a fresh build's tree; a build reads nothing back
+and allocates four arrays, a rebuild neither allocates nor prepares; cuda variants on
+the GPU machine."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import kdsl as wp
+from kdsl.errors import KdslError
+from kdsl.geometry import lbvh
+from kdsl.geometry.device_tree import UNUSED
+from kdsl.runtime.array import array
+
+cuda = pytest.mark.skipif(not wp.is_cuda_available(), reason="no GPU")
+DEVICES = ["cpu", pytest.param("cuda:0", marks=cuda)]
+
+
+def _spread(v: int) -> int:
+    return sum(((v >> b) & 1) << (3 * b) for b in range(10))
+
+
+def _grid_boxes(rng, n: int, cells: int):
+    """Boxes whose centres sit at cell centres of a 1024^3 grid (``cells`` distinct
+    coordinates per axis, so duplicates when few), with centres 0 and 1023 present on
+    every axis: the centres' bounds are [0, 1023], the quantization the identity."""
+    q = rng.integers(0, cells, (n, 3)) * (1023 // max(cells - 1, 1))
+    q[0], q[-1] = 0, 1023
+    c = q.astype(np.float32)
+    return c - np.float32(0.25), c + np.float32(0.25), q
+
+
+def _reference(keys: list[int], leaf_size: int, group_shift: int):
+    """skip, first, count of the preorder tree over the sorted distinct ``keys``."""
+    skip, first, count = [], [], []
+
+    def clz(x: int) -> int:
+        return 64 - x.bit_length()
+
+    def emit(a: int, b: int) -> None:
+        me = len(skip)
+        skip.append(0)
+        if b - a + 1 <= leaf_size and keys[a] >> group_shift == keys[b] >> group_shift:
+            first.append(a)
+            count.append(b - a + 1)
+        else:
+            first.append(-1)
+            count.append(0)
+            d = clz(keys[a] ^ keys[b])
+            split = max(i for i in range(a, b) if clz(keys[a] ^ keys[i]) > d)
+            emit(a, split)
+            emit(split + 1, b)
+        skip[me] = len(skip)
+
+    emit(0, len(keys) - 1)
+    return skip, first, count
+
+
+@pytest.mark.parametrize("device", DEVICES)
+@pytest.mark.parametrize(("n", "cells", "leaf_size", "num_groups"), [
+    (1, 2, 1, 0), (2, 2, 1, 0), (300, 1024, 1, 0), (300, 1024, 4, 0), (400, 3, 1, 0),
+    (400, 3, 3, 0), (500, 16, 2, 5), (257, 1024, 1, 3),
+])  # fmt: skip
+def test_tree_is_the_radix_tree_of_the_keys(device, n, cells, leaf_size, num_groups):
+    rng = np.random.default_rng(n + cells)
+    lo, hi, q = _grid_boxes(rng, n, cells)
+    groups = rng.integers(0, num_groups, n).astype(np.int32) if num_groups else None
+    drop, index_bits, group_shift = lbvh.key_layout(n, num_groups)
+    morton = [(_spread(int(x)) << 2 | _spread(int(y)) << 1 | _spread(int(z))) >> drop
+              for x, y, z in q]
+    keys = sorted(m << index_bits | i | (int(groups[i]) << group_shift if num_groups else 0)
+                  for i, m in enumerate(morton))  # fmt: skip
+    skip, first, count = _reference(keys, leaf_size, group_shift if num_groups else 63)
+    g = None if groups is None else wp.array(groups, dtype=wp.int32, device=device)
+    bvh = wp.Bvh(wp.array(lo, dtype=wp.vec3, device=device),
+                 wp.array(hi, dtype=wp.vec3, device=device), constructor="lbvh", groups=g,
+                 leaf_size=leaf_size)  # fmt: skip
+    t = bvh._tree
+    m = t.num_nodes
+    assert m == len(skip) and t.slots == 2 * n - 1
+    np.testing.assert_array_equal(t.skip.numpy()[:m], skip)
+    np.testing.assert_array_equal(t.first.numpy()[:m], first)
+    np.testing.assert_array_equal(t.count.numpy()[:m], count)
+    np.testing.assert_array_equal(t.items.numpy(), [k & ((1 << index_bits) - 1) for k in keys])
+    assert np.all(t.first.numpy()[m:] == UNUSED) and np.all(t.nodes.numpy()["first"][m:] == UNUSED)
+    nodes = t.nodes.numpy()[:m]  # packed links and bounds: the union of the items below
+    items = t.items.numpy()
+    for k in range(m):
+        end = skip[k] if first[k] < 0 else k + 1
+        under = [items[first[j] + c] for j in range(k, end) if first[j] >= 0
+                 for c in range(count[j])]  # fmt: skip
+        np.testing.assert_array_equal(nodes["lower"][k], lo[under].min(axis=0))
+        np.testing.assert_array_equal(nodes["upper"][k], hi[under].max(axis=0))
+        assert nodes["next"][k] == (count[k] if first[k] >= 0 else skip[k])
+
+
+@pytest.mark.parametrize("device", DEVICES)
+@pytest.mark.parametrize("leaf_size", [1, 4])
+def test_rebuild_reuses_buffers_and_matches_a_fresh_build(device, leaf_size):
+    rng = np.random.default_rng(3)
+    n = 3000
+    lo = wp.array(rng.random((n, 3)).astype(np.float32), dtype=wp.vec3, device=device)
+    hi = wp.array(lo.numpy() + 0.01, dtype=wp.vec3, device=device)
+    bvh = wp.Bvh(lo, hi, constructor="lbvh", leaf_size=leaf_size)
+    nodes, tree = bvh._nodes, bvh._tree
+    for step in range(3):  # each build must leave its counters zeroed for the next
+        c = rng.random((n, 3)).astype(np.float32) * (step + 1)
+        lo.assign(wp.array(c, dtype=wp.vec3, device=device))
+        hi.assign(wp.array(c + 0.02, dtype=wp.vec3, device=device))
+        bvh.rebuild()
+        assert bvh._nodes is nodes and bvh._tree is tree
+        fresh = wp.Bvh(lo, hi, constructor="lbvh", leaf_size=leaf_size)
+        assert tree.num_nodes == fresh._tree.num_nodes
+        np.testing.assert_array_equal(bvh._nodes.numpy(), fresh._nodes.numpy())
+        np.testing.assert_array_equal(tree.items.numpy(), fresh._tree.items.numpy())
+        bvh.refit()  # the refit's counters too
+        np.testing.assert_array_equal(bvh._nodes.numpy(), fresh._nodes.numpy())
+
+
+@pytest.mark.parametrize("device", DEVICES)
+def test_build_reads_nothing_back_and_rebuild_prepares_nothing(device, monkeypatch):
+    n = 5000
+    rng = np.random.default_rng(5)
+    lo = wp.array(rng.random((n, 3)).astype(np.float32), dtype=wp.vec3, device=device)
+    hi = wp.array(lo.numpy() + 0.01, dtype=wp.vec3, device=device)
+    wp.Bvh(lo, hi, constructor="lbvh")  # compiles
+    calls = {"numpy": 0, "alloc": 0, "launch": 0}
+    real_numpy = array.numpy
+
+    def counting(name, fn):
+        def wrapped(*a, **k):
+            calls[name] += 1
+            return fn(*a, **k)
+        return wrapped
+
+    monkeypatch.setattr(array, "numpy", counting("numpy", real_numpy))
+    monkeypatch.setattr(lbvh, "empty", counting("alloc", lbvh.empty))
+    monkeypatch.setattr(lbvh, "zeros", counting("alloc", lbvh.zeros))
+    monkeypatch.setattr(lbvh, "launch", counting("launch", lbvh.launch))
+    bvh = wp.Bvh(lo, hi, constructor="lbvh")
+    assert calls == {"numpy": 0, "alloc": 4, "launch": 4}  # four prepared kernels
+    calls.update(numpy=0, alloc=0, launch=0)
+    bvh.rebuild()
+    assert calls == {"numpy": 0, "alloc": 0, "launch": 0}
+    monkeypatch.setattr(array, "numpy", real_numpy)
+    assert bvh._tree.num_nodes == 2 * n - 1  # read back on demand only
+
+
+def test_key_layout_makes_room_for_groups_and_refuses_too_many():
+    assert lbvh.key_layout(200_000, 0) == (0, 18, 63)
+    assert lbvh.key_layout(200_000, 5) == (0, 18, 48)
+    assert lbvh.key_layout(2**31, 2**12) == (12, 31, 49)  # fewer Morton bits
+    with pytest.raises(KdslError, match="no key bits"):
+        lbvh.key_layout(2**31, 2**31)
