@@ -92,24 +92,32 @@ def fast_geometry(
     """(grid, block) to launch the fast entry of ``plan`` on ``args`` (CuPy arrays at
     the array positions) over ``dims`` (``total`` threads), or None where only the
     general entry is exact (see ``variants``): one pass over the arrays (this runs
-    per launch) applying ``offsets_fit``, then ``disjoint`` to the ``byte_range``
-    of each read-only array against each written one."""
+    per launch; 1-d arrays inline) applying ``offsets_fit``, then ``disjoint`` to the
+    ``byte_range`` of each read-only array against each written one."""
     read: list[tuple[int, int]] = []
     written: list[tuple[int, int]] = []
-    ro, wr = plan.read_only, plan.written
-    for i, nd, item in plan.arrays:
+    for i, nd, item, role in plan.checks:
         a = args[i]
-        span = extent(a.shape[:nd], a.strides[:nd])
-        if span is None:
-            continue
-        lo, hi = span
+        if nd == 1:
+            n = a.shape[0]
+            if n == 0:
+                continue
+            ext = a.strides[0] * (n - 1)
+            lo, hi = (ext, 0) if ext < 0 else (0, ext)
+        else:
+            span = extent(a.shape[:nd], a.strides[:nd])
+            if span is None:
+                continue
+            lo, hi = span
         if hi - lo > INT32_MAX:
             return None
-        if i in ro or i in wr:
+        if role:
             ptr = a.data.ptr
-            (read if i in ro else written).append((ptr + lo, ptr + hi + item))
-    if any(not disjoint(r, w) for r in read for w in written):
-        return None
+            (read if role == 1 else written).append((ptr + lo, ptr + hi + item))
+    for r in read:
+        for w in written:
+            if r[0] < w[1] and w[0] < r[1]:  # not disjoint(r, w), inline
+                return None
     if plan.grid_nd:
         return nd_geometry(tuple(dims)) if len(dims) == plan.grid_nd else None
     return linear_geometry(total)

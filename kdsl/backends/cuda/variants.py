@@ -25,6 +25,7 @@ that both entries' ``__launch_bounds__`` declare.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 from kdsl.ir import types as T
@@ -50,6 +51,15 @@ class FastPlan:
     arrays: tuple[tuple[int, int, int], ...]
     read_only: tuple[int, ...]
     written: tuple[int, ...]
+
+    @functools.cached_property
+    def checks(self) -> tuple[tuple[int, int, int, int], ...]:
+        """(position, ndim, element bytes, role) per array, what a launch tests: role 1
+        for a read-only array, 2 for a written one, 0 for the others."""
+        ro, wr = self.read_only, self.written
+        return tuple(
+            (i, nd, item, 1 if i in ro else 2 if i in wr else 0) for i, nd, item in self.arrays
+        )
 
 
 def ldg_type(t: T.Type) -> bool:
