@@ -44,3 +44,14 @@ def test_a_changed_prologue_is_reported():
         V.rows_grid("__global__ void k() {}")
     with pytest.raises(RuntimeError, match="no kd_at accessor"):
         V.offsets32("int x;")
+
+
+def test_kdsl_fast_entries_as_generated(variants):
+    """The backend's own fast entries (``cuda/variants.py``): Jacobi without the
+    division, both with every load of a read-only array through the read-only path."""
+    jac = variants["jacobi"][V.FAST_ROWS]
+    clo = variants["cloth"][V.FAST]
+    j = V.ptx_counts(*jac, kdsl_options=True)
+    c = V.ptx_counts(*clo, kdsl_options=True)
+    assert j["div/rem"] == 0 and j["ld.global.nc"] == 5 and j["ld.global"] == 0
+    assert c["ld.global.nc"] == 30 and c["ld.global"] == 0
