@@ -213,10 +213,12 @@ def _index_key(
     backend: Backend, target: Any, symbol: str | None, options: dict[str, Any]
 ) -> str | None:
     """The source index key of ``target`` (``source_index``), or None where it has none:
-    a module given as IR, a backend without binaries, no disk cache, or a kernel whose
-    fingerprint cannot be computed."""
+    a module given as IR, a backend without binaries, no disk cache, the index turned
+    off (``KDSL_SOURCE_INDEX=0``), or a kernel whose fingerprint cannot be computed."""
     fingerprint = getattr(target, "source_fingerprint", None)
     if symbol is not None or fingerprint is None or not backend.cacheable:
+        return None
+    if not source_index.enabled():
         return None
     if kernel_cache.default_cache() is None:
         return None

@@ -21,7 +21,8 @@ just built it; the backend then loads the IR-keyed binary (or builds it from tha
 module if it is gone). A kernel whose fingerprint cannot be computed (it reads a value
 the fingerprint cannot digest) has no index entry and is keyed by its IR as before.
 Entries live in the disk cache only (``KDSL_CACHE=0`` turns the index off), and in
-ahead-of-time directories beside the kernels.
+ahead-of-time directories beside the kernels. ``KDSL_SOURCE_INDEX=0`` turns the index
+alone off (every kernel is keyed by its IR, as before; for comparisons).
 """
 
 from __future__ import annotations
@@ -60,6 +61,12 @@ class IndexStats:
 
 
 STATS = IndexStats()
+
+
+def enabled() -> bool:
+    """False when ``KDSL_SOURCE_INDEX`` is 0/off/false/no."""
+    flag = os.environ.get("KDSL_SOURCE_INDEX", "1").strip().lower()
+    return flag not in ("0", "off", "false", "no")
 
 
 @dataclass

@@ -339,6 +339,16 @@ def test_without_a_disk_cache_there_is_no_index(tmp_path, monkeypatch):
     assert (source_index.STATS.stored, source_index.STATS.misses) == (stored, misses)
 
 
+def test_the_index_can_be_turned_off_alone(tmp_path, monkeypatch):
+    monkeypatch.setenv("KDSL_SOURCE_INDEX", "0")
+    mod = _load(tmp_path / "kern.py", BASE)
+    stored, misses = source_index.STATS.stored, source_index.STATS.misses
+    builds = cache.STATS.builds
+    compile_kernel(BACKEND, mod.k, options={})
+    assert (source_index.STATS.stored, source_index.STATS.misses) == (stored, misses)
+    assert cache.STATS.builds == builds + 1  # the kernel itself is still cached
+
+
 def _refuse(*args, **kwargs):
     raise AssertionError("a source index hit must not build the kernel's IR")
 

@@ -159,14 +159,23 @@ def library_fingerprint() -> str | None:
             found.append((path, st.st_size, st.st_mtime_ns))
     if not found:
         return None
-    spec = importlib.util.find_spec("cupy_backends")
-    for root in (spec.submodule_search_locations or []) if spec is not None else []:
+    for root in _package_dirs("cupy_backends"):
         libs = os.path.join(root, "cuda", "libs")
         for name in sorted(os.listdir(libs)) if os.path.isdir(libs) else []:
             if name.startswith("nvrtc"):
                 st = os.stat(os.path.join(libs, name))
                 found.append((name, st.st_size, st.st_mtime_ns))
     return hashlib.sha256(repr(found).encode()).hexdigest()[:16]
+
+
+def _package_dirs(name: str) -> list[str]:
+    """The directories of package ``name``, without importing it: from ``sys.modules``
+    when it is imported already (a launch imports CuPy first), else from its spec."""
+    mod = sys.modules.get(name)
+    if mod is not None and getattr(mod, "__path__", None) is not None:
+        return list(mod.__path__)
+    spec = importlib.util.find_spec(name)
+    return list(spec.submodule_search_locations or []) if spec is not None else []
 
 
 def arch_for(compute_capability: int) -> str:
