@@ -231,8 +231,15 @@ class CudaBackend(Backend):
         driver, _ = _cuda_api()
         launch_kernel, addr = driver.launchKernel, ctypes.addressof(params)
 
-        def run() -> None:
-            _on_device(ordinal, launch_kernel, fn, gx, gy, gz, bx, by, bz, 0, raw, addr, 0)
+        if device_count() == 1:  # the only device is always the current one
+
+            def run() -> None:
+                launch_kernel(fn, gx, gy, gz, bx, by, bz, 0, raw, addr, 0)
+
+        else:
+
+            def run() -> None:
+                _on_device(ordinal, launch_kernel, fn, gx, gy, gz, bx, by, bz, 0, raw, addr, 0)
 
         run.keep = (buf, params, hold)  # type: ignore[attr-defined]
         return run
@@ -261,6 +268,8 @@ def _cuda_api() -> tuple[Any, Any]:
 
 def _on_device(ordinal: int, fn: Callable[..., Any], *args: Any) -> Any:
     """``fn(*args)`` with CUDA device ``ordinal`` current (switching only when needed)."""
+    if device_count() == 1:  # the only device is always the current one: no query
+        return fn(*args)
     runtime = _cuda_api()[1]
     current = runtime.getDevice()
     if current == ordinal:
