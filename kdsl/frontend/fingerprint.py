@@ -19,7 +19,8 @@ frontend reads while it builds a kernel:
 
 A value it cannot digest (an arbitrary object, a plain Python function outside kdsl,
 a global shadowed by a local of the same name whose value it cannot digest) makes the
-whole fingerprint ``None``: the kernel is then keyed by its IR as before (correct,
+whole fingerprint ``None`` (an object only used as the base of an attribute, as
+``settings`` in ``settings.n``, is named by its type: the value read is ``settings.n``): the kernel is then keyed by its IR as before (correct,
 only slower). Names the kernel binds only as parameters are never looked up: the
 frontend finds the parameter first.
 """
@@ -90,19 +91,33 @@ class _Walk:
         return h.hexdigest()
 
     def chain(self, scope: _Scope, chain: tuple[str, ...]) -> str:
-        """The digest of what ``a.b.c`` names (as far as it resolves)."""
+        """The digest of what ``a.b.c`` names (as far as it resolves).
+
+        The frontend reads only the value at the end of a chain (``a`` and ``a.b`` are
+        bases it takes an attribute of), so an object in the middle that cannot be
+        digested (``settings`` in ``settings.n``) is named by its type; the end value
+        must be digested. A bare ``settings`` elsewhere is a chain of its own.
+        """
         found, value = scope.lookup(chain[0])
         if not found:
             return "<undefined>"  # a local, or a name the frontend reports
-        parts = [self.value(value)]
+        values, missing = [value], ""
         for attr in chain[1:]:
             try:
                 value = getattr(value, attr)
             except Exception:
-                parts.append(f"<no .{attr}>")
+                missing = f"|<no .{attr}>"
                 break
-            parts.append(self.value(value))
-        return "|".join(parts)
+            values.append(value)
+        parts = [self.base(v) for v in values[:-1]] + [self.value(values[-1])]
+        return "|".join(parts) + missing
+
+    def base(self, v: Any) -> str:
+        """The digest of an object the frontend takes an attribute of."""
+        try:
+            return self.value(v)
+        except _Opaque:
+            return f"base:{_qual(v if isinstance(v, type) else type(v))}"
 
     def value(self, v: Any) -> str:
         """The digest of one value the frontend may read (raises ``_Opaque``)."""

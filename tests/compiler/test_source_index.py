@@ -186,6 +186,12 @@ def uses_object(a: wp.array(dtype=int)):
 
 
 @wp.kernel
+def uses_bare_object(a: wp.array(dtype=int)):
+    s = SETTINGS
+    a[wp.tid()] = s.n
+
+
+@wp.kernel
 def uses_static_call(a: wp.array(dtype=int)):
     a[wp.tid()] = wp.static(helper())
 
@@ -198,7 +204,11 @@ def param_named_like_a_global(out: wp.array(dtype=int)):
 
 def test_values_it_cannot_digest_leave_the_kernel_keyed_by_its_ir(tmp_path):
     mod = _load(tmp_path / "kern.py", OPAQUE)
-    assert source_fingerprint(mod.uses_object) is None
+    assert source_fingerprint(mod.uses_bare_object) is None
+    via_attribute = source_fingerprint(mod.uses_object)  # the value read is SETTINGS.n
+    assert via_attribute is not None
+    mod.SETTINGS.n = 5
+    assert source_fingerprint(mod.uses_object) not in (None, via_attribute)
     assert source_fingerprint(mod.uses_static_call) is None
     assert source_fingerprint(mod.param_named_like_a_global) is not None
     # Still compiled and run, through the IR key alone (no index entry).
