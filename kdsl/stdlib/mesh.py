@@ -426,9 +426,10 @@ def _ray_closest_face(id: wp.uint64, start: wp.vec3, dir: wp.vec3, max_t: float,
     """The face of the first hit along the ray at ``0 <= t < max_t`` (lowest face among
     equal ``t``), or -1.
 
-    Front to back: at an inner node the child the ray enters first is visited first
-    and the other waits on a small stack with its entry ``t``, dropped when a hit
-    nearer than that is found meanwhile. A tree deeper than the stack (``RAY_STACK``)
+    Front to back: at an inner node the child the ray enters first is visited next
+    (its node, loaded for its entry ``t``, is not loaded again) and the other waits on
+    a small stack with its entry ``t``, dropped when a hit nearer than that is found
+    meanwhile. A tree deeper than the stack (``RAY_STACK``)
     overflows into a stackless pass over the whole range, bounded by the hit found so
     far: the answer never depends on the order."""
     rec = wp.object_record(id, MeshRecord)
@@ -448,48 +449,56 @@ def _ray_closest_face(id: wp.uint64, start: wp.vec3, dir: wp.vec3, max_t: float,
     enters = wp.zeros(RAY_STACK, dtype=wp.float32)
     count = 0
     overflow = False
+    node = span[0]
+    active = False  # ``node`` (packed as ``nd``) is to be visited
+    nd = BvhNode()
     if span[0] < span[1]:
-        nd = bvh.nodes[span[0]]
-        t_root = ray_box_enter(nd.lower, nd.upper, start, inv)
-        if t_root <= hit.t:
-            nodes[0] = span[0]
-            enters[0] = t_root
-            count = 1
-    while count > 0:
-        count = count - 1
-        node = nodes[count]
-        if enters[count] <= hit.t:
-            nd = bvh.nodes[node]
-            if nd.first >= 0:
-                hit = _ray_leaf(rec, bvh, nd, shear, start, hit)
-            else:
-                near = node + 1
-                near_nd = bvh.nodes[near]
-                far = _skip(near_nd, near)
-                far_nd = bvh.nodes[far]
-                t_near = ray_box_enter(near_nd.lower, near_nd.upper, start, inv)
-                t_far = ray_box_enter(far_nd.lower, far_nd.upper, start, inv)
-                if t_far < t_near:
-                    tmp = near
-                    near = far
-                    far = tmp
-                    tmp_t = t_near
-                    t_near = t_far
-                    t_far = tmp_t
-                if t_far <= hit.t:
+        nd = bvh.nodes[node]
+        active = ray_box_enter(nd.lower, nd.upper, start, inv) <= hit.t
+    while active:
+        go_on = False  # a child of ``node`` is visited next, without the stack
+        if nd.first >= 0:
+            hit = _ray_leaf(rec, bvh, nd, shear, start, hit)
+        else:
+            near = node + 1
+            near_nd = bvh.nodes[near]
+            far = _skip(near_nd, near)
+            far_nd = bvh.nodes[far]
+            t_near = ray_box_enter(near_nd.lower, near_nd.upper, start, inv)
+            t_far = ray_box_enter(far_nd.lower, far_nd.upper, start, inv)
+            near_in = t_near <= hit.t  # (false for NaN: a missed box)
+            far_in = t_far <= hit.t
+            if far_in and (not near_in or t_far < t_near):  # the far child first
+                near_in = far_in
+                far_in = t_near <= hit.t
+                tmp = near
+                near = far
+                far = tmp
+                tmp_nd = near_nd
+                near_nd = far_nd
+                far_nd = tmp_nd
+                tmp_t = t_near
+                t_near = t_far
+                t_far = tmp_t
+            if near_in:  # visit it now (its node is loaded); the other waits
+                if far_in:
                     if count < RAY_STACK:
                         nodes[count] = far
                         enters[count] = t_far
                         count = count + 1
                     else:
                         overflow = True
-                if t_near <= hit.t:
-                    if count < RAY_STACK:
-                        nodes[count] = near
-                        enters[count] = t_near
-                        count = count + 1
-                    else:
-                        overflow = True
+                node = near
+                nd = near_nd
+                go_on = True
+        if not go_on:  # the nearest waiting node not beyond the hit found so far
+            active = False
+            while count > 0 and not active:
+                count = count - 1
+                if enters[count] <= hit.t:
+                    node = nodes[count]
+                    nd = bvh.nodes[node]
+                    active = True
     if overflow:
         node = span[0]
         while node < span[1]:
