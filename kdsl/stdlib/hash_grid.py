@@ -162,11 +162,26 @@ def hash_grid_query(id: wp.uint64, point: wp.vec3, max_dist: float) -> HashGridQ
     q.x = q.x_start
     q.y = q.y_start
     q.z = q.z_start
-    q.cell_index = 0
-    q.cell_end = 0
-    if rec.num_points > 0:
-        _enter_run(q, rec)
+    # The cell tables exist from the grid's making and hold only empty buckets until a
+    # build: an unbuilt grid's runs are all empty, with no test of its point count.
+    _enter_run(q, rec)
     return q
+
+
+@func
+def _next_run(query: inout(HashGridQuery), rec: HashGridRecord) -> bool:
+    """Move ``query`` to its next run of buckets (the rest of its row, or the next row's
+    first run); False when its box has no more."""
+    if query.x > query.x_end:  # the row is done: the next one
+        query.x = query.x_start
+        query.y = query.y + 1
+        if query.y > query.y_end:
+            query.y = query.y_start
+            query.z = query.z + 1
+            if query.z > query.z_end:
+                return False
+    _enter_run(query, rec)
+    return True
 
 
 @func
@@ -175,23 +190,12 @@ def hash_grid_query_next(query: inout(HashGridQuery), index: inout(wp.int32)) ->
     ``index`` and gives True, or gives False (``index`` unchanged) when none is left, or
     when the grid has not been built."""
     rec = wp.object_record(query.grid, HashGridRecord)
-    found = False
-    if rec.num_points > 0:
-        while not found:
-            if query.cell_index < query.cell_end:
-                index = rec.point_ids[query.cell_index]  # noqa: F841 - in-out
-                query.cell_index = query.cell_index + 1
-                found = True
-            else:
-                if query.x > query.x_end:  # the row is done: the next one
-                    query.x = query.x_start
-                    query.y = query.y + 1
-                    if query.y > query.y_end:
-                        query.y = query.y_start
-                        query.z = query.z + 1
-                        if query.z > query.z_end:
-                            break
-                _enter_run(query, rec)
+    found = True
+    while found and query.cell_index >= query.cell_end:
+        found = _next_run(query, rec)
+    if found:
+        index = rec.point_ids[query.cell_index]  # noqa: F841 - in-out
+        query.cell_index = query.cell_index + 1
     return found
 
 
