@@ -27,7 +27,6 @@ alone off (every kernel is keyed by its IR, as before; for comparisons).
 
 from __future__ import annotations
 
-import functools
 import hashlib
 import io
 import json
@@ -79,10 +78,14 @@ class Entry:
     facts: dict[str, Any]
 
 
-@functools.cache
 def kdsl_code_digest() -> str:
-    """``code_digest`` of the kdsl package this process runs, computed once per process."""
-    return code_digest(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    """``code_digest`` of the kdsl package this process runs, taken when it was imported.
+
+    Taken at import, not at the first compile: a kdsl file edited while a process runs
+    must not key what that process (still running the old code) compiles as the new
+    code's.
+    """
+    return _IMPORTED_CODE
 
 
 def code_digest(root: str) -> str:
@@ -112,6 +115,10 @@ def _scan(directory: str, rows: list[str], recurse: bool) -> None:
             rows.append(f"{e.path}:{st.st_size}:{st.st_mtime_ns}")
         elif recurse and e.name != "__pycache__" and e.is_dir(follow_symlinks=False):
             _scan(e.path, rows, recurse)
+
+
+#: kdsl's code digest at import (see ``kdsl_code_digest``).
+_IMPORTED_CODE = code_digest(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 
 def source_key(backend: Any, fingerprint: str, symbol: str, options: dict[str, Any]) -> str:
