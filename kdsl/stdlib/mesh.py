@@ -70,9 +70,10 @@ __all__ = [
 AABB, SPHERE = 0, 1
 #: The largest finite float32 (Warp's FLT_MAX), the bound of an unbounded ray.
 FLT_MAX = 3.402823466e38
-#: Nodes a ray's front-to-back walk keeps waiting (``_ray_closest``): deeper trees fall
-#: back to a stackless pass.
-RAY_STACK = 48
+#: Nodes a ray's front-to-back walk keeps waiting (``_ray_closest``): at most one per
+#: level of the tree below the root (a 200k-face mesh's tree is 24 deep); deeper trees
+#: fall back to a stackless pass. Warp's stack holds 32 too; each query zero-fills it.
+RAY_STACK = 32
 #: 1 / (4 pi): solid angle to winding number.
 INV_4PI = 0.07957747154594767
 
@@ -274,10 +275,11 @@ def _furthest_face(id: wp.uint64, point: wp.vec3, min_dist: float) -> int:
     span = _root_range(bvh, -1)
     node = span[0]
     while node < span[1]:
-        if box_furthest_distance_sq(bvh.lowers[node], bvh.uppers[node], point) >= best:
-            first = bvh.first[node]
+        nd = bvh.nodes[node]  # bounds and links in one 32-byte load
+        if box_furthest_distance_sq(nd.lower, nd.upper, point) >= best:
+            first = nd.first
             if first >= 0:
-                for k in range(first, first + bvh.count[node]):
+                for k in range(first, first + nd.next):
                     f = bvh.items[k]
                     a = _vertex(rec, f, 0)
                     b = _vertex(rec, f, 1)
@@ -291,7 +293,7 @@ def _furthest_face(id: wp.uint64, point: wp.vec3, min_dist: float) -> int:
                             best_face = f
             node = node + 1
         else:
-            node = bvh.skip[node]
+            node = _skip(nd, node)
     return best_face
 
 
@@ -865,10 +867,11 @@ def mesh_query_point_sign_normal(
     node = span[0]
     while node < span[1]:
         reach = best + eps
-        if box_distance_sq(bvh.lowers[node], bvh.uppers[node], point) <= reach * reach:
-            first = bvh.first[node]
+        nd = bvh.nodes[node]  # bounds and links in one 32-byte load
+        if box_distance_sq(nd.lower, nd.upper, point) <= reach * reach:
+            first = nd.first
             if first >= 0:
-                for k in range(first, first + bvh.count[node]):
+                for k in range(first, first + nd.next):
                     f = bvh.items[k]
                     a = _vertex(rec, f, 0)
                     b = _vertex(rec, f, 1)
@@ -891,7 +894,7 @@ def mesh_query_point_sign_normal(
                                 normal = w * n
             node = node + 1
         else:
-            node = bvh.skip[node]
+            node = _skip(nd, node)
     if not (best < max_dist):
         best_face = -1
     sign = 0.0
