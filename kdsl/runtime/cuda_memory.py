@@ -166,6 +166,21 @@ def _memcpy(dst: Any, dst_dev: Device, src: Any, src_dev: Device, stream: Stream
         rt.memcpyPeerAsync(dst.data.ptr, dst_dev.ordinal, src.data.ptr, src_dev.ordinal, nbytes, s)
 
 
+def upload_bytes(address: int, data: bytes, device: Device) -> None:
+    """Enqueue a copy of the host bytes ``data`` to device address ``address`` on
+    ``device``'s current stream (staged by the driver before this returns, so ``data``
+    may go at once): a small upload (an object record) without the array checks and
+    the stream bookkeeping of ``copy_elements``."""
+    refuse_upload(device, "an object record write")
+    if not data:
+        return
+    s = get_stream(device)
+    rt = cupy().cuda.runtime
+    src = np.frombuffer(data, dtype=np.uint8)
+    with scope(device, s):
+        rt.memcpyAsync(address, src.ctypes.data, len(data), rt.memcpyHostToDevice, s.cuda_stream)
+
+
 def copy_elements(
     dest: Any,
     dest_dev: Device,

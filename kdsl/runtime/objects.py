@@ -27,6 +27,7 @@ from kdsl.ir import types as T
 from kdsl.ir.records import record_dtype, record_tag
 from kdsl.runtime import alloc
 from kdsl.runtime.array import array
+from kdsl.runtime.cuda_memory import upload_bytes
 from kdsl.runtime.device import Device, get_device
 
 #: Bytes per slab; records are rounded up to a multiple of ``_GRAIN``.
@@ -62,9 +63,8 @@ class _DeviceTable:
         if self.device.is_cpu:
             ctypes.memmove(address, data, len(data))
             return
-        slab, offset = self._locate(address)
-        src = np.frombuffer(data, dtype=np.uint8)
-        alloc.copy(slab, array(src, dtype=T.U8, device="cpu"), dest_offset=offset)
+        self._locate(address)  # (refuses an address outside the slabs)
+        upload_bytes(address, data, self.device)
 
     def _locate(self, address: int) -> tuple[array, int]:
         for slab in self.slabs:
