@@ -14,6 +14,10 @@ blocks, no grid-stride loop): ``kd_i = blockIdx.x * blockDim.x + threadIdx.x``
 (32-bit: launches are limited to 2**31 - 1 threads, like the cpu backend, since
 ``tid()`` is an ``int32``), and an n-d ``tid()`` is split from it row-major with
 32-bit division. Array addresses are computed in 64 bits (``helpers.element_ptr``).
+That is the general entry; release builds add a fast entry ``k_<name>_0_fast`` with
+the same parameters where ``variants.fast_plan`` gives one (an n-d grid, 32-bit
+offsets, ``__ldg`` loads), which a launch takes when ``geometry.fast_geometry``
+allows it.
 
 Every body line carries its op's source location: ``#line`` directives name the
 user's Python file and line, so NVRTC messages point there. Statements of one
