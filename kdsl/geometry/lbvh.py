@@ -28,7 +28,8 @@ parent's range, bounds and kept-node counts, then climbs on); the preorder kerne
 (writes every kept node at its preorder number, packed, with its bounds: no refit).
 The number of kept nodes stays on the device (``DeviceTree.node_count``): the tree's
 arrays have ``2n - 1`` slots, those after the last node marked ``first = -2``
-(``UNUSED``). Its buffers are four allocations; the launches are prepared once
+(``UNUSED``). Its buffers are views of one zeroed allocation (which the tree's
+``rebuild`` keeps alive); the launches are prepared once
 (``record_cmd``) and ``rebuild`` runs them again over the same buffers, which every
 build leaves as it found them (the zeroed counters zero again).
 """
@@ -44,7 +45,7 @@ from kdsl.runtime.alloc import empty, zeros
 from kdsl.runtime.array import array
 from kdsl.runtime.launch import Launch, launch
 from kdsl.stdlib.bvh import BvhNode
-from kdsl.types import float32, int32, uint64, vec3
+from kdsl.types import float32, int32, uint8, uint64, vec3
 from kdsl.utils.scan import ScanInto
 from kdsl.utils.sort import SortKeys
 
@@ -420,19 +421,26 @@ class LbvhBuild:
         roots = max(num_groups, 1)
         morton_drop, index_bits, group_shift = key_layout(n, num_groups)
         has_groups = int(groups is not None)
-        # Every element of ``ints`` is written before it is read; ``zero`` starts at zero
-        # and every build leaves it so.
+        # One zeroed block (one allocation, one fill): the packed nodes (the tree's, then
+        # the radix tree's inner nodes' bounds; 16-byte aligned at the block's start), the
+        # keys, the int32 arrays. Every element of ``ints`` is written before it is read;
+        # ``zero`` must start at zero, and every build leaves it so.
         sizes = {"items": n, "skip": slots, "first": slots, "count": slots, "parent": slots,
                  "left": n - 1, "right": n - 1, "node_a": n - 1, "node_b": n - 1,
                  "before": n + 1,
                  "pre_parent": slots if bottom_up else 0, "group_roots": roots}  # fmt: skip
-        ints = _carve(empty(sum(sizes.values()), dtype=int32, device=device), sizes)
         zero_sizes = {"starts": n + 1, "climbs": n - 1, "arrivals": slots if bottom_up else 0,
                       "bounds": BOUND_SLOTS}  # fmt: skip
-        zero = _carve(zeros(sum(zero_sizes.values()), dtype=int32, device=device), zero_sizes)
-        keys = empty(n, dtype=uint64, device=device)
-        # The tree's packed nodes, then the radix tree's inner nodes' bounds.
-        packed = empty(slots + n - 1, dtype=BvhNode, device=device)
+        node_bytes = 32 * (slots + n - 1)
+        num_ints = sum(sizes.values()) + sum(zero_sizes.values())
+        self._block = zeros(node_bytes + 8 * n + 4 * num_ints, dtype=uint8, device=device)
+        base = self._block.ptr
+        packed = array(ptr=base, dtype=BvhNode, shape=(slots + n - 1,), device=device)
+        keys = array(ptr=base + node_bytes, dtype=uint64, shape=(n,), device=device)
+        int_view = array(ptr=base + node_bytes + 8 * n, dtype=int32, shape=(num_ints,),
+                         device=device)  # fmt: skip
+        ints = _carve(int_view, {**sizes, **zero_sizes})
+        zero = {name: ints[name] for name in zero_sizes}
         nodes, inner = packed[:slots], packed[slots:]
         node_lo, node_hi = node_field(inner, 0, vec3), node_field(inner, 16, vec3)
         node_a, node_b = ints["node_a"], ints["node_b"]
