@@ -112,31 +112,21 @@ def shifts(src: Source, which: str) -> str:
     return _int_template(src, f"kd_{which}", body)
 
 
-def element_ptr(src: Source, ndim: int) -> str:
-    """``kd_at<N>(array, i...)``: the address of an element (64-bit byte offsets)."""
-    name = f"kd_at{ndim}"
+def element_ptr(src: Source, ndim: int, narrow: bool = False) -> str:
+    """``kd_at<N>(array, i...)``: the address of an element (64-bit byte offsets); with
+    ``narrow``, ``kd_at<N>_32``: the byte offset summed in 32-bit ``int`` and widened
+    once, exact while the array spans less than 2**31 bytes (``geometry.offsets_fit``,
+    checked at launch)."""
+    name = f"kd_at{ndim}_32" if narrow else f"kd_at{ndim}"
     arr = src.ctype(T.ArrayType(T.F32, ndim))
     params = ", ".join(f"long long i{k}" for k in range(ndim))
-    off = " + ".join(f"i{k} * a.strides[{k}]" for k in range(ndim))
+    if narrow:
+        off = " + ".join(f"(int)i{k} * (int)a.strides[{k}]" for k in range(ndim))
+        off = f"(long long)({off})"
+    else:
+        off = " + ".join(f"i{k} * a.strides[{k}]" for k in range(ndim))
     src.need(
         name, lambda: f"{_FI} char *{name}(const {arr} &a, {params}) {{ return a.data + {off}; }}"
-    )
-    return name
-
-
-def element_ptr32(src: Source, ndim: int) -> str:
-    """``kd_at<N>_32(array, i...)``: the address of an element, its byte offset summed
-    in 32-bit ``int`` and widened once; exact while the array spans less than 2**31
-    bytes (``geometry.offsets_fit``, checked at launch)."""
-    name = f"kd_at{ndim}_32"
-    arr = src.ctype(T.ArrayType(T.F32, ndim))
-    params = ", ".join(f"long long i{k}" for k in range(ndim))
-    off = " + ".join(f"(int)i{k} * (int)a.strides[{k}]" for k in range(ndim))
-    src.need(
-        name,
-        lambda: (
-            f"{_FI} char *{name}(const {arr} &a, {params}) {{ return a.data + (long long)({off}); }}"
-        ),
     )
     return name
 

@@ -46,7 +46,7 @@ def _array_shape(em: FuncEmitter, op: Operation) -> str:
 def element_ptr(em: FuncEmitter, arr: Value, idx: list[Value]) -> str:
     """C expression of the (``char *``) address of an element; no bounds check."""
     at: T.ArrayType = arr.type
-    fn = (H.element_ptr32 if arr in em.narrow else H.element_ptr)(em.src, at.ndim)
+    fn = H.element_ptr(em.src, at.ndim, arr in em.narrow)
     return f"{fn}({em.get(arr)}, {', '.join(em.get(i) for i in idx)})"
 
 
