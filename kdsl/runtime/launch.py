@@ -145,13 +145,19 @@ class _Plan:
     """What a kernel's launches on one device and backend share (see ``launch_plan``)."""
 
     __slots__ = (
-        "backend", "compiled", "converters", "device", "options", "own", "reuse", "settings",
-        "tid_ndim",
+        "alias", "backend", "backend_arg", "compiled", "converters", "device", "on_cpu",
+        "options", "own", "reuse", "settings", "tid_ndim",
     )  # fmt: skip
 
-    def __init__(self, kernel: Any, device: Device, backend: Backend, settings: tuple) -> None:
+    def __init__(
+        self, kernel: Any, device: Device, backend: Backend, settings: tuple, backend_arg: Any
+    ) -> None:
         self.device = device
+        self.alias = device.alias
+        self.on_cpu = device.is_cpu
         self.backend = backend
+        #: The ``backend`` argument of the launches this plan serves (a name, None or a Backend).
+        self.backend_arg = backend_arg
         self.settings = settings
         self.own = dict(getattr(kernel, "options", None) or {})
         # The module's options (set_module_options) fill in what the kernel leaves unset;
@@ -169,16 +175,29 @@ class _Plan:
 
 
 _PLAN_ATTR = "_kdsl_plans"
+_LAST_ATTR = "_kdsl_last_plan"
 
 
 def launch_plan(kernel: Any, device: Any, backend: Any) -> _Plan:
     """The cached plan for ``kernel`` on ``device`` with ``backend``.
 
     Plans are looked up by device, backend and the debug settings of ``kdsl.config``,
-    and dropped when the kernel's options change, so a hit costs a dict lookup.
+    and dropped when the kernel's options change, so a hit costs a dict lookup. The
+    plan used last is tried first, when ``device`` names its device exactly (its
+    ``Device`` or its full alias: a bare "cuda" follows the current device) and
+    ``backend`` is the same argument.
     """
-    dev = get_device(device)
     settings = (config.mode, config.verify_fp, _modules.version)
+    plan = getattr(kernel, _LAST_ATTR, None)
+    if (
+        plan is not None
+        and (device is plan.device or device == plan.alias)
+        and backend is plan.backend_arg
+        and plan.settings == settings
+        and plan.own == (getattr(kernel, "options", None) or {})
+    ):
+        return plan
+    dev = get_device(device)
     key = (dev.alias, backend if isinstance(backend, str | None) else id(backend))
     plans = getattr(kernel, _PLAN_ATTR, None)
     if plans is None:
@@ -190,13 +209,14 @@ def launch_plan(kernel: Any, device: Any, backend: Any) -> _Plan:
         or plan.settings != settings
         or plan.own != (getattr(kernel, "options", None) or {})
     ):
-        plan = plans[key] = _Plan(kernel, dev, _resolve_backend(backend, dev), settings)
+        plan = plans[key] = _Plan(kernel, dev, _resolve_backend(backend, dev), settings, backend)
+    setattr(kernel, _LAST_ATTR, plan)
     return plan
 
 
 def forget(kernel: Any) -> None:
     """Drop the compiled code and launch plans cached on ``kernel``."""
-    for attr in (_CACHE_ATTR, _PLAN_ATTR):
+    for attr in (_CACHE_ATTR, _PLAN_ATTR, _LAST_ATTR):
         if hasattr(kernel, attr):
             delattr(kernel, attr)
 
@@ -534,7 +554,8 @@ def launch(
             stream = resolve_stream(dev, stream)
             rec = _graphs.recording(dev, stream)
         elif not record_cmd and _timing.RECORDING is None:
-            stream = resolve_stream(dev, stream)
+            if stream is None and not plan.on_cpu:
+                stream = current_stream(dev)  # resolve_stream, inline
             reuse = plan.reuse
             if (reuse.same is not None and reuse.relaunch(args, dims, stream)) or (
                 reuse.tokens is not None

@@ -66,6 +66,8 @@ MAX_ENTRIES = 128
 #: ``MAX_ENTRIES``, so a cycle through that many argument sets gets prepared).
 MAX_SEEN = 256
 
+_REF = weakref.ref
+
 # Per parameter: how one converted argument adds to the key, and whether it is a
 # buffer the entry must watch.
 _ARRAY, _BYTES = 0, 1
@@ -177,7 +179,7 @@ class LaunchReuse:
         if len(held) != len(args):
             return False
         for h, a in zip(held, args):
-            if h is not a and (type(h) is not weakref.ref or h() is not a):
+            if h is not a and (type(h) is not _REF or h() is not a):
                 return False
         self.hits += 1
         same[3]()
