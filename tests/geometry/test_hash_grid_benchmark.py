@@ -79,3 +79,18 @@ def test_peer_matches_the_brute_force(package):
     p64 = pts.astype(np.float64)
     ref = np.stack([(np.linalg.norm(p64 - p, axis=1) < radius) @ p64 for p in p64])
     assert np.allclose(sums, ref, rtol=0, atol=1e-4)
+
+
+def test_per_core_script_runs(tmp_path):
+    """``bench_hashgrid_cores.py`` at a tiny size, in its own process (it puts kdsl's
+    kernels on one thread): it checks the answers, then writes a row per side."""
+    import json
+    import subprocess
+
+    out = tmp_path / "cores.json"
+    args = ["--points", "2000", "--grid-dim", "16", "--reps", "1", "--rounds", "1", "--json"]
+    subprocess.run([sys.executable, str(BENCH / "bench_hashgrid_cores.py"), *args, str(out)],
+                   check=True, capture_output=True, timeout=600)  # fmt: skip
+    table = json.loads(out.read_text())["table"]
+    assert next(iter(table)) == "kdsl" and table["kdsl"]["query_s_ratio"] == 1.0
+    assert all(r["build_s"] > 0 and r["query_s"] > 0 for r in table.values())
