@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from kdsl.errors import KdslError, KdslTypeError
-from kdsl.geometry.device_tree import DeviceTree, node_field, pack_nodes, refit, upload_tree
+from kdsl.geometry.device_tree import DeviceTree, node_views, pack_nodes, refit, upload_tree
 from kdsl.geometry.lbvh import build_lbvh
 from kdsl.geometry.median import build_median
 from kdsl.geometry.sah import build_sah
@@ -133,10 +133,12 @@ class Bvh:
         self._tree, self._built = tree, shape
         if tree.nodes is not None:  # the constructor packed the links itself
             self._nodes = tree.nodes
+            self._views = tree.views if tree.views is not None else node_views(tree.nodes)
         else:
             self._nodes = empty(tree.slots, dtype=BvhNode, device=self.device)
-            pack_nodes(tree, self._nodes, self._node_field(12, T.I32))
-        self._bounds = [self._node_field(0, VEC3), self._node_field(16, VEC3)]
+            self._views = node_views(self._nodes)
+            pack_nodes(tree, self._views)
+        self._bounds = [self._views[0], self._views[2]]
         if not tree.bounded:
             refit(self._tree, self.lowers, self.uppers, self._bounds[0], self._bounds[1])
         self._write_record()
@@ -155,16 +157,12 @@ class Bvh:
         self._record.write(
             {
                 "lowers": self._bounds[0], "uppers": self._bounds[1],
-                "skip": tree.skip, "first": self._node_field(12, T.I32), "count": tree.count,
+                "skip": tree.skip, "first": self._views[1], "count": tree.count,
                 "items": tree.items, "group_roots": tree.group_roots,
                 "item_lowers": self.lowers, "item_uppers": self.uppers,
                 "root": 0 if tree.slots else -1, "nodes": self._nodes,
             }
         )  # fmt: skip
-
-    def _node_field(self, offset: int, dtype) -> array:
-        """A strided view of one field of every packed node (``BvhNode``)."""
-        return node_field(self._nodes, offset, dtype)
 
     def refit(self) -> None:
         """Recompute the node bounds from the current boxes (the tree keeps its shape), with

@@ -55,6 +55,8 @@ class DeviceTree:
     #: The packed nodes (``kdsl.stdlib.bvh.BvhNode``) with their links written, when the
     #: constructor wrote them itself (``lbvh``); None: ``kdsl.Bvh`` packs them.
     nodes: array | None = None
+    #: ``node_views(nodes)``, when the constructor made them.
+    views: tuple | None = None
     #: A one-element int32 array on the device holding the number of nodes, when the
     #: constructor left it there (None: ``slots`` nodes).
     node_count: array | None = None
@@ -80,12 +82,15 @@ class DeviceTree:
         self._num_nodes = None
 
 
-def node_field(nodes: array, offset: int, dtype) -> array:
-    """A strided view of the field at byte ``offset`` of every packed node."""
+def node_views(nodes: array) -> tuple[array, array, array, array]:
+    """Strided views of the fields of every packed node (``BvhNode``): ``lower`` (vec3),
+    ``first`` (int32), ``upper`` (vec3), ``next`` (int32)."""
+    fields = ((0, vec3), (12, int32), (16, vec3), (28, int32))
     if nodes.shape[0] == 0:
-        return empty(0, dtype=dtype, device=nodes.device)
-    return array(ptr=nodes.ptr + offset, dtype=dtype, shape=nodes.shape, strides=nodes.strides,
-                 device=nodes.device)  # fmt: skip
+        return tuple(empty(0, dtype=t, device=nodes.device) for _, t in fields)
+    base, shape, strides, device = nodes.ptr, nodes.shape, nodes.strides, nodes.device
+    return tuple(array(ptr=base + offset, dtype=t, shape=shape, strides=strides, device=device)
+                 for offset, t in fields)  # fmt: skip
 
 
 def _device_ints(a: np.ndarray, device) -> array:
@@ -201,14 +206,13 @@ def _pack_links(
         packed_next[n] = skip[n]
 
 
-def pack_nodes(tree: DeviceTree, nodes: array, packed_first: array) -> None:
-    """Write the links of the packed nodes (``kdsl.stdlib.bvh.BvhNode``): ``first``, and
-    ``next``, an inner node's ``skip`` or a leaf's count; ``refit`` writes the bounds."""
+def pack_nodes(tree: DeviceTree, views: tuple) -> None:
+    """Write the links of the packed nodes whose ``node_views`` are ``views``: ``first``,
+    and ``next``, an inner node's ``skip`` or a leaf's count; ``refit`` writes the bounds."""
     if tree.slots == 0:
         return
-    packed_next = node_field(nodes, 28, int32)
-    launch(_pack_links, dim=tree.slots, device=nodes.device,
-           inputs=[tree.first, tree.count, tree.skip, packed_first, packed_next])  # fmt: skip
+    launch(_pack_links, dim=tree.slots, device=views[1].device,
+           inputs=[tree.first, tree.count, tree.skip, views[1], views[3]])  # fmt: skip
 
 
 @kernel

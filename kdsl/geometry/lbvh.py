@@ -40,12 +40,12 @@ from kdsl.errors import KdslError
 from kdsl.frontend.api import atomic_add, atomic_max, cast, func, inf, kernel, thread_fence, tid
 from kdsl.frontend.api import max as vmax
 from kdsl.frontend.api import min as vmin
-from kdsl.geometry.device_tree import UNUSED, DeviceTree, node_field
+from kdsl.geometry.device_tree import UNUSED, DeviceTree, node_views
 from kdsl.runtime.alloc import empty, zeros
 from kdsl.runtime.array import array
 from kdsl.runtime.launch import Launch, launch
 from kdsl.stdlib.bvh import BvhNode
-from kdsl.types import float32, int32, uint8, uint64, vec3
+from kdsl.types import float32, int32, uint64, vec3
 from kdsl.utils.scan import ScanInto
 from kdsl.utils.sort import SortKeys
 
@@ -421,9 +421,9 @@ class LbvhBuild:
         roots = max(num_groups, 1)
         morton_drop, index_bits, group_shift = key_layout(n, num_groups)
         has_groups = int(groups is not None)
-        # One zeroed block (one allocation, one fill): the packed nodes (the tree's, then
-        # the radix tree's inner nodes' bounds; 16-byte aligned at the block's start), the
-        # keys, the int32 arrays. Every element of ``ints`` is written before it is read;
+        # One zeroed block of packed nodes (one allocation, one fill): the tree's nodes,
+        # then, as views of the rest, the radix tree's inner nodes' bounds, the keys and
+        # the int32 arrays. Every element of ``ints`` is written before it is read;
         # ``zero`` must start at zero, and every build leaves it so.
         sizes = {"items": n, "skip": slots, "first": slots, "count": slots, "parent": slots,
                  "left": n - 1, "right": n - 1, "node_a": n - 1, "node_b": n - 1,
@@ -431,21 +431,21 @@ class LbvhBuild:
                  "pre_parent": slots if bottom_up else 0, "group_roots": roots}  # fmt: skip
         zero_sizes = {"starts": n + 1, "climbs": n - 1, "arrivals": slots if bottom_up else 0,
                       "bounds": BOUND_SLOTS}  # fmt: skip
-        node_bytes = 32 * (slots + n - 1)
         num_ints = sum(sizes.values()) + sum(zero_sizes.values())
-        self._block = zeros(node_bytes + 8 * n + 4 * num_ints, dtype=uint8, device=device)
-        base = self._block.ptr
-        packed = array(ptr=base, dtype=BvhNode, shape=(slots + n - 1,), device=device)
-        keys = array(ptr=base + node_bytes, dtype=uint64, shape=(n,), device=device)
-        int_view = array(ptr=base + node_bytes + 8 * n, dtype=int32, shape=(num_ints,),
+        tail = 24 * (n - 1) + 8 * n + 4 * num_ints  # inner bounds, keys, ints
+        self._block = zeros(slots + -(-tail // 32), dtype=BvhNode, device=device)
+        nodes = self._block[:slots]
+        views = node_views(nodes)
+        lo, packed_first, hi, packed_next = views
+        base = self._block.ptr + 32 * slots
+        inner = array(ptr=base, dtype=vec3, shape=(2 * (n - 1),), device=device)
+        node_lo, node_hi = inner[: n - 1], inner[n - 1 :]
+        keys = array(ptr=base + 24 * (n - 1), dtype=uint64, shape=(n,), device=device)
+        int_view = array(ptr=base + 24 * (n - 1) + 8 * n, dtype=int32, shape=(num_ints,),
                          device=device)  # fmt: skip
         ints = _carve(int_view, {**sizes, **zero_sizes})
         zero = {name: ints[name] for name in zero_sizes}
-        nodes, inner = packed[:slots], packed[slots:]
-        node_lo, node_hi = node_field(inner, 0, vec3), node_field(inner, 16, vec3)
         node_a, node_b = ints["node_a"], ints["node_b"]
-        lo, hi = node_field(nodes, 0, vec3), node_field(nodes, 16, vec3)
-        packed_first, packed_next = node_field(nodes, 12, int32), node_field(nodes, 28, int32)
         group_arg = groups if groups is not None else zero["bounds"]
         with_parents = int(bottom_up)
 
@@ -471,7 +471,7 @@ class LbvhBuild:
         self.tree = DeviceTree(
             ints["skip"], ints["first"], ints["count"], ints["items"],
             ints["group_roots"][:num_groups], ints["pre_parent"], zero["arrivals"], slots,
-            nodes, node_count=ints["before"][n:], bounded=True,
+            nodes, views, node_count=ints["before"][n:], bounded=True,
         )  # fmt: skip
 
     def run(self) -> DeviceTree:

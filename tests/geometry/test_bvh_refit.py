@@ -11,7 +11,7 @@ import pytest
 
 import kdsl as wp
 from kdsl.geometry.bvh import CONSTRUCTORS
-from kdsl.geometry.device_tree import UNUSED, pack_nodes, refit, with_parents
+from kdsl.geometry.device_tree import UNUSED, node_views, pack_nodes, refit, with_parents
 from kdsl.geometry.lbvh import build_lbvh
 from kdsl.stdlib.bvh import BvhNode
 
@@ -77,7 +77,7 @@ def test_lbvh_writes_the_parents_and_links_of_its_nodes(device, leaf_size, num_g
     assert tree.arrivals.shape == (tree.slots,) and not tree.arrivals.numpy().any()
     assert tree.slots == 2 * 2000 - 1 and np.all(tree.first.numpy()[m:] == UNUSED)
     packed = wp.empty(tree.slots, dtype=BvhNode, device=device)
-    pack_nodes(tree, packed, wp.empty(tree.slots, dtype=wp.int32, device=device))
+    pack_nodes(tree, node_views(packed))
     got, want = tree.nodes.numpy(), packed.numpy()
     np.testing.assert_array_equal(got["next"][:m], want["next"][:m])
     np.testing.assert_array_equal(got["first"], tree.first.numpy())
