@@ -10,17 +10,18 @@ one sum."""
 
 from __future__ import annotations
 
-from kdsl.frontend.api import atomic_min, isfinite, kernel, length, tid
+from kdsl.frontend.api import atomic_max, isfinite, kernel, length, tid
 from kdsl.frontend.api import max as vmax
 from kdsl.frontend.api import min as vmin
-from kdsl.runtime.alloc import empty, full, zeros
+from kdsl.runtime.alloc import zeros
 from kdsl.runtime.array import array
 from kdsl.runtime.launch import launch
 from kdsl.types import float32, int32, vec3
 from kdsl.utils.reduce import SumInto
 
-#: What the check's two counters start at: above every position (a 1-d array of int32).
-_NONE = 2**31 - 1
+#: The check's two counters keep the maximum of ``_TOP - position`` of the bad values
+#: found: zero (where they start) is "nothing found", larger values earlier positions.
+_TOP = 2**31 - 1
 
 
 @kernel
@@ -30,12 +31,13 @@ def _checked_face_boxes(
     edges: array(dtype=float32), first_bad: array(dtype=int32),
 ):  # fmt: skip
     # Thread i checks point i (``first_bad[1]``: the first non-finite one) and face i's
-    # three indices (``first_bad[0]``: the first position out of range), and writes face
+    # three indices (``first_bad[0]``: the first position out of range), each counter
+    # keeping the largest ``_TOP - position``, and writes face
     # i's box and edge lengths (zeros for a face with a bad index: nothing out of range
     # is read).
     i = tid()
     if i < num_points and not isfinite(points[i]):
-        atomic_min(first_bad, 1, i)
+        atomic_max(first_bad, 1, _TOP - i)
     if i >= num_tris:
         return
     bad = -1
@@ -44,7 +46,7 @@ def _checked_face_boxes(
         if bad < 0 and (v < 0 or v >= num_points):
             bad = i * 3 + k
     if bad >= 0:
-        atomic_min(first_bad, 0, bad)
+        atomic_max(first_bad, 0, _TOP - bad)
         lowers[i] = vec3()
         uppers[i] = vec3()
         edges[i] = 0.0
@@ -58,21 +60,22 @@ def _checked_face_boxes(
 
 
 class FaceBoxes:
-    """What a mesh's checking kernel writes, allocated once per mesh and rewritten by
-    every ``write`` (construction and each refit): ``lowers``/``uppers``, the faces'
-    boxes (views of one vec3 block); ``edges``, each face's three edge lengths summed,
-    and ``edge_sum``, their sum (views of one float32 block; the mean edge length is
-    ``edge_sum[0] / (3 * faces)``); ``none``, an empty vec3 array (a mesh's missing
-    velocities); and the check's two counters, which hold "nothing found" between
-    calls (a call that finds something resets them), so a call fills nothing."""
+    """What a mesh's checking kernel writes, allocated once per mesh (one zeroed float32
+    block, viewed) and rewritten by every ``write`` (construction and each refit):
+    ``lowers``/``uppers``, the faces' boxes; ``edges``, each face's three edge lengths
+    summed, and ``edge_sum``, their sum (the mean edge length is ``edge_sum[0] / (3 *
+    faces)``; 0.0 with no faces); ``none``, an empty vec3 array (a mesh's missing
+    velocities); and the check's two counters, which hold "nothing found" (zero)
+    between calls (a call that finds something zeroes them again), so a call fills
+    nothing."""
 
     def __init__(self, num_tris: int, device) -> None:
-        boxes = empty(2 * num_tris, dtype=vec3, device=device)
+        floats = 7 * num_tris + 1  # boxes (six per face), edges, their sum
+        block = zeros(floats + 2, dtype=float32, device=device)  # and the two counters
+        boxes = block[: 6 * num_tris].reshape((2 * num_tris, 3)).view(vec3)
         self.lowers, self.uppers, self.none = boxes[:num_tris], boxes[num_tris:], boxes[:0]
-        # With no faces the sum stays 0.0: nothing writes it.
-        sums = (empty if num_tris else zeros)(num_tris + 1, dtype=float32, device=device)
-        self.edges, self.edge_sum = sums[:num_tris], sums[num_tris:]
-        self._first_bad = full(2, _NONE, dtype=int32, device=device)
+        self.edges, self.edge_sum = block[6 * num_tris : floats - 1], block[floats - 1 : floats]
+        self._first_bad = block[floats:].view(int32)
         self._sum = SumInto(self.edges, self.edge_sum) if num_tris else None
 
     def write(self, points: array, indices: array) -> tuple[int, int]:
@@ -92,9 +95,9 @@ class FaceBoxes:
                     self.edges, first_bad],
         )  # fmt: skip
         bad_index, bad_point = (int(x) for x in first_bad.numpy())  # the one read back
-        if bad_index == _NONE and bad_point == _NONE:
+        if bad_index == 0 and bad_point == 0:
             if self._sum is not None:
                 self._sum()
             return -1, -1
-        first_bad.fill_(_NONE)  # "nothing found" again, for the next call
-        return (-1 if bad_index == _NONE else bad_index, -1 if bad_point == _NONE else bad_point)
+        first_bad.zero_()  # "nothing found" again, for the next call
+        return (-1 if bad_index == 0 else _TOP - bad_index, -1 if bad_point == 0 else _TOP - bad_point)
