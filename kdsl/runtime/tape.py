@@ -30,7 +30,7 @@ from kdsl.runtime.array import array
 from kdsl.runtime.array_access import check_launch, clear_read_marks
 from kdsl.runtime.device import Device, get_device
 from kdsl.runtime.modules import backward_enabled
-from kdsl.runtime.zero_batch import ZeroBatch
+from kdsl.runtime.zero_batch import zero_arrays
 
 # The active tapes, outermost first; launch() records on the last one.
 ACTIVE: list[Tape] = []
@@ -79,8 +79,6 @@ class Tape:
         self.launches: list[LaunchRecord | Callable[[], Any]] = []
         self.scopes: list[tuple[int, str | None, dict | None]] = []
         self.loss: array | None = None
-        #: How ``zero()`` clears ``gradients`` (kept while they stay the same arrays).
-        self._zero = ZeroBatch()
 
     # --- recording -----------------------------------------------------------
     def __enter__(self) -> Tape:
@@ -226,7 +224,7 @@ class Tape:
     def zero(self) -> None:
         """Set every gradient the tape has used to zero (in one pass per device, see
         ``kdsl.runtime.zero_batch``)."""
-        self._zero.zero(list(self.gradients.values()))
+        zero_arrays(list(self.gradients.values()))
 
     def reset(self) -> None:
         """Zero the gradients, then forget every recorded launch, function and scope."""
@@ -237,7 +235,6 @@ class Tape:
         self.scopes = []
         self.gradients = {}
         self.loss = None
-        self._zero.clear()
 
 
 _ADJOINT: list = []

@@ -2,26 +2,31 @@
 
 A taped simulation step ends with ``tape.zero()`` over every gradient it used (about a
 hundred arrays for the ``throw`` scene), and zeroing them one by one costs a CuPy fill
-kernel (with its Python dispatch) per array on a GPU. ``ZeroBatch`` keeps, for one
-list of arrays, what zeroing them takes, and does it in as few calls as it can:
+kernel (with its Python dispatch) per array on a GPU. ``zero_arrays`` keeps, for a
+list of arrays, a plan of what zeroing them takes, and does it in as few calls as it
+can:
 
 - on a CUDA device, one launch of ``_zero_words`` over a table of (address, 32-bit
   words) of every array that is one contiguous span of whole words (the table is
-  uploaded once per list), on the device's current stream, as ``array.zero_`` is;
+  uploaded once per plan), on the device's current stream, as ``array.zero_`` is;
 - on the CPU, a fill of each contiguous span's bytes (no per-array Python checks);
 - everything else (a strided view, a span of odd size or alignment, an open graph
   capture) through ``array.zero_``.
 
-The plan is rebuilt when the list changes (another array, or the same arrays in
-another order: compared by identity); it holds the arrays, so an identity it compares
-cannot be reused by another array while it is kept. Lists shorter than ``MIN_BATCH``
-on a CUDA device zero array by array (the zero kernel is compiled on first use).
+Plans are kept by the arrays' identities, in order, and hold the arrays weakly: a plan
+serves a list only while every array it was made for is alive and in its place, so a
+new tape over the same gradients (a simulation that tapes each step afresh) reuses it,
+and an array freed and replaced by another at the same address never is. Lists shorter
+than ``MIN_BATCH`` on a CUDA device zero array by array (the zero kernel is compiled on
+first use).
 """
 
 from __future__ import annotations
 
 import ctypes
 import functools
+import operator
+import weakref
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -58,56 +63,78 @@ def _zero_words(ptrs: array(dtype=uint64), words: array(dtype=int32), width: int
         k += width
 
 
-class ZeroBatch:
-    """Zeroes a list of arrays with few calls (see the module docstring)."""
+class _Plan:
+    """What zeroing one list of arrays takes: the calls, and the arrays (held weakly)."""
 
-    __slots__ = ("_arrays", "_ids", "_steps")
+    __slots__ = ("refs", "steps")
 
-    def __init__(self) -> None:
-        self._arrays: tuple = ()  # held, so no other array can take one of ``_ids``
-        self._ids: list[int] = []
-        self._steps: list = []
+    def __init__(self, refs: list, steps: list) -> None:
+        self.refs = refs
+        self.steps = steps
 
-    def zero(self, arrays: Sequence[array]) -> None:
-        """Set every element of every array in ``arrays`` to zero."""
-        if graphs.ACTIVE:  # captures have their own fill paths
-            for a in arrays:
-                a.zero_()
-            return
-        ids = list(map(id, arrays))
-        if ids != self._ids:
-            self._plan(tuple(arrays), ids)
-        for step in self._steps:
-            step()
 
-    def clear(self) -> None:
-        """Forget the plan (and the arrays it holds)."""
-        self._arrays, self._ids, self._steps = (), [], []
+#: Plans by the arrays' ids (in order), the most recently made last; a plan serves a list
+#: only while every array it was made for is alive and in its place (so an id reused by
+#: a new array is never mistaken for the old one).
+_PLANS: dict[tuple[int, ...], _Plan] = {}
+#: Plans kept (a tape per step of a simulation zeroes the same gradients every step).
+MAX_PLANS = 8
+#: Plans made so far (for tests and benchmarks).
+made = 0
 
-    def _plan(self, arrays: tuple, ids: list[int]) -> None:
-        self.clear()
-        steps: list = []
-        by_device: dict[Device, list[tuple[array, tuple[int, int]]]] = {}
+
+def zero_arrays(arrays: Sequence[array]) -> None:
+    """Set every element of every array in ``arrays`` to zero, with the plan made for
+    this very list of arrays when there is one (see the module docstring)."""
+    if graphs.ACTIVE:  # captures have their own fill paths
         for a in arrays:
-            span = a.memory_span()
-            if span is None:
-                steps.append(a.zero_)
-            elif span[1] == 0:
-                continue
-            elif a.device.kind not in KERNEL_KINDS:
-                steps.append(_memset(*span) if a.device.is_cpu else a.zero_)
-            elif span[0] % 4 == 0 and span[1] % 4 == 0 and span[1] // 4 <= MAX_WORDS:
-                by_device.setdefault(a.device, []).append((a, span))
-            else:
-                steps.append(a.zero_)
-        for dev, items in by_device.items():
-            if len(items) < MIN_BATCH:
-                steps += [a.zero_ for a, _ in items]
-            else:
-                steps.append(zero_spans_launch(dev, [span for _, span in items]))
-                if dev.is_cuda:  # the table is in place before any stream runs it
-                    get_stream(dev).synchronize()
-        self._arrays, self._ids, self._steps = arrays, ids, steps
+            a.zero_()
+        return
+    key = tuple(map(id, arrays))
+    plan = _PLANS.get(key)
+    if plan is None or not all(map(operator.is_, map(operator.call, plan.refs), arrays)):
+        plan = _make_plan(key, arrays)
+    for step in plan.steps:
+        step()
+
+
+def forget_plans() -> None:
+    """Drop every plan (and the device tables they hold)."""
+    _PLANS.clear()
+
+
+def _make_plan(key: tuple[int, ...], arrays: Sequence[array]) -> _Plan:
+    global made
+    steps: list = []
+    by_device: dict[Device, list[tuple[array, tuple[int, int]]]] = {}
+    for a in arrays:
+        span = a.memory_span()
+        if span is None:
+            steps.append(a.zero_)
+        elif span[1] == 0:
+            continue
+        elif a.device.kind not in KERNEL_KINDS:
+            steps.append(_memset(*span) if a.device.is_cpu else a.zero_)
+        elif span[0] % 4 == 0 and span[1] % 4 == 0 and span[1] // 4 <= MAX_WORDS:
+            by_device.setdefault(a.device, []).append((a, span))
+        else:
+            steps.append(a.zero_)
+    for dev, items in by_device.items():
+        if len(items) < MIN_BATCH:
+            steps += [a.zero_ for a, _ in items]
+        else:
+            steps.append(zero_spans_launch(dev, [span for _, span in items]))
+            if dev.is_cuda:  # the table is in place before any stream runs it
+                get_stream(dev).synchronize()
+    # A bound method holds its array: steps keep the arrays alive only through the
+    # plan, which is dropped from the table once MAX_PLANS newer ones exist.
+    plan = _Plan([weakref.ref(a) for a in arrays], steps)
+    _PLANS.pop(key, None)
+    while len(_PLANS) >= MAX_PLANS:
+        del _PLANS[next(iter(_PLANS))]
+    _PLANS[key] = plan
+    made += 1
+    return plan
 
 
 def _memset(addr: int, nbytes: int) -> Callable[[], Any]:

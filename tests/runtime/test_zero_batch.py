@@ -7,7 +7,7 @@ import pytest
 import kdsl as wp
 from kdsl.errors import KdslError
 from kdsl.runtime import zero_batch
-from kdsl.runtime.zero_batch import ZeroBatch, zero_spans_launch
+from kdsl.runtime.zero_batch import zero_arrays, zero_spans_launch
 
 cuda = pytest.mark.skipif(not wp.is_cuda_available(), reason="needs a CUDA device")
 DEVICES = ["cpu", pytest.param("cuda:0", marks=cuda)]
@@ -52,14 +52,15 @@ def _total(a):
 def test_zero_batch_zeroes_exactly_the_given_arrays(device):
     arrays, base = _mixed(device)
     bystander = _filled(device, 8)
-    zb = ZeroBatch()
+    made = zero_batch.made
     for _ in range(2):  # the first call plans, the second reuses the plan
         for a in arrays[:-1]:
             a.fill_(3)
-        zb.zero(arrays)
+        zero_arrays(arrays)
         assert [_total(a) for a in arrays] == [0.0] * len(arrays)
         np.testing.assert_array_equal(base.numpy()[:, [0, 2, 3]], 1.0)
         np.testing.assert_array_equal(bystander.numpy(), 1.0)
+    assert zero_batch.made == made + 1
 
 
 @pytest.fixture(params=["memset", "kernel"])
@@ -73,41 +74,76 @@ def cpu_path(request, monkeypatch):
 def test_zero_batch_on_the_cpu_both_paths(cpu_path):
     arrays, base = _mixed("cpu")
     many = [_filled("cpu", n) for n in (1, 2, 3, 700)]
-    zb = ZeroBatch()
+    zero_batch.forget_plans()
     for _ in range(2):
         for a in arrays[:-1] + many:
             a.fill_(3)
-        zb.zero(arrays + many)
+        zero_arrays(arrays + many)
         assert [_total(a) for a in arrays + many] == [0.0] * (len(arrays) + 4)
         np.testing.assert_array_equal(base.numpy()[:, [0, 2, 3]], 1.0)
     few = many[:2]  # under MIN_BATCH: array by array
     for a in few:
         a.fill_(1)
-    zb.zero(few)
+    zero_arrays(few)
     assert [_total(a) for a in few] == [0.0, 0.0]
 
 
 @pytest.mark.parametrize("device", DEVICES)
 def test_zero_batch_replans_when_the_list_changes(device):
-    zb = ZeroBatch()
     first = [_filled(device, 16) for _ in range(6)]
-    zb.zero(first)
+    zero_arrays(first)
     extra = _filled(device, 9)
     for a in first:
         a.fill_(2)
-    zb.zero([*first, extra])  # one more array
+    zero_arrays([*first, extra])  # one more array
     assert [_total(a) for a in (*first, extra)] == [0.0] * 7
     kept = first[::2]
-    del first[1::2]  # dropped arrays (and, after the next plan, their memory)
     for a in first:
         a.fill_(5)
-    zb.zero(kept)
+    zero_arrays(kept)
     assert [_total(a) for a in kept] == [0.0] * len(kept)
-    fresh = [_filled(device, 16) for _ in range(3)]  # new arrays may reuse old ids/memory
-    zb.zero(fresh)
-    assert [_total(a) for a in fresh] == [0.0] * 3
-    zb.zero([])  # nothing to do
-    zb.clear()
+    assert [_total(a) for a in first[1::2]] == [5.0 * 16] * 3  # not in the list
+    zero_arrays([])  # nothing to do
+
+
+@pytest.mark.parametrize("device", DEVICES)
+def test_a_plan_never_serves_arrays_that_replaced_freed_ones(device):
+    """A freed array's id may be reused by a new one, so the new list may look up the
+    old list's plan: it must check its arrays and not zero the old memory instead. (The
+    reuse is forced here: the old plan is filed under the new arrays' ids.)"""
+    old = [_filled(device, 64) for _ in range(5)]
+    zero_arrays(old)
+    new = [_filled(device, 64) for _ in range(5)]
+    for a in old:
+        a.fill_(2.0)
+    zero_batch._PLANS[tuple(map(id, new))] = zero_batch._PLANS[tuple(map(id, old))]
+    zero_arrays(new)
+    assert [_total(a) for a in new] == [0.0] * 5
+    assert [_total(a) for a in old] == [128.0] * 5
+
+
+def test_plans_are_shared_by_tapes_and_bounded(monkeypatch):
+    monkeypatch.setattr(zero_batch, "MAX_PLANS", 2)
+    zero_batch.forget_plans()
+    lists = [[_filled("cpu", 8) for _ in range(3)] for _ in range(3)]
+    made = zero_batch.made
+    for arrays in lists:
+        zero_arrays(arrays)
+    zero_arrays(lists[2])  # kept
+    assert zero_batch.made == made + 3
+    zero_arrays(lists[0])  # dropped (MAX_PLANS): made again
+    assert zero_batch.made == made + 4
+    # two tapes over the same gradients share one plan
+    xs = [wp.zeros(4, dtype=float, requires_grad=True) for _ in range(4)]
+    made = zero_batch.made
+    for _ in range(3):
+        tape = wp.Tape()
+        for x in xs:
+            tape.get_adjoint(x)
+            x.grad.fill_(1.0)
+        tape.zero()
+        assert [_total(x.grad) for x in xs] == [0.0] * 4
+    assert zero_batch.made == made + 1
 
 
 def _flight(device, steps, extra_grad=None):
@@ -159,7 +195,7 @@ def test_tape_zero_after_gradients_are_added_replaced_and_reset(device, cpu_path
 
 @pytest.mark.parametrize("device", ["cpu", pytest.param("cuda:0", marks=cuda)])
 def test_zero_spans_launch_zeroes_only_its_spans(device):
-    """The zero kernel itself (the CUDA path of ZeroBatch), also on the cpu backend:
+    """The zero kernel itself (the CUDA path of zero_arrays), also on the cpu backend:
     sizes below, at and above the kernel's width, neighbours untouched."""
     data = [np.arange(1, n + 1, dtype=np.float32) for n in (1, 5, 300, 17)]
     arrays = [wp.array(d, device=device) for d in data]
