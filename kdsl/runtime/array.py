@@ -361,6 +361,9 @@ class array:
         if graphs.ACTIVE and self._device.is_cpu:
             graphs.captured_fill(self._buf, self._device, np.zeros((), self._buf.dtype))
             return self
+        if self._device.is_cuda and not graphs.ACTIVE and self._buf.flags.c_contiguous:
+            mem.zero_async(self._buf, self._device)  # records too (CuPy cannot fill those)
+            return self
         with mem.scope(self._device):
             if self._device.is_cuda and isinstance(self._t, T.StructType):
                 self._buf.data.memset_async(0, self._buf.nbytes)  # CuPy cannot fill records

@@ -13,12 +13,13 @@ from typing import Any
 
 import numpy as np
 
+from kdsl.backends.cuda.devices import device_count
 from kdsl.errors import KdslError
 from kdsl.runtime import allocators
 from kdsl.runtime.device import Device, cupy
 from kdsl.runtime.graphs.state import refuse_host_read, refuse_upload
 from kdsl.runtime.mempool import note_allocation
-from kdsl.runtime.stream import Stream, get_stream
+from kdsl.runtime.stream import Stream, current_stream, get_stream
 
 
 def xp(device: Device) -> Any:
@@ -99,9 +100,33 @@ def empty(shape: tuple[int, ...], dtype: np.dtype, device: Device) -> Any:
 def zeros_like(buf: Any, device: Device) -> Any:
     """A zero buffer shaped like ``buf`` on ``device``."""
     out = empty(buf.shape, buf.dtype, device)
-    with scope(device):
+    if device.is_cpu:
         out.fill(0)
+    else:
+        zero_async(out, device)
     return out
+
+
+_RUNTIME: list = []
+
+
+def zero_async(buf: Any, device: Device) -> None:
+    """Zero the C-contiguous CUDA buffer ``buf`` with one ``cudaMemsetAsync`` on the
+    device's current kdsl stream (a CuPy fill is a kernel launch behind Python dispatch
+    and a ``scope``)."""
+    nbytes = buf.nbytes
+    if not nbytes:
+        return
+    if not _RUNTIME:
+        from cupy_backends.cuda.api import runtime
+
+        _RUNTIME.append(runtime)
+    stream = current_stream(device)
+    if device_count() == 1:  # the only device is the current one
+        _RUNTIME[0].memsetAsync(buf.data.ptr, 0, nbytes, stream.cuda_stream)
+        return
+    with scope(device, stream):
+        _RUNTIME[0].memsetAsync(buf.data.ptr, 0, nbytes, stream.cuda_stream)
 
 
 def to_host(buf: Any, device: Device) -> np.ndarray:
