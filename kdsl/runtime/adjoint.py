@@ -28,6 +28,7 @@ from kdsl.runtime.graphs import state as _graphs
 from kdsl.runtime.graphs.state import run_or_record
 from kdsl.runtime.launch import check_tid, launch_plan, normalize_dim, resolve_stream
 from kdsl.runtime.modules import backward_enabled
+from kdsl.runtime.stream import current_stream
 
 _ADJ_ATTR = "_kdsl_adjoint"
 _COUNT_ATTR = "_kdsl_counter"
@@ -162,7 +163,7 @@ def launch_adjoint(
                 return  # these objects' adjoint ran before: nothing to convert or key
     convs = plan.converters
     primal = [conv(v) for conv, v in zip(convs, args)]
-    adjoints = [ap.adjoint_arg(i, role, v, g, p) for i, (role, v, g, p) in
+    adjoints = [ap.adjoint_arg(i, role, v, g, p, stream) for i, (role, v, g, p) in
                 enumerate(zip(ap.roles, args, adj_args, primal))]  # fmt: skip
     if ap.hidden is not None:  # no tape is read: the hidden arguments are fixed
         hidden, status = list(ap.hidden), None
@@ -222,31 +223,35 @@ class _AdjointPlan:
                 return None
         return tuple(key)
 
-    def adjoint_arg(self, i: int, role: int, v: Any, g: Any, converted: Any) -> Any:
+    def adjoint_arg(
+        self, i: int, role: int, v: Any, g: Any, converted: Any, stream: Any = None
+    ) -> Any:
         """The converted adjoint argument of parameter ``i``: value ``v`` (``converted``
-        as the primal argument), gradient ``g``."""
+        as the primal argument), gradient ``g``, for a launch on ``stream``."""
         conv = self.convs[self.n + i]
         if role == _GRAD_ARRAY:
-            return conv(self._scratch(i, v) if g is None else g)
+            return conv(self._scratch(i, v, stream) if g is None else g)
         if role == _SCRATCH_ARRAY:
-            return conv(self._scratch(i, v))
+            return conv(self._scratch(i, v, stream))
         if role == _STRUCT and g is None:
             return conv(_struct_adjoint(v, self.dev))
         # A scalar's adjoint is an unused input of the adjoint kernel (as in Warp).
         return converted if g is None else conv(g)
 
-    def _scratch(self, i: int, v: Any) -> Any:
+    def _scratch(self, i: int, v: Any, stream: Any = None) -> Any:
         """Zeros shaped like ``v`` for gradients nobody asked for (they land there).
 
-        On the cpu outside a graph capture the memory is kept per parameter (and
-        calling thread) and cleared before each launch, so repeated launches pass the
-        same buffer (and can reuse their packed arguments); elsewhere it is fresh.
+        Outside a graph capture, on the cpu or for a launch on the device's current
+        stream (where ``zero_`` clears it, so in order after the launch that used it
+        last), the memory is kept per parameter (and calling thread) and cleared before
+        each launch, so repeated launches pass the same buffer (and can reuse their
+        packed arguments); elsewhere it is fresh.
         """
         from kdsl.runtime import alloc
 
         if not isinstance(v, array):
             return v
-        if not self.dev.is_cpu or _graphs.ACTIVE:
+        if _graphs.ACTIVE or not (self.dev.is_cpu or stream is current_stream(self.dev)):
             return alloc.zeros_like(v, device=self.dev)
         key = (i, threading.get_ident(), v.shape, v.dtype)
         z = self.scratch.get(key)

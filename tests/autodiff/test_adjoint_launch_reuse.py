@@ -112,3 +112,23 @@ def test_adjoint_launch_grid_is_checked():
         with pytest.raises(wp.KdslError, match="dim must"):
             wp.launch(flight_step, bad, [x, 0.1], [x1], adj_inputs=[x.grad, None],
                       adj_outputs=[x1.grad], adjoint=True)  # fmt: skip
+
+
+@pytest.mark.filterwarnings("ignore:kernel reads array 'tmp' after writing it")
+@pytest.mark.skipif(not wp.is_cuda_available(), reason="needs a CUDA device")
+def test_scratch_gradients_on_another_stream_cuda():
+    """Launches on a stream other than the device's current one get fresh scratch (the
+    kept one is cleared on the current stream, which would not order with theirs)."""
+    dev = "cuda:0"
+    stream = wp.Stream(dev)
+    x = wp.array(np.arange(4, dtype=np.float32), device=dev, requires_grad=True)
+    tmp = wp.zeros(4, dtype=float, device=dev)
+    y = wp.zeros(4, dtype=float, device=dev, requires_grad=True)
+    for s in (stream, None, stream, None):
+        tape = wp.Tape()
+        with tape:
+            wp.launch(through_scratch, 4, [x, tmp, y], device=dev, stream=s)
+        tape.backward(grads={y: wp.ones(4, dtype=float, device=dev)})
+        wp.synchronize_device(dev)
+        np.testing.assert_array_equal(x.grad.numpy(), np.full(4, 6.0, np.float32))
+        tape.zero()
