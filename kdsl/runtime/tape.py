@@ -162,7 +162,7 @@ class Tape:
             if g is not None:
                 self.gradients[a] = g
             return g
-        if ta in _PLAIN:  # a number: no gradient, no fields
+        if ta in _PLAIN or isinstance(a, np.ndarray):  # a number, vector, matrix: no fields
             return None
         # A struct's adjoint is built at the adjoint launch; its array fields' gradients
         # are tracked here, so ``tape.gradients[s.field]`` and ``zero()`` reach them (Warp).
