@@ -57,17 +57,29 @@ def check_tables(grid, p: np.ndarray, radius: float, device: str) -> None:
     np.testing.assert_array_equal(got.numpy()[: len(p)], order)
 
 
-@pytest.mark.parametrize("device", DEVICES)
-def test_tables_follow_every_rebuild(device):
-    rng = np.random.default_rng(7)
-    p = scene(rng, 300)
+def built_grid(seed: int, n: int, device: str):
+    """``(rng, points as NumPy, as a kdsl array, grid)``: the grid built once, radius 0.2."""
+    rng = np.random.default_rng(seed)
+    p = scene(rng, n)
     pts = wp.array(p, dtype=wp.vec3, device=device)
     grid = wp.HashGrid(*DIMS, device=device)
     grid.build(pts, 0.2)
+    return rng, p, pts, grid
+
+
+def move(rng, p: np.ndarray, pts, scale: float) -> np.ndarray:
+    """Move the points of ``pts`` (now ``p``) in place by a normal step; the new ``p``."""
+    p = (p + rng.normal(0.0, scale, p.shape)).astype(np.float32)
+    pts.assign(p)
+    return p
+
+
+@pytest.mark.parametrize("device", DEVICES)
+def test_tables_follow_every_rebuild(device):
+    rng, p, pts, grid = built_grid(7, 300, device)
     check_tables(grid, p, 0.2, device)
     for radius in (0.2, 0.35):  # moved in place; then a new cell width as well
-        p = (p + rng.normal(0.0, 0.3, p.shape)).astype(np.float32)
-        pts.assign(p)
+        p = move(rng, p, pts, 0.3)
         grid.build(pts, radius)
         check_tables(grid, p, radius, device)
     fewer = p[:40].copy()  # the other buckets of the last build must be emptied
@@ -87,17 +99,12 @@ def test_tables_follow_every_rebuild(device):
 
 @pytest.mark.parametrize("device", DEVICES)
 def test_same_count_rebuild_reuses_buffers_and_steps(device):
-    rng = np.random.default_rng(8)
-    p = scene(rng, 400)
-    pts = wp.array(p, dtype=wp.vec3, device=device)
-    grid = wp.HashGrid(*DIMS, device=device)
-    grid.build(pts, 0.2)
+    rng, p, pts, grid = built_grid(8, 400, device)
     grid.build(pts, 0.2)  # the second build prepares the steps of a rebuild after one
     steps, buffers = grid._build, (grid._keys.ptr, grid._point_ids.ptr, grid._cell_starts.ptr)
     backend = "cuda" if device != "cpu" else "cpu"
     for radius in (0.2, 0.3, 0.3):
-        p = (p + rng.normal(0.0, 0.1, p.shape)).astype(np.float32)
-        pts.assign(p)
+        p = move(rng, p, pts, 0.1)
         grid.build(pts, radius)
         assert grid._build is steps
         assert (grid._keys.ptr, grid._point_ids.ptr, grid._cell_starts.ptr) == buffers
