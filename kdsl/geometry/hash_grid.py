@@ -179,6 +179,8 @@ class HashGrid:
         self._keys = empty(0, dtype=uint64, device=self.device)
         self._point_ids = empty(0, dtype=int32, device=self.device)
         self._build: _Build | None = None
+        self._radius_key: tuple | None = None
+        self._inv = np.float32(0.0)
         self._record = ObjectRecord(self, HashGridRecord.__kdsl_type__, "hash_grid", self.device)
         self._recorded: tuple | None = None
         self._write_record(np.float32(0.0))
@@ -214,13 +216,36 @@ class HashGrid:
                 copy(point_ids, self._point_ids, count=self.num_points)
             self._keys, self._point_ids, self._capacity = keys, point_ids, n
             self._build = None
-            if self._recorded is not None:
-                self._write_record(np.float32(self._recorded[1]))
+            inv, self._recorded = self._recorded[1], None
+            self._write_record(inv)
 
     def build(self, points: array, radius: float) -> None:
         """Bucket ``points`` (a 1-d ``vec3`` array on the grid's device) into cells of
         width ``radius`` (> 0; query with about the same radius for 27-cell queries)."""
-        inv = _cell_width_inv(radius)
+        # A rebuild of the last build's array with its radius skips the checks they
+        # passed then (host time: a GPU rebuild is a few launches).
+        key = (type(radius), radius)
+        if key != self._radius_key:
+            self._inv = _cell_width_inv(radius)
+            self._radius_key = key
+        inv = self._inv
+        step = self._build
+        if step is None or points is not step.points:
+            self._check_points(points)
+        n = points.shape[0]
+        if n > self._capacity:
+            self.reserve(n)
+            step = self._build
+        emptied = self.num_points
+        if n or emptied:
+            if step is None or not step.matches(points, n, emptied):
+                step = self._build = _Build(self, points, n, emptied, inv)
+            step.run(inv)
+        self.num_points = n
+        self.radius = float(radius)
+        self._write_record(inv)
+
+    def _check_points(self, points: Any) -> None:
         if not isinstance(points, array) or type_of(points.dtype) != VEC3 or points.ndim != 1:
             raise KdslTypeError(
                 f"HashGrid.build points must be a 1-d kdsl.array of vec3, not {points!r}"
@@ -229,23 +254,12 @@ class HashGrid:
             raise KdslTypeError(
                 f"HashGrid.build points are on {points.device}, the grid on {self.device}"
             )
-        n = points.shape[0]
-        self.reserve(n)
-        emptied = self.num_points
-        if n or emptied:
-            step = self._build
-            if step is None or not step.matches(points, n, emptied):
-                step = self._build = _Build(self, points, n, emptied, inv)
-            step.run(inv)
-        self.num_points = n
-        self.radius = float(radius)
-        self._write_record(inv)
 
     def _write_record(self, inv: np.float32) -> None:
         n = self.num_points
-        state = (n, float(inv), self._point_ids.ptr)
+        state = (n, inv)
         if state == self._recorded:
-            return  # the same buffers, count and cell width: the record is current
+            return  # the same buffers (``reserve`` forgets this), count and cell width
         self._record.write(
             {
                 "point_ids": self._point_ids[:n], "cell_starts": self._cell_starts,

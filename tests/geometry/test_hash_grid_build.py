@@ -9,7 +9,9 @@ import numpy as np
 import pytest
 
 import kdsl as wp
+from kdsl.errors import KdslTypeError
 from kdsl.geometry import hash_grid as hash_grid_build
+from kdsl.geometry.hash_grid import HashGridError
 from kdsl.stdlib import hash_grid
 from tests.geometry.test_hash_grid import (
     brute_sums,
@@ -147,3 +149,17 @@ def test_bucket_wraps_every_int32_cell(backend):
     wp.launch(wrap_cells, dim=out.shape, backend=backend,
               inputs=[wp.array(c, dtype=int), wp.array(dims, dtype=int), out])  # fmt: skip
     np.testing.assert_array_equal(out.numpy(), c[:, None] % dims[None, :])
+
+
+def test_rebuild_checks_what_it_did_not_check_before():
+    """A rebuild of the last build's array with its radius skips their checks; any other
+    radius or array is checked as on the first build."""
+    _, p, pts, grid = built_grid(10, 50, "cpu")
+    for radius in (float("nan"), 0.0, True, np.float32(-0.2)):
+        with pytest.raises((HashGridError, KdslTypeError), match="radius"):
+            grid.build(pts, radius)
+    with pytest.raises(KdslTypeError, match=r"1-d kdsl\.array of vec3"):
+        grid.build(wp.zeros(50, dtype=wp.vec2), 0.2)
+    grid.build(pts, np.float32(0.2))  # another type of the same radius: checked, accepted
+    grid.build(pts, 0.2)
+    check_tables(grid, p, 0.2, "cpu")
