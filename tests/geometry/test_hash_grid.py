@@ -197,7 +197,7 @@ def test_rebuild_moved_points_and_reserve(backend):
     pts = wp.array(p, dtype=wp.vec3)
     grid = wp.HashGrid(8, 8, 8)
     grid.reserve(n + 100)
-    buffers = grid._point_ids.ptr
+    buffers = grid._builder.point_ids.ptr
     grid.build(pts, 0.15)
     for _ in range(2):  # move the points in place and rebuild: same buffers, new answers
         p = (p + rng.normal(0.0, 0.2, p.shape)).astype(np.float32)
@@ -205,9 +205,9 @@ def test_rebuild_moved_points_and_reserve(backend):
         grid.build(pts, 0.15)
         np.testing.assert_allclose(run_sum(grid, pts, 0.15, backend), brute_sums(p, 0.15),
                                    atol=2e-4)  # fmt: skip
-    assert grid._point_ids.ptr == buffers and grid.num_points == n
+    assert grid._builder.point_ids.ptr == buffers and grid.num_points == n
     grid.build(wp.array(p[: n // 2], dtype=wp.vec3), 0.15)  # fewer points: still no allocation
-    assert grid._point_ids.ptr == buffers
+    assert grid._builder.point_ids.ptr == buffers
     more = scene(rng, 2 * n)
     grid.build(wp.array(more, dtype=wp.vec3), 0.15)  # more than reserved: the buffers grow
     np.testing.assert_allclose(run_sum(grid, wp.array(more, dtype=wp.vec3), 0.15, backend),

@@ -1,7 +1,8 @@
-"""``kdsl.HashGrid``'s build: the cell tables and point order against a NumPy model after
-every kind of rebuild (moved points, fewer, more than reserved, none, a new radius), the
-prepared steps and buffers a same-count rebuild reuses, and the build and query kernels
-compiled for CUDA (compile only, no GPU needed)."""
+"""``kdsl.HashGrid``'s builds (``kdsl.geometry.hash_grid_build``: the sort of keys and the
+counting sort, each tried on every device): the cell tables and point order against a
+NumPy model after every kind of rebuild (moved points, fewer, more than reserved, none,
+a new radius), the prepared steps and buffers a same-count rebuild reuses, and the
+build and query kernels compiled for CUDA (compile only, no GPU needed)."""
 
 from __future__ import annotations
 
@@ -10,7 +11,7 @@ import pytest
 
 import kdsl as wp
 from kdsl.errors import KdslTypeError
-from kdsl.geometry import hash_grid as hash_grid_build
+from kdsl.geometry import hash_grid_build
 from kdsl.geometry.hash_grid import HashGridError
 from kdsl.stdlib import hash_grid
 from tests.geometry.test_hash_grid import (
@@ -28,32 +29,44 @@ DEVICES = ["cpu", pytest.param("cuda:0", marks=cuda)]
 DIMS = (5, 4, 3)
 
 
+@pytest.fixture(params=["sort", "count"])
+def build_kind(request, monkeypatch) -> str:
+    """Grids made in the test build by the sort of keys or by the counting sort."""
+    monkeypatch.setattr(
+        hash_grid_build, "counting_sort_on", lambda device: request.param == "count"
+    )
+    return request.param
+
+
 @wp.kernel
 def point_order(grid: wp.uint64, out: wp.array(dtype=int)):
     i = wp.tid()
     out[i] = wp.hash_grid_point_id(grid, i)
 
 
-def model_tables(p: np.ndarray, radius: float, dims) -> tuple[np.ndarray, ...]:
+def model_tables(p: np.ndarray, radius: float, dims, counting: bool) -> tuple[np.ndarray, ...]:
     """The documented build: points stably sorted by bucket, each bucket's ``[start, end)``
-    of that order, ``[0, 0)`` for an empty one."""
+    of that order; an empty one's is ``[0, 0)`` (sort of keys) or ``[p, p)`` at its place
+    in the order (counting sort)."""
     b = bucket(cell_coord(p * (np.float32(1) / np.float32(radius))), dims)
     order = np.argsort(b, kind="stable")
     cells = int(np.prod(dims))
     counts = np.bincount(b, minlength=cells)
     ends = np.cumsum(counts)
     starts = ends - counts
-    empty = counts == 0
-    starts[empty] = 0
-    ends[empty] = 0
+    if not counting:
+        empty = counts == 0
+        starts[empty] = 0
+        ends[empty] = 0
     return order, starts, ends
 
 
 def check_tables(grid, p: np.ndarray, radius: float, device: str) -> None:
     """The grid's tables and point order equal the model's for points ``p``."""
-    order, starts, ends = model_tables(p, radius, DIMS)
-    np.testing.assert_array_equal(grid._cell_starts.numpy(), starts)
-    np.testing.assert_array_equal(grid._cell_ends.numpy(), ends)
+    b = grid._builder
+    order, starts, ends = model_tables(p, radius, DIMS, isinstance(b, hash_grid_build.CountBuild))
+    np.testing.assert_array_equal(b.cell_starts.numpy(), starts)
+    np.testing.assert_array_equal(b.cell_ends.numpy(), ends)
     got = wp.zeros(max(len(p), 1), dtype=int, device=device)
     wp.launch(point_order, dim=len(p), inputs=[grid.id, got], device=device)
     np.testing.assert_array_equal(got.numpy()[: len(p)], order)
@@ -77,7 +90,7 @@ def move(rng, p: np.ndarray, pts, scale: float) -> np.ndarray:
 
 
 @pytest.mark.parametrize("device", DEVICES)
-def test_tables_follow_every_rebuild(device):
+def test_tables_follow_every_rebuild(device, build_kind):
     rng, p, pts, grid = built_grid(7, 300, device)
     check_tables(grid, p, 0.2, device)
     for radius in (0.2, 0.35):  # moved in place; then a new cell width as well
@@ -96,26 +109,27 @@ def test_tables_follow_every_rebuild(device):
     assert got == model_candidates(more, DIMS, 0.2, more[:6], 0.2)
     grid.build(wp.empty(0, dtype=wp.vec3, device=device), 0.2)
     check_tables(grid, more[:0], 0.2, device)
-    assert not grid._cell_starts.numpy().any() and not grid._cell_ends.numpy().any()
+    assert not grid._builder.cell_starts.numpy().any() and not grid._builder.cell_ends.numpy().any()
 
 
 @pytest.mark.parametrize("device", DEVICES)
-def test_same_count_rebuild_reuses_buffers_and_steps(device):
+def test_same_count_rebuild_reuses_buffers_and_steps(device, build_kind):
     rng, p, pts, grid = built_grid(8, 400, device)
     grid.build(pts, 0.2)  # the second build prepares the steps of a rebuild after one
-    steps, buffers = grid._build, (grid._keys.ptr, grid._point_ids.ptr, grid._cell_starts.ptr)
+    b = grid._builder
+    steps, buffers = b.steps, (b.point_ids.ptr, b.cell_starts.ptr)
     backend = "cuda" if device != "cpu" else "cpu"
     for radius in (0.2, 0.3, 0.3):
         p = move(rng, p, pts, 0.1)
         grid.build(pts, radius)
-        assert grid._build is steps
-        assert (grid._keys.ptr, grid._point_ids.ptr, grid._cell_starts.ptr) == buffers
+        assert b.steps is steps
+        assert (b.point_ids.ptr, b.cell_starts.ptr) == buffers
         np.testing.assert_allclose(run_sum(grid, pts, radius, backend, device),
                                    brute_sums(p, radius), atol=2e-4)  # fmt: skip
     other = wp.array(p, dtype=wp.vec3, device=device)  # another array: new steps, same buffers
     grid.build(other, 0.3)
-    assert grid._build is not steps
-    assert (grid._keys.ptr, grid._point_ids.ptr, grid._cell_starts.ptr) == buffers
+    assert b.steps is not steps
+    assert (b.point_ids.ptr, b.cell_starts.ptr) == buffers
 
 
 def test_build_and_query_kernels_compile_for_cuda():
@@ -125,7 +139,10 @@ def test_build_and_query_kernels_compile_for_cuda():
     from kdsl.compiler import lower
     from tests.geometry.test_hash_grid import sum as seed_sum
 
-    for k in (hash_grid_build._bucket_keys, hash_grid_build._bucket_ranges, seed_sum):
+    b = hash_grid_build
+    kernels = (b._bucket_keys, b._bucket_ranges, b._count_points, b._count_scatter,
+               b._count_order, seed_sum)  # fmt: skip
+    for k in kernels:
         assert ".entry" in lower(BACKEND, k.build_module(), "ptx", {"arch": "sm_90"})
 
 
@@ -151,7 +168,7 @@ def test_bucket_wraps_every_int32_cell(backend):
     np.testing.assert_array_equal(out.numpy(), c[:, None] % dims[None, :])
 
 
-def test_rebuild_checks_what_it_did_not_check_before():
+def test_rebuild_checks_what_it_did_not_check_before(build_kind):
     """A rebuild of the last build's array with its radius skips their checks; any other
     radius or array is checked as on the first build."""
     _, p, pts, grid = built_grid(10, 50, "cpu")

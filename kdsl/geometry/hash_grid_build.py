@@ -1,0 +1,282 @@
+"""The two builds of a ``kdsl.HashGrid``'s tables, both kdsl kernels on the grid's device
+with no read back to the host, both giving the same point order (points sorted by
+bucket, stably: a bucket's points in their original order) and bucket ranges.
+
+``SortBuild`` (the CPU's): two kernels around one sort.
+
+1. ``_bucket_keys``: each point's key, its bucket in the high 32 bits and its index in
+   the low 32 (unique keys, so any sort is stable), and, first, the bucket of the
+   previous build's ``i``-th key emptied in the cell tables (those buckets are the
+   tables' only nonzero entries);
+2. a sort of the keys in place (``kdsl.utils.sort.SortKeys``: NumPy's sort on the CPU);
+3. ``_bucket_ranges``: the point order (the keys' low halves) and each bucket's range of
+   it, found by comparing sorted neighbours (empty buckets: ``[0, 0)``).
+
+Its work grows with the point count only, never with the cell count (a 128^3 grid has
+2M cells, ten times a 200k-point build's points): the tables are zeroed once, when
+allocated, and then only the previous build's buckets are emptied.
+
+``CountBuild`` (a GPU's): a counting sort by bucket, three kernels and one scan, where
+the sort's many launches (CUB's radix sort through CuPy: 86 of a rebuild's 112 us of
+host time on an H200) cost more than scanning every cell (2M ints: a few microseconds
+of GPU time).
+
+1. ``_count_points``: each point's bucket, and its slot in it from an atomic count;
+2. an inclusive scan of the counts into ``offsets[1:]`` (``offsets[0]`` stays 0), which
+   is both tables at once: bucket ``c`` is ``[offsets[c], offsets[c + 1])`` (empty
+   buckets: ``[p, p)``);
+3. ``_count_scatter``: each point into its bucket's range at its slot, and the counts
+   back to zero for the next build;
+4. ``_count_order``: the atomic slots come in any order, so each point's final place is
+   its bucket's start plus the number of the bucket's points with a smaller index. That
+   costs the square of each bucket's size, as one query of the points does at least
+   (each point's query visits its own bucket), so no input makes the build cost more
+   than one query pass over the same points.
+
+Both keep their buffers between builds, grow them only when the point count exceeds
+what they hold, and prepare their launches once per points array and count.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from kdsl.frontend.api import atomic_add, kernel, tid
+from kdsl.runtime.alloc import copy, empty, zeros
+from kdsl.runtime.array import array
+from kdsl.runtime.launch import Launch, launch
+from kdsl.stdlib.hash_grid import hash_grid_cell, hash_grid_cell_coord
+from kdsl.types import float32, int32, uint64, vec3
+from kdsl.utils.scan import ScanInto
+from kdsl.utils.sort import SortKeys
+
+#: The index of the inverse cell width among each build's first kernel's parameters.
+_INV = 2
+
+
+@kernel
+def _bucket_keys(
+    points: array(dtype=vec3), n: int32, inv: float32, emptied: int32, dim_x: int32,
+    dim_y: int32, dim_z: int32, keys: array(dtype=uint64), starts: array(dtype=int32),
+    ends: array(dtype=int32),
+):  # fmt: skip
+    # Launched over max(n, emptied): keys[:emptied] hold the previous build's sorted
+    # keys, whose buckets are emptied before this thread's key replaces its slot.
+    i = tid()
+    if i < emptied:
+        old = int32(keys[i] >> uint64(32))
+        starts[old] = 0
+        ends[old] = 0
+    if i < n:
+        p = points[i]
+        x = hash_grid_cell_coord(p[0] * inv)
+        y = hash_grid_cell_coord(p[1] * inv)
+        z = hash_grid_cell_coord(p[2] * inv)
+        c = hash_grid_cell(x, y, z, dim_x, dim_y, dim_z)
+        keys[i] = (uint64(c) << uint64(32)) | uint64(i)
+
+
+@kernel
+def _bucket_ranges(
+    keys: array(dtype=uint64), n: int32, point_ids: array(dtype=int32),
+    starts: array(dtype=int32), ends: array(dtype=int32),
+):  # fmt: skip
+    # Sorted keys: a bucket starts where its bucket differs from the previous key's and
+    # ends where it differs from the next one's; each bucket's two entries are written once.
+    i = tid()
+    k = keys[i]
+    c = int32(k >> uint64(32))
+    point_ids[i] = int32(k & uint64(0xFFFFFFFF))
+    if i == 0 or int32(keys[i - 1] >> uint64(32)) != c:
+        starts[c] = i
+    if i == n - 1 or int32(keys[i + 1] >> uint64(32)) != c:
+        ends[c] = i + 1
+
+
+@kernel
+def _count_points(
+    points: array(dtype=vec3), n: int32, inv: float32, dim_x: int32, dim_y: int32,
+    dim_z: int32, buckets: array(dtype=int32), slots: array(dtype=int32),
+    counts: array(dtype=int32),
+):  # fmt: skip
+    i = tid()
+    p = points[i]
+    x = hash_grid_cell_coord(p[0] * inv)
+    y = hash_grid_cell_coord(p[1] * inv)
+    z = hash_grid_cell_coord(p[2] * inv)
+    c = hash_grid_cell(x, y, z, dim_x, dim_y, dim_z)
+    buckets[i] = c
+    slots[i] = atomic_add(counts, c, 1)
+
+
+@kernel
+def _count_scatter(
+    buckets: array(dtype=int32), slots: array(dtype=int32), offsets: array(dtype=int32),
+    counts: array(dtype=int32), scattered: array(dtype=int32),
+):  # fmt: skip
+    # Slots fill a bucket's range from its end (no read of its count, which this kernel
+    # zeroes for the next build).
+    i = tid()
+    c = buckets[i]
+    scattered[offsets[c + 1] - 1 - slots[i]] = i
+    counts[c] = 0
+
+
+@kernel
+def _count_order(
+    scattered: array(dtype=int32), buckets: array(dtype=int32), offsets: array(dtype=int32),
+    point_ids: array(dtype=int32),
+):  # fmt: skip
+    k = tid()
+    v = scattered[k]
+    c = buckets[v]
+    start = offsets[c]
+    rank = int32(0)
+    for j in range(start, offsets[c + 1]):
+        if scattered[j] < v:
+            rank += 1
+    point_ids[start + rank] = v
+
+
+class _Steps:
+    """One build's prepared steps for ``points`` (``n`` of them) after a build of
+    ``emptied``: run again while those stay the same (it holds ``points``, as its
+    prepared launches do, until the grid builds another array)."""
+
+    __slots__ = ("emptied", "first", "inv", "n", "points", "steps")
+
+    def __init__(self, points: array, n: int, emptied: int, inv: np.float32,
+                 first: Launch | None, steps: list[Callable[[], None]]) -> None:  # fmt: skip
+        self.points, self.n, self.emptied, self.inv = points, n, emptied, inv
+        self.first, self.steps = first, steps
+
+    def matches(self, points: array, n: int, emptied: int) -> bool:
+        """Whether these steps fit a build of ``points`` after one of ``emptied``."""
+        return points is self.points and n == self.n and emptied == self.emptied
+
+    def run(self, inv: np.float32) -> None:
+        """Run the steps with cell width ``1 / inv``."""
+        if inv != self.inv and self.first is not None:
+            self.first.set_param_at_index(_INV, inv)
+            self.inv = inv
+        for step in self.steps:
+            step()
+
+
+class _Build(ABC):
+    """What both builds share: the point order's buffer, its growth, the steps' reuse."""
+
+    def __init__(self, device: Any, dims: tuple[int, int, int]) -> None:
+        self.device, self.dims = device, dims
+        self.num_cells = dims[0] * dims[1] * dims[2]
+        self.capacity = -1
+        self.built = 0
+        #: The original index of each point, in bucket order (its first ``built``).
+        self.point_ids = empty(0, dtype=int32, device=device)
+        self.cell_starts: array
+        self.cell_ends: array
+        #: The last build's prepared steps (their ``points`` is that build's array).
+        self.steps: _Steps | None = None
+
+    def reserve(self, n: int) -> None:
+        """Grow the point buffers to ``n`` points, keeping the built grid as it is."""
+        if n <= self.capacity:
+            return
+        point_ids = empty(n, dtype=int32, device=self.device)
+        if self.built:
+            copy(point_ids, self.point_ids, count=self.built)
+        self.point_ids, self.capacity = point_ids, n
+        self._grow(n)
+        self.steps = None
+
+    @abstractmethod
+    def _grow(self, n: int) -> None:
+        """Grow the build's own point buffers to ``n`` points (``point_ids`` has grown)."""
+
+    @abstractmethod
+    def _prepare(self, points: array, n: int, inv: np.float32) -> _Steps:
+        """The prepared steps of a build over ``points`` after one of ``built``."""
+
+    def run(self, points: array, n: int, inv: np.float32) -> None:
+        """Build over ``points`` (``n``, within ``capacity``) with cell width ``1 / inv``."""
+        steps = self.steps
+        if steps is None or not steps.matches(points, n, self.built):
+            steps = self.steps = self._prepare(points, n, inv)
+        steps.run(inv)
+        self.built = n
+
+    def _launch(self, kernel_: Any, dim: int, inputs: list) -> Launch:
+        return launch(kernel_, dim=dim, device=self.device, inputs=inputs, record_cmd=True)
+
+
+class SortBuild(_Build):
+    """The build by a sort of unique keys (see the module docstring)."""
+
+    def __init__(self, device: Any, dims: tuple[int, int, int]) -> None:
+        super().__init__(device, dims)
+        self.cell_starts = zeros(self.num_cells, dtype=int32, device=device)
+        self.cell_ends = zeros(self.num_cells, dtype=int32, device=device)
+        self.keys = empty(0, dtype=uint64, device=device)
+
+    def _grow(self, n: int) -> None:
+        keys = empty(n, dtype=uint64, device=self.device)
+        if self.built:  # the next build empties the buckets they name
+            copy(keys, self.keys, count=self.built)
+        self.keys = keys
+
+    def _prepare(self, points: array, n: int, inv: np.float32) -> _Steps:
+        tables = [self.cell_starts, self.cell_ends]
+        emptied, keys = self.built, self.keys
+        first = self._launch(_bucket_keys, max(n, emptied),
+                             [points, n, inv, emptied, *self.dims, keys, *tables])  # fmt: skip
+        steps: list[Callable[[], None]] = [first.launch]
+        if n:
+            ranges = self._launch(_bucket_ranges, n, [keys, n, self.point_ids, *tables])
+            steps += [SortKeys(keys[:n]), ranges.launch]
+        return _Steps(points, n, emptied, inv, first, steps)
+
+
+class CountBuild(_Build):
+    """The build by a counting sort (see the module docstring)."""
+
+    def __init__(self, device: Any, dims: tuple[int, int, int]) -> None:
+        super().__init__(device, dims)
+        cells = self.num_cells
+        self.counts = zeros(cells, dtype=int32, device=device)
+        self.offsets = zeros(cells + 1, dtype=int32, device=device)
+        self.cell_starts, self.cell_ends = self.offsets[:cells], self.offsets[1:]
+        self._scratch = empty(0, dtype=int32, device=device)
+
+    def _grow(self, n: int) -> None:
+        # Bucket, slot and scattered order of each point, in one allocation.
+        self._scratch = empty(3 * n, dtype=int32, device=self.device)
+
+    def _prepare(self, points: array, n: int, inv: np.float32) -> _Steps:
+        m = self.capacity
+        buckets, slots, scattered = (self._scratch[k * m : k * m + n] for k in range(3))
+        scan = ScanInto(self.counts, self.cell_ends)
+        if not n:  # no points: the scan of zero counts empties every bucket
+            return _Steps(points, n, self.built, inv, None, [scan])
+        first = self._launch(_count_points, n,
+                             [points, n, inv, *self.dims, buckets, slots, self.counts])  # fmt: skip
+        scatter = self._launch(_count_scatter, n,
+                               [buckets, slots, self.offsets, self.counts, scattered])  # fmt: skip
+        order = self._launch(_count_order, n,
+                             [scattered, buckets, self.offsets, self.point_ids])  # fmt: skip
+        steps = [first.launch, scan, scatter.launch, order.launch]
+        return _Steps(points, n, self.built, inv, first, steps)
+
+
+def builder(device: Any, dims: tuple[int, int, int]) -> _Build:
+    """The build a grid on ``device`` uses: the counting sort on a GPU, the sort of keys
+    on the CPU (measured there: ``docs/performance.md``)."""
+    return CountBuild(device, dims) if counting_sort_on(device) else SortBuild(device, dims)
+
+
+def counting_sort_on(device: Any) -> bool:
+    """Whether grids on ``device`` build by the counting sort (tests try both anywhere)."""
+    return bool(device.is_cuda)
