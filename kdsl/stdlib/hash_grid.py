@@ -8,16 +8,16 @@ record (``HashGridRecord``, read with ``object_record``):
 
 - ``point_ids[k]`` is the original index of the ``k``-th point in cell order (points
   sorted by bucket, stably, so a bucket's points keep their original order);
-- bucket ``c``'s points are ``point_ids[cell_starts[c] : cell_ends[c]]`` (both 0 for
-  an empty bucket);
+- bucket ``c``'s points are ``point_ids[cell_starts[c] : cell_ends[c]]`` (an empty
+  bucket's start equals its end: both 0, or its place in the order, by the build);
 - ``num_points`` is 0 until the grid is built.
 
 Since the points are sorted by bucket, the points of consecutive buckets are one
 consecutive range of ``point_ids``: a query walks each row of its cell box (the cells
 of one ``y`` and ``z``) as one range, or two where the row wraps past the grid's last
 ``x`` bucket, instead of cell by cell (9 ranges, not 27, for a box of 27 cells). Empty
-buckets' ``[0, 0)`` drop out: a run's range ends at the largest end and holds the sum
-of the buckets' counts.
+buckets drop out: a run's range ends at its buckets' largest end and holds the sum of
+their counts.
 
 A query visits the buckets of the cells the box ``[point - max_dist, point +
 max_dist]`` overlaps (27 cells when ``max_dist`` is the build's radius, at most the
