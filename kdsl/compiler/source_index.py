@@ -33,6 +33,7 @@ import json
 import os
 import pickle
 from dataclasses import dataclass
+from types import SimpleNamespace
 from typing import Any
 
 from kdsl.compiler import cache as kernel_cache
@@ -49,17 +50,9 @@ _CODE_DIRS = ("frontend", "ir", "passes", "compiler", "runtime", "stdlib", "geom
               "utils", "texture")  # fmt: skip
 
 
-@dataclass
-class IndexStats:
-    """Lookups of the source index in this process (for tests)."""
-
-    hits: int = 0
-    misses: int = 0
-    stored: int = 0
-    discarded: int = 0
-
-
-STATS = IndexStats()
+#: Lookups of the source index in this process (for tests and benchmarks): entries
+#: found, not found, written, and found bad (then deleted).
+STATS = SimpleNamespace(hits=0, misses=0, stored=0, discarded=0)
 
 
 def enabled() -> bool:
