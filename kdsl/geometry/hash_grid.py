@@ -133,7 +133,12 @@ class HashGrid:
         if n > self._builder.capacity:
             self.reserve(n)
         if n or self.num_points:
-            self._builder.run(points, n, inv)
+            try:
+                self._builder.run(points, n, inv)
+            except BaseException:  # the builder has emptied the tables: an empty grid
+                self.num_points = 0
+                self._write_record(inv)
+                raise
         self.num_points = n
         self.radius = float(radius)
         self._write_record(inv)

@@ -116,20 +116,23 @@ def _count_points(
 @kernel
 def _count_scatter(
     buckets: array(dtype=int32), slots: array(dtype=int32), offsets: array(dtype=int32),
-    counts: array(dtype=int32), scattered: array(dtype=int32),
+    n: int32, counts: array(dtype=int32), scattered: array(dtype=int32),
 ):  # fmt: skip
     # Slots fill a bucket's range from its end (no read of its count, which this kernel
-    # zeroes for the next build).
+    # zeroes for the next build). The test is a guard: counts are zero at a build's start
+    # (``_Build.run`` zeroes them after a build cut short by an error).
     i = tid()
     c = buckets[i]
-    scattered[offsets[c + 1] - 1 - slots[i]] = i
+    at = offsets[c + 1] - 1 - slots[i]
+    if at >= 0 and at < n:
+        scattered[at] = i
     counts[c] = 0
 
 
 @kernel
 def _count_order(
     scattered: array(dtype=int32), buckets: array(dtype=int32), offsets: array(dtype=int32),
-    point_ids: array(dtype=int32),
+    n: int32, point_ids: array(dtype=int32),
 ):  # fmt: skip
     k = tid()
     v = scattered[k]
@@ -139,7 +142,8 @@ def _count_order(
     for j in range(start, offsets[c + 1]):
         if scattered[j] < v:
             rank += 1
-    point_ids[start + rank] = v
+    if start + rank < n:  # as in _count_scatter
+        point_ids[start + rank] = v
 
 
 class _Steps:
@@ -202,12 +206,24 @@ class _Build(ABC):
         """The prepared steps of a build over ``points`` after one of ``built``."""
 
     def run(self, points: array, n: int, inv: np.float32) -> None:
-        """Build over ``points`` (``n``, within ``capacity``) with cell width ``1 / inv``."""
+        """Build over ``points`` (``n``, within ``capacity``) with cell width ``1 / inv``.
+
+        A build cut short by an error leaves an empty grid (tables zeroed), so the next
+        one starts from the state every build expects."""
         steps = self.steps
         if steps is None or not steps.matches(points, n, self.built):
             steps = self.steps = self._prepare(points, n, inv)
-        steps.run(inv)
+        try:
+            steps.run(inv)
+        except BaseException:
+            self.built, self.steps = 0, None
+            self._clear()
+            raise
         self.built = n
+
+    @abstractmethod
+    def _clear(self) -> None:
+        """Zero the tables (and whatever else a build expects zero at its start)."""
 
     def _launch(self, kernel_: Any, dim: int, inputs: list) -> Launch:
         return launch(kernel_, dim=dim, device=self.device, inputs=inputs, record_cmd=True)
@@ -221,6 +237,10 @@ class SortBuild(_Build):
         self.cell_starts = zeros(self.num_cells, dtype=int32, device=device)
         self.cell_ends = zeros(self.num_cells, dtype=int32, device=device)
         self.keys = empty(0, dtype=uint64, device=device)
+
+    def _clear(self) -> None:
+        self.cell_starts.zero_()
+        self.cell_ends.zero_()
 
     def _grow(self, n: int) -> None:
         keys = empty(n, dtype=uint64, device=self.device)
@@ -251,6 +271,10 @@ class CountBuild(_Build):
         self.cell_starts, self.cell_ends = self.offsets[:cells], self.offsets[1:]
         self._scratch = empty(0, dtype=int32, device=device)
 
+    def _clear(self) -> None:
+        self.counts.zero_()
+        self.offsets.zero_()
+
     def _grow(self, n: int) -> None:
         # Bucket, slot and scattered order of each point, in one allocation.
         self._scratch = empty(3 * n, dtype=int32, device=self.device)
@@ -264,9 +288,9 @@ class CountBuild(_Build):
         first = self._launch(_count_points, n,
                              [points, n, inv, *self.dims, buckets, slots, self.counts])  # fmt: skip
         scatter = self._launch(_count_scatter, n,
-                               [buckets, slots, self.offsets, self.counts, scattered])  # fmt: skip
+                               [buckets, slots, self.offsets, n, self.counts, scattered])  # fmt: skip
         order = self._launch(_count_order, n,
-                             [scattered, buckets, self.offsets, self.point_ids])  # fmt: skip
+                             [scattered, buckets, self.offsets, n, self.point_ids])  # fmt: skip
         steps = [first.launch, scan, scatter.launch, order.launch]
         return _Steps(points, n, self.built, inv, first, steps)
 

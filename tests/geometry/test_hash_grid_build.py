@@ -180,3 +180,25 @@ def test_rebuild_checks_what_it_did_not_check_before(build_kind):
     grid.build(pts, np.float32(0.2))  # another type of the same radius: checked, accepted
     grid.build(pts, 0.2)
     check_tables(grid, p, 0.2, "cpu")
+
+
+def test_a_build_cut_short_leaves_an_empty_grid(build_kind):
+    """An error between a build's steps leaves every bucket empty, and the next build
+    over the same buffers is right (the counting sort's counts are zero again)."""
+    rng, p, pts, grid = built_grid(11, 200, "cpu")
+    grid.build(pts, 0.2)
+    steps = grid._builder.steps.steps
+
+    def broken():
+        raise RuntimeError("cut short")
+
+    steps.insert(2, broken)  # after the first kernel and the sort or scan
+    p = move(rng, p, pts, 0.2)
+    with pytest.raises(RuntimeError, match="cut short"):
+        grid.build(pts, 0.2)
+    b = grid._builder
+    assert grid.num_points == 0
+    assert not b.cell_starts.numpy().any() and not b.cell_ends.numpy().any()
+    assert run_candidates(grid, p[:3], 0.2, "cpu") == [[], [], []]
+    grid.build(pts, 0.2)
+    check_tables(grid, p, 0.2, "cpu")
