@@ -28,7 +28,7 @@ parent's range, bounds and kept-node counts, then climbs on); the preorder kerne
 (writes every kept node at its preorder number, packed, with its bounds: no refit).
 The number of kept nodes stays on the device (``DeviceTree.node_count``): the tree's
 arrays have ``2n - 1`` slots, those after the last node marked ``first = -2``
-(``UNUSED``). Its buffers are views of one zeroed allocation (which the tree's
+(``UNUSED``). Its buffers are views of one allocation (which the tree's
 ``rebuild`` keeps alive); the launches are prepared once
 (``record_cmd``) and ``rebuild`` runs them again over the same buffers, which every
 build leaves as it found them (the zeroed counters zero again).
@@ -41,7 +41,7 @@ from kdsl.frontend.api import atomic_add, atomic_max, cast, func, inf, kernel, t
 from kdsl.frontend.api import max as vmax
 from kdsl.frontend.api import min as vmin
 from kdsl.geometry.device_tree import UNUSED, DeviceTree, node_views
-from kdsl.runtime.alloc import empty, zeros
+from kdsl.runtime.alloc import empty
 from kdsl.runtime.array import array
 from kdsl.runtime.launch import Launch, launch
 from kdsl.stdlib.bvh import BvhNode
@@ -421,7 +421,7 @@ class LbvhBuild:
         roots = max(num_groups, 1)
         morton_drop, index_bits, group_shift = key_layout(n, num_groups)
         has_groups = int(groups is not None)
-        # One zeroed block of packed nodes (one allocation, one fill): the tree's nodes,
+        # One block of packed nodes (one allocation, one fill): the tree's nodes,
         # then, as views of the rest, the radix tree's inner nodes' bounds, the keys and
         # the int32 arrays. Every element of ``ints`` is written before it is read;
         # ``zero`` must start at zero, and every build leaves it so.
@@ -433,7 +433,9 @@ class LbvhBuild:
                       "bounds": BOUND_SLOTS}  # fmt: skip
         num_ints = sum(sizes.values()) + sum(zero_sizes.values())
         tail = 24 * (n - 1) + 8 * n + 4 * num_ints  # inner bounds, keys, ints
-        self._block = zeros(slots + -(-tail // 32), dtype=BvhNode, device=device)
+        # (an uninitialized struct allocation, then one fill of the int32 arrays that
+        # must start at zero: a zero-filled struct array is slow to make on the CPU)
+        self._block = empty(slots + -(-tail // 32), dtype=BvhNode, device=device)
         nodes = self._block[:slots]
         views = node_views(nodes)
         lo, packed_first, hi, packed_next = views
@@ -445,6 +447,7 @@ class LbvhBuild:
                          device=device)  # fmt: skip
         ints = _carve(int_view, {**sizes, **zero_sizes})
         zero = {name: ints[name] for name in zero_sizes}
+        int_view[sum(sizes.values()) :].zero_()  # ``zero``: the last arrays of the block
         node_a, node_b = ints["node_a"], ints["node_b"]
         group_arg = groups if groups is not None else zero["bounds"]
         with_parents = int(bottom_up)

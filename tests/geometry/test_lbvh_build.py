@@ -128,7 +128,7 @@ def test_build_reads_nothing_back_and_rebuild_prepares_nothing(device, monkeypat
     lo = wp.array(rng.random((n, 3)).astype(np.float32), dtype=wp.vec3, device=device)
     hi = wp.array(lo.numpy() + 0.01, dtype=wp.vec3, device=device)
     wp.Bvh(lo, hi, constructor="lbvh")  # compiles
-    calls = {"numpy": 0, "alloc": 0, "launch": 0}
+    calls = {"numpy": 0, "alloc": 0, "launch": 0, "fill": 0}
     real_numpy = array.numpy
 
     def counting(name, fn):
@@ -139,13 +139,13 @@ def test_build_reads_nothing_back_and_rebuild_prepares_nothing(device, monkeypat
 
     monkeypatch.setattr(array, "numpy", counting("numpy", real_numpy))
     monkeypatch.setattr(lbvh, "empty", counting("alloc", lbvh.empty))
-    monkeypatch.setattr(lbvh, "zeros", counting("alloc", lbvh.zeros))
+    monkeypatch.setattr(array, "zero_", counting("fill", array.zero_))
     monkeypatch.setattr(lbvh, "launch", counting("launch", lbvh.launch))
     bvh = wp.Bvh(lo, hi, constructor="lbvh")
-    assert calls == {"numpy": 0, "alloc": 1, "launch": 4}  # one block, four prepared kernels
-    calls.update(numpy=0, alloc=0, launch=0)
+    assert calls == {"numpy": 0, "alloc": 1, "launch": 4, "fill": 1}  # one block, four kernels
+    calls.update(numpy=0, alloc=0, launch=0, fill=0)
     bvh.rebuild()
-    assert calls == {"numpy": 0, "alloc": 0, "launch": 0}
+    assert calls == {"numpy": 0, "alloc": 0, "launch": 0, "fill": 0}
     monkeypatch.setattr(array, "numpy", real_numpy)
     assert bvh._tree.num_nodes == 2 * n - 1  # read back on demand only
 
