@@ -45,7 +45,7 @@ from kdsl.runtime.alloc import empty
 from kdsl.runtime.array import array
 from kdsl.runtime.launch import Launch, launch
 from kdsl.stdlib.bvh import BvhNode
-from kdsl.types import float32, int32, uint64, vec3
+from kdsl.types import float32, int32, uint64, vec2i, vec3
 from kdsl.utils.scan import ScanInto
 from kdsl.utils.sort import SortKeys
 
@@ -244,14 +244,17 @@ def _emit_hierarchy(
     index_mask: uint64, item_lowers: array(dtype=vec3), item_uppers: array(dtype=vec3),
     items: array(dtype=int32), parent: array(dtype=int32), left: array(dtype=int32),
     right: array(dtype=int32), node_lo: array(dtype=vec3), node_hi: array(dtype=vec3),
-    node_a: array(dtype=int32), node_b: array(dtype=int32), arrivals: array(dtype=int32),
-    starts: array(dtype=int32), group_roots: array(dtype=int32),
+    node_a: array(dtype=int32), node_b: array(dtype=int32), sizes: array(dtype=int32),
+    arrivals: array(dtype=int32), use_scan: int32, starts: array(dtype=int32),
+    before: array(dtype=int32), group_roots: array(dtype=int32),
 ):  # fmt: skip
     # Thread k: sorted item k (its index into ``items``, its box), then up the tree (see
     # the module docstring). Inner node s's parent is s (this node is its left child) or
     # a - 1 (its right child): the side whose neighbouring key shares the longer prefix.
-    # The kept nodes are counted by their first position a into ``starts[a + 1]``; every
-    # group's root is set to -1 (``_preorder`` writes the roots found).
+    # Each inner node gets its range, bounds and kept size (its subtree's kept nodes);
+    # the root's kept size, the tree's node count, goes to ``before[n]``. With
+    # ``use_scan``, the kept nodes are also counted by their first position a into
+    # ``starts[a + 1]``. Every group's root is set to -1 (``_preorder`` writes them).
     k = tid()
     if k < group_roots.shape[0]:  # (more groups than threads: each sets several)
         for g in range(k, group_roots.shape[0], n):
@@ -263,18 +266,25 @@ def _emit_hierarchy(
     node = n - 1 + k
     a = k
     b = k
+    size = 1  # kept nodes in the subtree of ``node`` (a leaf's dropped subtree: 1)
     while True:
         if node < n - 1:  # an inner node, complete: publish it
+            leaf = _is_leaf(keys, a, b, leaf_size, group_shift)
+            if leaf:
+                size = 1
             node_lo[node] = lo
             node_hi[node] = hi
             node_a[node] = a
             node_b[node] = b
-            if not _is_leaf(keys, a, b, leaf_size, group_shift):  # its children are kept
+            sizes[node] = size
+            if use_scan != 0 and not leaf:  # its children are kept
                 atomic_add(starts, a + 1, 1)
                 atomic_add(starts, node + 2, 1)
         if a == 0 and b == n - 1:  # the root, always kept
             parent[node] = -1
-            atomic_add(starts, 1, 1)
+            before[n] = size
+            if use_scan != 0:
+                atomic_add(starts, 1, 1)
             return
         p = a - 1
         if a == 0 or (b != n - 1 and _delta(keys, b, b + 1) > _delta(keys, a - 1, a)):
@@ -300,7 +310,43 @@ def _emit_hierarchy(
             hi = vmax(hi, node_hi[s])
         a = vmin(a, _range_a(n, node_a, s))
         b = vmax(b, _range_b(n, node_b, s))
+        size = size + _kept_size(n, sizes, s) + 1
         node = p
+
+
+@func
+def _kept_size(n: int, sizes: array(dtype=int32), x: int) -> int:
+    """Kept nodes in the subtree of radix-tree node ``x`` (1 for a leaf)."""
+    if x >= n - 1:
+        return 1
+    return sizes[x]
+
+
+@func
+def _walk_preorder(
+    n: int, parent: array(dtype=int32), left: array(dtype=int32), sizes: array(dtype=int32),
+    x: int,
+) -> vec2i:  # fmt: skip
+    """(the preorder number of kept node ``x``, its parent's, -1 for the root), from a
+    walk up to the root: each ancestor adds itself, and the kept nodes of its left
+    subtree where ``x`` is in its right one."""
+    pre = 0
+    first_step = 0
+    c = x
+    p = parent[x]
+    while p >= 0:
+        step = 1
+        if left[p] != c:
+            step = step + _kept_size(n, sizes, left[p])
+        if c == x:
+            first_step = step
+        pre = pre + step
+        c = p
+        p = parent[p]
+    up = -1
+    if parent[x] >= 0:
+        up = pre - first_step
+    return vec2i(pre, up)
 
 
 @func
@@ -324,6 +370,7 @@ def _preorder(
     has_groups: int32, items: array(dtype=int32), item_lowers: array(dtype=vec3),
     item_uppers: array(dtype=vec3), parent: array(dtype=int32), node_lo: array(dtype=vec3),
     node_hi: array(dtype=vec3), node_a: array(dtype=int32), node_b: array(dtype=int32),
+    left: array(dtype=int32), sizes: array(dtype=int32), use_scan: int32,
     before: array(dtype=int32), skip: array(dtype=int32), first: array(dtype=int32),
     count: array(dtype=int32), lowers: array(dtype=vec3), uppers: array(dtype=vec3),
     packed_first: array(dtype=int32), packed_next: array(dtype=int32),
@@ -333,8 +380,11 @@ def _preorder(
     # Thread x: radix-tree node x, written at its preorder number when kept (links,
     # contiguous ``first``/``count`` for the refit, packed node and bounds, and, with
     # ``with_parents``, its parent's preorder number: a kept node's parent is kept); and
-    # slot x, when past the last node, marked unused. Zeroes ``starts`` and ``bounds``
-    # for the next build (nothing reads them after the scan).
+    # slot x, when past the last node, marked unused. The preorder number comes from the
+    # scan of the kept nodes' first positions (``before``) and a short walk up the chain
+    # of left children (``use_scan``: fewer steps, for a CPU), or from a walk up to the
+    # root over the kept sizes (no scan: one step less to issue, for a GPU). Zeroes
+    # ``starts`` and ``bounds`` for the next build (nothing reads them after the scan).
     x = tid()
     slots = 2 * n - 1
     if x <= n:  # (n == 1: one thread, two counts)
@@ -358,8 +408,21 @@ def _preorder(
         return  # inside a leaf: not kept
     a = _range_a(n, node_a, x)
     b = _range_b(n, node_b, x)
-    pre = before[a] + _chain_rank(n, node_a, parent, x)
-    after = before[b + 1]
+    pre = 0
+    after = 0
+    up = -1  # the parent's preorder number
+    if use_scan != 0:
+        pre = before[a] + _chain_rank(n, node_a, parent, x)
+        after = before[b + 1]
+        if q >= 0:
+            up = pre - 1  # the left child follows its parent
+            if node_a[q] != a:
+                up = before[node_a[q]] + _chain_rank(n, node_a, parent, q)
+    else:
+        walk = _walk_preorder(n, parent, left, sizes, x)
+        pre = walk[0]
+        up = walk[1]
+        after = pre + _kept_size(n, sizes, x)
     skip[pre] = after
     if x >= n - 1:
         j = items[a]
@@ -379,11 +442,6 @@ def _preorder(
         packed_next[pre] = after
         count[pre] = 0
     if with_parents != 0:
-        up = -1
-        if q >= 0:
-            up = pre - 1  # the left child follows its parent
-            if node_a[q] != a:
-                up = before[node_a[q]] + _chain_rank(n, node_a, parent, q)
         pre_parent[pre] = up
     if has_groups != 0:  # the root of a group: one group, its parent (if any) spans two
         s = uint64(group_shift)
@@ -414,7 +472,7 @@ class LbvhBuild:
     it again from the boxes' current values (same count), allocating nothing."""
 
     def __init__(self, lowers: array, uppers: array, leaf_size: int, groups: array | None,
-                 num_groups: int, bottom_up: bool) -> None:  # fmt: skip
+                 num_groups: int, bottom_up: bool, use_scan: bool) -> None:  # fmt: skip
         device = lowers.device
         n = lowers.shape[0]
         slots = 2 * n - 1
@@ -425,13 +483,13 @@ class LbvhBuild:
         # then, as views of the rest, the radix tree's inner nodes' bounds, the keys and
         # the int32 arrays. Every element of ``ints`` is written before it is read;
         # ``zero`` must start at zero, and every build leaves it so.
-        sizes = {"items": n, "skip": slots, "first": slots, "count": slots, "parent": slots,
-                 "left": n - 1, "right": n - 1, "node_a": n - 1, "node_b": n - 1,
-                 "before": n + 1,
-                 "pre_parent": slots if bottom_up else 0, "group_roots": roots}  # fmt: skip
+        layout = {"items": n, "skip": slots, "first": slots, "count": slots, "parent": slots,
+                  "left": n - 1, "right": n - 1, "node_a": n - 1, "node_b": n - 1,
+                  "kept": n - 1, "before": n + 1,
+                  "pre_parent": slots if bottom_up else 0, "group_roots": roots}  # fmt: skip
         zero_sizes = {"starts": n + 1, "climbs": n - 1, "arrivals": slots if bottom_up else 0,
                       "bounds": BOUND_SLOTS}  # fmt: skip
-        num_ints = sum(sizes.values()) + sum(zero_sizes.values())
+        num_ints = sum(layout.values()) + sum(zero_sizes.values())
         tail = 24 * (n - 1) + 8 * n + 4 * num_ints  # inner bounds, keys, ints
         # (an uninitialized struct allocation, then one fill of the int32 arrays that
         # must start at zero: a zero-filled struct array is slow to make on the CPU)
@@ -445,9 +503,9 @@ class LbvhBuild:
         keys = array(ptr=base + 24 * (n - 1), dtype=uint64, shape=(n,), device=device)
         int_view = array(ptr=base + 24 * (n - 1) + 8 * n, dtype=int32, shape=(num_ints,),
                          device=device)  # fmt: skip
-        ints = _carve(int_view, {**sizes, **zero_sizes})
+        ints = _carve(int_view, {**layout, **zero_sizes})
         zero = {name: ints[name] for name in zero_sizes}
-        int_view[sum(sizes.values()) :].zero_()  # ``zero``: the last arrays of the block
+        int_view[sum(layout.values()) :].zero_()  # ``zero``: the last arrays of the block
         node_a, node_b = ints["node_a"], ints["node_b"]
         group_arg = groups if groups is not None else zero["bounds"]
         with_parents = int(bottom_up)
@@ -463,13 +521,15 @@ class LbvhBuild:
             prepared(_emit_hierarchy, n, [
                 keys, n, leaf_size, group_shift, (1 << index_bits) - 1, lowers, uppers,
                 ints["items"], ints["parent"], ints["left"], ints["right"], node_lo, node_hi,
-                node_a, node_b, zero["climbs"], zero["starts"], ints["group_roots"]]).launch,
-            ScanInto(zero["starts"], ints["before"]),
+                node_a, node_b, ints["kept"], zero["climbs"], int(use_scan), zero["starts"],
+                ints["before"], ints["group_roots"]]).launch,
+            *([ScanInto(zero["starts"], ints["before"])] if use_scan else []),
             prepared(_preorder, slots, [
                 keys, n, leaf_size, group_shift, has_groups, ints["items"], lowers, uppers,
-                ints["parent"], node_lo, node_hi, node_a, node_b, ints["before"], ints["skip"],
-                ints["first"], ints["count"], lo, hi, packed_first, packed_next, with_parents,
-                ints["pre_parent"], ints["group_roots"], zero["starts"], zero["bounds"]]).launch,
+                ints["parent"], node_lo, node_hi, node_a, node_b, ints["left"], ints["kept"],
+                int(use_scan), ints["before"], ints["skip"], ints["first"], ints["count"], lo,
+                hi, packed_first, packed_next, with_parents, ints["pre_parent"],
+                ints["group_roots"], zero["starts"], zero["bounds"]]).launch,
         ]  # fmt: skip
         self.tree = DeviceTree(
             ints["skip"], ints["first"], ints["count"], ints["items"],
@@ -486,22 +546,27 @@ class LbvhBuild:
 
 
 def build_lbvh(lowers: array, uppers: array, leaf_size: int, groups: array | None,
-               num_groups: int, bottom_up: bool | None = None) -> DeviceTree:  # fmt: skip
+               num_groups: int, bottom_up: bool | None = None,
+               use_scan: bool | None = None) -> DeviceTree:  # fmt: skip
     """Build a ``DeviceTree`` over the boxes on their device (see the module docstring):
     its packed nodes written whole (links and bounds) and, for the bottom-up refit (on
     a GPU by default, anywhere with ``bottom_up=True``), its parents and arrival
-    counters. ``tree.rebuild()`` builds it again over the same buffers."""
+    counters. ``use_scan`` numbers the nodes through a scan (a CPU's default) rather
+    than walks up the tree (a GPU's: no scan to issue). ``tree.rebuild()`` builds it
+    again over the same buffers."""
     device = lowers.device
     n = lowers.shape[0]
     leaf_size = max(1, int(leaf_size))
     if bottom_up is None:  # a GPU refits bottom up (``device_tree``), from parents
         bottom_up = device.is_cuda
+    if use_scan is None:
+        use_scan = not device.is_cuda
     if n == 0:
         none = empty(max(num_groups, 1), dtype=int32, device=device)
         none.fill_(-1)
         return DeviceTree(none[:0], none[:0], none[:0], none[:0], none[:num_groups], none[:0],
                           none[:0], 0)  # fmt: skip
-    build = LbvhBuild(lowers, uppers, leaf_size, groups, num_groups, bottom_up)
+    build = LbvhBuild(lowers, uppers, leaf_size, groups, num_groups, bottom_up, use_scan)
     tree = build.run()
     tree.rebuild = build.run
     return tree

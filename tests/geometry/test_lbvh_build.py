@@ -61,11 +61,12 @@ def _reference(keys: list[int], leaf_size: int, group_shift: int):
 
 
 @pytest.mark.parametrize("device", DEVICES)
+@pytest.mark.parametrize("use_scan", [True, False])  # (a CPU's numbering, a GPU's)
 @pytest.mark.parametrize(("n", "cells", "leaf_size", "num_groups"), [
     (1, 2, 1, 0), (2, 2, 1, 0), (300, 1024, 1, 0), (300, 1024, 4, 0), (400, 3, 1, 0),
     (400, 3, 3, 0), (500, 16, 2, 5), (257, 1024, 1, 3),
 ])  # fmt: skip
-def test_tree_is_the_radix_tree_of_the_keys(device, n, cells, leaf_size, num_groups):
+def test_tree_is_the_radix_tree_of_the_keys(device, use_scan, n, cells, leaf_size, num_groups):
     rng = np.random.default_rng(n + cells)
     lo, hi, q = _grid_boxes(rng, n, cells)
     groups = rng.integers(0, num_groups, n).astype(np.int32) if num_groups else None
@@ -76,10 +77,9 @@ def test_tree_is_the_radix_tree_of_the_keys(device, n, cells, leaf_size, num_gro
                   for i, m in enumerate(morton))  # fmt: skip
     skip, first, count = _reference(keys, leaf_size, group_shift if num_groups else 63)
     g = None if groups is None else wp.array(groups, dtype=wp.int32, device=device)
-    bvh = wp.Bvh(wp.array(lo, dtype=wp.vec3, device=device),
-                 wp.array(hi, dtype=wp.vec3, device=device), constructor="lbvh", groups=g,
-                 leaf_size=leaf_size)  # fmt: skip
-    t = bvh._tree
+    t = lbvh.build_lbvh(wp.array(lo, dtype=wp.vec3, device=device),
+                        wp.array(hi, dtype=wp.vec3, device=device), leaf_size, g, num_groups,
+                        bottom_up=True, use_scan=use_scan)  # fmt: skip
     m = t.num_nodes
     assert m == len(skip) and t.slots == 2 * n - 1
     np.testing.assert_array_equal(t.skip.numpy()[:m], skip)
@@ -96,6 +96,23 @@ def test_tree_is_the_radix_tree_of_the_keys(device, n, cells, leaf_size, num_gro
         np.testing.assert_array_equal(nodes["lower"][k], lo[under].min(axis=0))
         np.testing.assert_array_equal(nodes["upper"][k], hi[under].max(axis=0))
         assert nodes["next"][k] == (count[k] if first[k] >= 0 else skip[k])
+    parents = t.parent.numpy()  # each node's parent: the node whose children it is
+    assert parents[0] == -1 and np.all(parents[m:] == -1)
+    for k in range(m):
+        if first[k] < 0:
+            assert parents[k + 1] == k and parents[skip[k + 1]] == k
+    if num_groups:  # each group's root: the top node over exactly its boxes
+        roots = t.group_roots.numpy()
+        for grp in range(num_groups):
+            under = np.flatnonzero(groups == grp)
+            if len(under) == 0:
+                assert roots[grp] == -1
+                continue
+            r = roots[grp]
+            end = skip[r] if first[r] < 0 else r + 1
+            got = [items[first[j] + c] for j in range(r, end) if first[j] >= 0
+                   for c in range(count[j])]  # fmt: skip
+            assert sorted(got) == under.tolist()
 
 
 @pytest.mark.parametrize("device", DEVICES)
