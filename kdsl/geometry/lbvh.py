@@ -18,14 +18,19 @@ its sorted range ``[a, b]`` between ``s`` and ``s + 1``; sorted item ``k`` is le
   children) the larger comes first. So a node's preorder number is the number of kept
   nodes starting before ``a`` (an inclusive scan of per-position counts) plus its rank
   in its chain (a short walk up its parents), and ``skip`` is the number of kept nodes
-  starting before ``b + 1``.
+  starting before ``b + 1`` (``use_scan``, a CPU's way). Without the scan (a GPU's way:
+  one host call less, longer walks being cheap there), the preorder number is a walk
+  up to the root, each ancestor adding itself and, where the node lies in its right
+  subtree, the kept size of its left one; ``skip`` is that number plus the node's kept
+  size.
 
-The build (``LbvhBuild``) is four kernels, one sort and one scan, all on the device,
-with no read back and no fill: the centres' bounds; the keys; the hierarchy (a thread
-per leaf climbs, and at each parent the second child's thread to arrive, after an
-arrival counter and fences as in the bottom-up refit of ``device_tree``, writes the
-parent's range, bounds and kept-node counts, then climbs on); the preorder kernel
-(writes every kept node at its preorder number, packed, with its bounds: no refit).
+The build (``LbvhBuild``) is four kernels, one sort and (on a CPU) one scan, all on the
+device, with no read back and no fill: the centres' bounds; the keys; the hierarchy (a
+thread per leaf climbs, and at each parent the second child's thread to arrive, after
+an arrival counter and fences as in the bottom-up refit of ``device_tree``, writes the
+parent's range, bounds, kept size and kept-node counts, then climbs on); the preorder
+kernel (writes every kept node at its preorder number, packed, with its bounds: no
+refit).
 The number of kept nodes stays on the device (``DeviceTree.node_count``): the tree's
 arrays have ``2n - 1`` slots, those after the last node marked ``first = -2``
 (``UNUSED``). Its buffers are views of one allocation (which the tree's
