@@ -425,3 +425,39 @@ def test_prepared_and_captured_launches_take_the_fast_entry(picks):
     np.testing.assert_array_equal(
         out.numpy().view(np.uint32), _run_jacobi(u, "cpu").view(np.uint32)
     )
+
+
+@wp.kernel
+def step_vec(x: wp.array(dtype=wp.vec3), v: wp.array(dtype=wp.vec3), x_out: wp.array(dtype=wp.vec3),
+             v_out: wp.array(dtype=wp.vec3), grid: int, k: float, gravity: wp.vec3, dt: float):  # fmt: skip
+    """Cloth's signature: vec3 arrays read and written, scalars and a vector by value."""
+    i = wp.tid()
+    r = i // grid
+    j = wp.min(i + 1, x.shape[0] - 1)
+    v1 = v[i] + (k * (x[j] - x[i]) + gravity * float(r)) * dt
+    v_out[i] = v1
+    x_out[i] = x[i] + v1 * dt
+
+
+@needs_gpu
+def test_cloth_like_launches_take_the_fast_entry(picks):
+    rng = np.random.default_rng(5)
+    n = 4097
+    x = rng.normal(size=(n, 3)).astype(np.float32)
+    v = rng.normal(size=(n, 3)).astype(np.float32)
+    got = {}
+    for device in (DEVICE, "cpu"):
+        outs = [wp.zeros(n, dtype=wp.vec3, device=device) for _ in range(2)]
+        args = [wp.array(x, dtype=wp.vec3, device=device), wp.array(v, dtype=wp.vec3, device=device),
+                *outs, 64, 0.5, wp.vec3(0.0, -9.8, 0.0), 0.01]  # fmt: skip
+        wp.launch(step_vec, dim=n, inputs=args, device=device)
+        if device == DEVICE:
+            cmd = wp.launch(step_vec, dim=n, inputs=args, device=device, record_cmd=True)
+            cmd.launch()
+            with wp.ScopedCapture(device=DEVICE) as cap:
+                wp.launch(step_vec, dim=n, inputs=args, device=device)
+            wp.capture_launch(cap.graph)
+        got[device] = [o.numpy() for o in outs]
+    assert picks(step_vec) and all(picks(step_vec))
+    for a, b in zip(got[DEVICE], got["cpu"]):
+        np.testing.assert_array_equal(a.view(np.uint32), b.view(np.uint32))
