@@ -173,3 +173,28 @@ def test_key_layout_makes_room_for_groups_and_refuses_too_many():
     assert lbvh.key_layout(2**31, 2**12) == (12, 31, 49)  # fewer Morton bits
     with pytest.raises(KdslError, match="no key bits"):
         lbvh.key_layout(2**31, 2**31)
+
+
+@pytest.mark.parametrize("leaf_size", [1, 3])
+@pytest.mark.parametrize("num_groups", [0, 4])
+def test_both_numberings_give_one_tree_on_adversarial_boxes(leaf_size, num_groups):
+    """The scan numbering (a CPU's) and the walk numbering (a GPU's) write the same
+    arrays, bit for bit, over NaN boxes, duplicates and a degenerate axis."""
+    rng = np.random.default_rng(leaf_size + num_groups)
+    n = 1500
+    c = rng.random((n, 3)).astype(np.float32)
+    c[: n // 3] = c[0]  # a third at one centre
+    c[:, 2] = 0.5  # a flat axis
+    lo, hi = c - np.float32(0.01), c + np.float32(0.01)
+    lo[rng.integers(0, n, 20)] = np.nan  # NaN boxes
+    groups = None
+    if num_groups:
+        groups = wp.array(rng.integers(0, num_groups, n).astype(np.int32))
+    trees = [lbvh.build_lbvh(wp.array(lo, dtype=wp.vec3), wp.array(hi, dtype=wp.vec3),
+                             leaf_size, groups, num_groups, bottom_up=True, use_scan=scan)
+             for scan in (True, False)]  # fmt: skip
+    a, b = trees
+    assert a.num_nodes == b.num_nodes
+    for name in ("skip", "first", "count", "items", "group_roots", "parent"):
+        np.testing.assert_array_equal(getattr(a, name).numpy(), getattr(b, name).numpy())
+    assert a.nodes.numpy().tobytes() == b.nodes.numpy().tobytes()
