@@ -16,15 +16,15 @@ Its work grows with the point count only, never with the cell count (a 128^3 gri
 2M cells, ten times a 200k-point build's points): the tables are zeroed once, when
 allocated, and then only the previous build's buckets are emptied.
 
-``CountBuild`` (a GPU's): a counting sort by bucket, three kernels and one scan, where
-the sort's many launches (CUB's radix sort through CuPy: 86 of a rebuild's 112 us of
-host time on an H200) cost more than scanning every cell (2M ints: a few microseconds
-of GPU time).
+``CountBuild`` (a GPU's): a counting sort by bucket, all kdsl launches (ten, prepared),
+where the sort of keys needs CuPy's radix sort (86 of a rebuild's 112 us of host time
+on an H200: CuPy's calls cost far more host time than a prepared launch's 6 us) and
+CuPy's scan would cost as much (114 us for 2M counts).
 
 1. ``_count_points``: each point's bucket, and its slot in it from an atomic count;
-2. an inclusive scan of the counts into ``offsets[1:]`` (``offsets[0]`` stays 0), which
-   is both tables at once: bucket ``c`` is ``[offsets[c], offsets[c + 1])`` (empty
-   buckets: ``[p, p)``);
+2. an inclusive scan of the counts into ``offsets[1:]`` (``offsets[0]`` stays 0;
+   ``_Scan``: seven launches for 2M counts), which is both tables at once: bucket ``c``
+   is ``[offsets[c], offsets[c + 1])`` (empty buckets: ``[p, p)``);
 3. ``_count_scatter``: each point into its bucket's range at its slot, and the counts
    back to zero for the next build;
 4. ``_count_order``: the atomic slots come in any order, so each point's final place is
@@ -46,12 +46,12 @@ from typing import Any
 import numpy as np
 
 from kdsl.frontend.api import atomic_add, kernel, tid
+from kdsl.frontend.api import min as vmin
 from kdsl.runtime.alloc import copy, empty, zeros
 from kdsl.runtime.array import array
 from kdsl.runtime.launch import Launch, launch
 from kdsl.stdlib.hash_grid import hash_grid_cell, hash_grid_cell_coord
 from kdsl.types import float32, int32, uint64, vec3
-from kdsl.utils.scan import ScanInto
 from kdsl.utils.sort import SortKeys
 
 #: The index of the inverse cell width among each build's first kernel's parameters.
@@ -144,6 +144,83 @@ def _count_order(
             rank += 1
     if start + rank < n:  # as in _count_scatter
         point_ids[start + rank] = v
+
+
+#: Counts each thread of the counting sort's scan adds up in turn (a level's chunk).
+SCAN_CHUNK = 64
+
+
+@kernel
+def _chunk_sums(values: array(dtype=int32), m: int32, chunk: int32, sums: array(dtype=int32)):
+    t = tid()
+    total = int32(0)
+    for j in range(t * chunk, vmin(t * chunk + chunk, m)):
+        total += values[j]
+    sums[t] = total
+
+
+@kernel
+def _top_prefix(values: array(dtype=int32), m: int32, prefix: array(dtype=int32)):
+    # One thread: the exclusive prefix sums of the top level's few values.
+    total = int32(0)
+    for j in range(m):
+        prefix[j] = total
+        total += values[j]
+
+
+@kernel
+def _chunk_prefix(
+    values: array(dtype=int32), m: int32, chunk: int32, base: array(dtype=int32),
+    inclusive: int32, out: array(dtype=int32),
+):  # fmt: skip
+    # Each chunk's prefix sums from the sum of the chunks before it (``base``, the level
+    # above's exclusive prefix): exclusive on the levels above, inclusive on the last.
+    t = tid()
+    run = base[t]
+    for j in range(t * chunk, vmin(t * chunk + chunk, m)):
+        v = values[j]
+        if inclusive != 0:
+            out[j] = run + v
+        else:
+            out[j] = run
+        run += v
+
+
+class _Scan:
+    """The inclusive prefix sums of ``values`` into ``out`` (both int32, one size) as
+    kdsl launches, prepared once: sums of chunks of ``SCAN_CHUNK`` level by level up to
+    a few, one thread's prefix of those, then each level's chunks' prefixes back down
+    (2M counts: three levels, seven launches). CuPy's scan of the same took 114 us of
+    host time on an H200, a launch about 6."""
+
+    def __init__(self, values: array, out: array) -> None:
+        device, chunk = values.device, SCAN_CHUNK
+        sizes = [values.shape[0]]
+        while sizes[-1] > chunk or len(sizes) == 1:
+            sizes.append(-(-sizes[-1] // chunk))
+        # Each level above the first: its sums, then their exclusive prefix.
+        block = empty(2 * sum(sizes[1:]), dtype=int32, device=device)
+        sums, prefix, at = [values], [out], 0
+        for m in sizes[1:]:
+            sums.append(block[at : at + m])
+            prefix.append(block[at + m : at + 2 * m])
+            at += 2 * m
+
+        def step(kernel_: Any, dim: int, inputs: list) -> Callable[[], None]:
+            return launch(kernel_, dim=dim, device=device, inputs=inputs, record_cmd=True).launch
+
+        top = len(sizes) - 1
+        self.steps = [step(_chunk_sums, sizes[k + 1], [sums[k], sizes[k], chunk, sums[k + 1]])
+                      for k in range(top)]  # fmt: skip
+        self.steps.append(step(_top_prefix, 1, [sums[top], sizes[top], prefix[top]]))
+        self.steps += [step(_chunk_prefix, sizes[k + 1],
+                            [sums[k], sizes[k], chunk, prefix[k + 1], int(k == 0), prefix[k]])
+                       for k in reversed(range(top))]  # fmt: skip
+
+    def __call__(self) -> None:
+        """Write the prefix sums."""
+        for step in self.steps:
+            step()
 
 
 class _Steps:
@@ -269,6 +346,7 @@ class CountBuild(_Build):
         self.counts = zeros(cells, dtype=int32, device=device)
         self.offsets = zeros(cells + 1, dtype=int32, device=device)
         self.cell_starts, self.cell_ends = self.offsets[:cells], self.offsets[1:]
+        self._scan = _Scan(self.counts, self.cell_ends)
         self._scratch = empty(0, dtype=int32, device=device)
 
     def _clear(self) -> None:
@@ -282,7 +360,7 @@ class CountBuild(_Build):
     def _prepare(self, points: array, n: int, inv: np.float32) -> _Steps:
         m = self.capacity
         buckets, slots, scattered = (self._scratch[k * m : k * m + n] for k in range(3))
-        scan = ScanInto(self.counts, self.cell_ends)
+        scan = self._scan
         if not n:  # no points: the scan of zero counts empties every bucket
             return _Steps(points, n, self.built, inv, None, [scan])
         first = self._launch(_count_points, n,

@@ -141,7 +141,7 @@ def test_build_and_query_kernels_compile_for_cuda():
 
     b = hash_grid_build
     kernels = (b._bucket_keys, b._bucket_ranges, b._count_points, b._count_scatter,
-               b._count_order, seed_sum)  # fmt: skip
+               b._count_order, b._chunk_sums, b._top_prefix, b._chunk_prefix, seed_sum)  # fmt: skip
     for k in kernels:
         assert ".entry" in lower(BACKEND, k.build_module(), "ptx", {"arch": "sm_90"})
 
@@ -202,3 +202,20 @@ def test_a_build_cut_short_leaves_an_empty_grid(build_kind):
     assert run_candidates(grid, p[:3], 0.2, "cpu") == [[], [], []]
     grid.build(pts, 0.2)
     check_tables(grid, p, 0.2, "cpu")
+
+
+@pytest.mark.parametrize("device", DEVICES)
+def test_count_scan_matches_cumsum(device):
+    """The counting sort's scan (kdsl launches, level by level) against NumPy's cumsum,
+    at sizes around its chunk's powers, run twice over its prepared launches."""
+    rng = np.random.default_rng(12)
+    chunk = hash_grid_build.SCAN_CHUNK
+    for m in (1, 2, chunk - 1, chunk, chunk + 1, chunk**2, chunk**2 + 1, chunk**3 + 5):
+        values = wp.zeros(m, dtype=wp.int32, device=device)
+        out = wp.zeros(m, dtype=wp.int32, device=device)
+        scan = hash_grid_build._Scan(values, out)
+        for _ in range(2):
+            v = rng.integers(0, 9, m).astype(np.int32)
+            values.assign(v)
+            scan()
+            np.testing.assert_array_equal(out.numpy(), np.cumsum(v))
