@@ -422,6 +422,11 @@ from kdsl.compiler import cache, source_index
 source_index.kdsl_code_digest = lambda: "pinned for the test"
 from kern import k
 
+def nvrtc_mapped():
+    maps = open("/proc/self/maps").read() if os.path.exists("/proc/self/maps") else ""
+    return "libnvrtc" in maps
+
+steps = {}
 if device == "cuda-compile":  # no GPU needed: compiled for sm_90, never launched
     from kdsl.backends.cuda import BACKEND
     from kdsl.compiler import compile_kernel
@@ -429,14 +434,15 @@ if device == "cuda-compile":  # no GPU needed: compiled for sm_90, never launche
     out = [len(compiled.payload.cubin("sm_90")) > 0]
 else:
     a = wp.zeros(4, dtype=float, device=device)
+    steps["allocated"] = nvrtc_mapped()
     wp.launch(k, 4, outputs=[a], device=device)
+    steps["launched"] = nvrtc_mapped()
     out = a.numpy().tolist()
-maps = open("/proc/self/maps").read() if os.path.exists("/proc/self/maps") else ""
 new = sorted(set(sys.modules) - before)
 print(json.dumps({
     "out": out, "built": built, "index": vars(source_index.STATS),
     "kernel_builds": cache.STATS.builds, "new_modules": new,
-    "nvrtc_mapped": "libnvrtc" in maps,
+    "nvrtc_mapped": nvrtc_mapped(), "nvrtc_steps": steps,
 }))
 """
 
@@ -543,5 +549,9 @@ def test_cuda_warm_start_on_a_gpu_skips_frontend_and_passes(project):
     assert cold["out"] == _expected() and cold["built"] == ["k"]
     warm = _run(project, "cuda:0")
     assert warm["out"] == _expected() and warm["built"] == [] and warm["index"]["hits"] == 1
-    assert warm["kernel_builds"] == 0 and not warm["nvrtc_mapped"]
+    assert warm["kernel_builds"] == 0
     assert [m for m in warm["new_modules"] if m.startswith("kdsl.passes.")] == []
+    # The compile and launch load no NVRTC (CuPy may have loaded it before, for its own
+    # kernels: that is not the kernel cache's doing, and the message says so).
+    steps = warm["nvrtc_steps"]
+    assert steps["allocated"] or not steps["launched"], f"the launch loaded NVRTC: {steps}"
