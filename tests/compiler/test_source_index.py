@@ -11,12 +11,12 @@ llvmlite's binding or NVRTC, and an edit between two processes recompiles.
 from __future__ import annotations
 
 import hashlib
-import importlib.util
 import json
 import os
 import subprocess
 import sys
 import textwrap
+import types
 from pathlib import Path
 
 import numpy as np
@@ -39,12 +39,10 @@ def _private_cache(tmp_path, monkeypatch):
 def _load(path: Path, text: str):
     """``text`` written to ``path`` and imported as a fresh module object, named after
     ``path`` (as a new process would import it: the same name for the same file)."""
-    path.write_text(textwrap.dedent(text))
-    name = f"srcidx_{path.stem}_{hashlib.sha1(str(path).encode()).hexdigest()[:8]}"
-    spec = importlib.util.spec_from_file_location(name, path)
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules[name] = mod
-    spec.loader.exec_module(mod)
+    source = textwrap.dedent(text)
+    path.write_text(source)
+    mod = types.ModuleType(f"srcidx_{path.stem}_{hashlib.sha1(str(path).encode()).hexdigest()[:8]}")
+    exec(compile(source, str(path), "exec"), mod.__dict__)
     return mod
 
 
