@@ -13,10 +13,9 @@ from typing import Any
 
 import numpy as np
 
-from kdsl.backends.cuda.devices import device_count
 from kdsl.errors import KdslError
 from kdsl.runtime import allocators
-from kdsl.runtime.device import Device, cupy
+from kdsl.runtime.device import Device, cuda_device_count, cupy
 from kdsl.runtime.graphs.state import refuse_host_read, refuse_upload
 from kdsl.runtime.mempool import note_allocation
 from kdsl.runtime.stream import Stream, current_stream, get_stream
@@ -122,7 +121,7 @@ def zero_async(buf: Any, device: Device) -> None:
 
         _RUNTIME.append(runtime)
     stream = current_stream(device)
-    if device_count() == 1:  # the only device is the current one
+    if cuda_device_count() == 1:  # the only device is the current one
         _RUNTIME[0].memsetAsync(buf.data.ptr, 0, nbytes, stream.cuda_stream)
         return
     with scope(device, stream):
