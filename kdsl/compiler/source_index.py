@@ -190,7 +190,18 @@ class _Pickler(pickle.Pickler):
         return None
 
 
+#: The modules an index entry may name classes from: kdsl's IR, NumPy (constants'
+#: values), Python's builtins. Anything else is refused, so loading an entry never
+#: imports (runs) a module the IR does not need.
+_ALLOWED_MODULES = ("kdsl.", "numpy", "builtins")
+
+
 class _Unpickler(pickle.Unpickler):
+    def find_class(self, module: str, name: str) -> Any:
+        if not module.startswith(_ALLOWED_MODULES):
+            raise pickle.UnpicklingError(f"an index entry may not name {module}.{name}")
+        return super().find_class(module, name)
+
     def persistent_load(self, pid: Any) -> Any:
         kind, name = pid
         opdef = CATALOG.get(name) if kind == "op" else None

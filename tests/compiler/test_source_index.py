@@ -329,6 +329,24 @@ def test_a_bad_index_entry_is_discarded_and_rebuilt(tmp_path):
     assert source_index.STATS.stored == stored + 1  # rebuilt from the frontend
 
 
+class NotIR:
+    """A class outside kdsl: an index entry naming it is refused on load."""
+
+
+def test_an_entry_naming_a_class_outside_kdsl_is_refused(tmp_path):
+    import pickle
+
+    mod = _load(tmp_path / "kern.py", BASE)
+    compile_kernel(BACKEND, mod.k, options={})
+    index = cache.DiskCache(cache.default_cache().directory, cache.INDEX_SUFFIX)
+    (entry,) = index.entries()
+    key = entry.name[: -len(cache.INDEX_SUFFIX)]
+    index.store(key, pickle.dumps(NotIR()))
+    discarded = source_index.STATS.discarded
+    assert source_index.lookup(key) is None
+    assert source_index.STATS.discarded == discarded + 1 and index.entries() == []
+
+
 def test_options_key_apart_and_clear_removes_index_entries(tmp_path):
     mod = _load(tmp_path / "kern.py", BASE)
     compile_kernel(BACKEND, mod.k, options={})
