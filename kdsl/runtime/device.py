@@ -134,12 +134,18 @@ _default: Device = _CPU
 _current_cuda = 0  # the ordinal "cuda" means
 
 
+_COUNTER: list = []  # the cuda backend's device_count, once imported
+
+
 def cuda_device_count() -> int:
     """Number of CUDA devices CuPy sees (0 without CuPy or a driver). Cached."""
-    # Imported here: ``import kdsl`` loads no backend package.
-    from kdsl.backends.cuda.devices import device_count
+    if not _COUNTER:
+        # Imported on first use: ``import kdsl`` loads no backend package. Kept, since
+        # hot paths (a zero fill, a launch) ask, and an import statement costs microseconds.
+        from kdsl.backends.cuda.devices import device_count
 
-    return device_count()
+        _COUNTER.append(device_count)
+    return _COUNTER[0]()
 
 
 def cuda_initialized() -> bool:
