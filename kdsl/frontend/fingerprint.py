@@ -54,10 +54,10 @@ def source_fingerprint(target: Any) -> str | None:
     """
     try:
         return _Walk().target(target, "kernel")
-    except _Opaque:
+    except Exception:
+        # _Opaque, or anything a user's object raises when looked at (a repr, an
+        # attribute), or source the frontend cannot read either: it reports that itself.
         return None
-    except (OSError, SyntaxError, TypeError, ValueError):
-        return None  # no readable source, or an annotation the frontend will reject
 
 
 class _Walk:

@@ -170,6 +170,14 @@ class Settings:
     n = 3
 
 
+class Loud(float):
+    def __repr__(self):
+        raise RuntimeError("no repr")
+
+
+LOUD = Loud(1.0)
+
+
 def helper():
     return 4
 
@@ -197,6 +205,11 @@ def uses_static_call(a: wp.array(dtype=int)):
 @wp.kernel
 def param_named_like_a_global(out: wp.array(dtype=int)):
     out[wp.tid()] = 1
+
+
+@wp.kernel
+def reads_a_value_that_raises(a: wp.array(dtype=float)):
+    a[wp.tid()] = LOUD
 """
 
 
@@ -209,6 +222,7 @@ def test_values_it_cannot_digest_leave_the_kernel_keyed_by_its_ir(tmp_path):
     assert source_fingerprint(mod.uses_object) not in (None, via_attribute)
     assert source_fingerprint(mod.uses_static_call) is None
     assert source_fingerprint(mod.param_named_like_a_global) is not None
+    assert source_fingerprint(mod.reads_a_value_that_raises) is None  # never an error
     # Still compiled and run, through the IR key alone (no index entry).
     stored = source_index.STATS.stored
     a = wp.zeros(2, dtype=int)
