@@ -11,6 +11,7 @@ from functools import cached_property
 from typing import Any
 
 from kdsl.errors import KdslError, KdslTypeError, full_tracebacks
+from kdsl.frontend.fingerprint import source_fingerprint
 from kdsl.frontend.generic import Generic, is_generic
 from kdsl.frontend.source import ParsedSource
 from kdsl.frontend.structs import register_structs
@@ -155,8 +156,6 @@ class Kernel(CompileTarget):
     def source_fingerprint(self) -> str | None:
         """The digest of everything ``build_module`` reads (``kdsl.frontend.fingerprint``),
         or None when it cannot be known without building (the cache then keys the IR)."""
-        from kdsl.frontend.fingerprint import source_fingerprint
-
         return None if self.is_generic else source_fingerprint(self)
 
     def build_facts(self) -> dict[str, Any]:
