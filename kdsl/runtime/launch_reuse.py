@@ -6,8 +6,9 @@ launches prepared by the backend (``Backend.prepare_reusable``: arguments packed
 once, as ``record_cmd=True`` does) under a key made of everything the packed bytes
 depend on:
 
-- the grid and the stream (a different stream is another key; another device is
-  another plan);
+- the grid and the stream, by identity (the entry holds the stream, so its id is not
+  reused while the entry lives; a ``Stream`` hashes through CuPy, which costs about a
+  microsecond; another device is another plan);
 - per array argument, the identity of the converted buffer with its shape and strides
   (an array reallocated, resized or reshaped is a new buffer or a new shape);
 - per scalar, vector, matrix or handle, the exact bytes of the converted value (so
@@ -153,7 +154,8 @@ class LaunchReuse:
         #: False for a signature with a struct (or unknown) parameter: never reused.
         self.enabled = all(k is not None for k in kinds)
         self.kinds: list[int] = [k for k in kinds if k is not None]
-        self.entries: dict[tuple, tuple[Callable[[], None], list]] = {}
+        #: Key -> (run, weak references to its buffers, the stream it runs on).
+        self.entries: dict[tuple, tuple[Callable[[], None], list, Any]] = {}
         self.seen: set[tuple] = set()
         #: The entry used last (key, entry), tried before the table.
         self.last: tuple | None = None
@@ -166,8 +168,9 @@ class LaunchReuse:
         tokens = [_token(t) for t in arg_types]
         #: Per parameter, how its argument object keys ``known`` (None: no signature key).
         self.tokens: list | None = tokens if self.enabled and None not in tokens else None
-        #: Object key (``object_key``) -> (run, weak references to the arrays it names).
-        self.known: dict[tuple, tuple[Callable[[], None], list]] = {}
+        #: Object key (``object_key``) -> (run, weak references to the arrays it names,
+        #: the stream it runs on).
+        self.known: dict[tuple, tuple[Callable[[], None], list, Any]] = {}
 
     def relaunch(self, args: Sequence[Any], dims: tuple, stream: Any) -> bool:
         """Run the last entry again if ``args`` are the objects it last ran with (see the
@@ -198,7 +201,7 @@ class LaunchReuse:
         tokens = self.tokens
         if tokens is None or len(args) > len(tokens) or (extra is None and len(args) < len(tokens)):
             return None
-        key = [dims, stream]
+        key = [dims, id(stream)]  # the entry holds the stream (``_learn``)
         for tok, a in zip(tokens, args):
             k = tok(a)
             if k is _NO:
@@ -214,7 +217,7 @@ class LaunchReuse:
         entry = self.known.get(key)
         if entry is None:
             return False
-        run, refs = entry
+        run, refs = entry[0], entry[1]
         for ref in refs:
             if ref() is None:  # an array died: its id may now name another one
                 del self.known[key]
@@ -223,18 +226,19 @@ class LaunchReuse:
         run()
         return True
 
-    def _learn(self, known: tuple | None, run: Any) -> None:
-        """Keep ``run`` under object key ``known[0]``, watching the arrays in ``known[1]``."""
+    def _learn(self, known: tuple | None, run: Any, stream: Any = None) -> None:
+        """Keep ``run`` (on ``stream``, held) under object key ``known[0]``, watching the
+        arrays in ``known[1]``."""
         if known is None or known[0] is None:
             return
         key, objects = known
         if len(self.known) >= MAX_ENTRIES:
-            dead = [k for k, (_, refs) in self.known.items() if any(r() is None for r in refs)]
+            dead = [k for k, e in self.known.items() if any(r() is None for r in e[1])]
             for k in dead:
                 del self.known[k]
             if not dead:
                 self.known.clear()
-        self.known[key] = (run, [weakref.ref(a) for a in objects if type(a) is array])
+        self.known[key] = (run, [weakref.ref(a) for a in objects if type(a) is array], stream)
 
     def _remember(self, args: Sequence[Any] | None, dims: tuple, stream: Any, run: Any) -> None:
         """Keep what ``relaunch`` compares, when every argument may be compared by identity."""
@@ -254,7 +258,7 @@ class LaunchReuse:
 
     def key(self, dims: tuple, converted: Sequence[Any], stream: Any) -> tuple | None:
         """Everything the packed launch depends on, or None when it cannot be keyed."""
-        parts: list[Any] = [dims, stream]
+        parts: list[Any] = [dims, id(stream)]  # the entry holds the stream (``_prepare``)
         for kind, v in zip(self.kinds, converted):
             if kind is _ARRAY:
                 parts += (id(v), v.shape, v.strides)
@@ -284,7 +288,7 @@ class LaunchReuse:
         last = self.last
         entry = last[1] if last is not None and last[0] == key else self.entries.get(key)
         if entry is not None:
-            run, refs = entry
+            run, refs = entry[0], entry[1]
             for ref in refs:
                 if ref() is None:  # a buffer died: its id may now name another one
                     self.entries.pop(key, None)
@@ -294,7 +298,7 @@ class LaunchReuse:
                 self.hits += 1
                 self.last = (key, entry)
                 self._remember(args, dims, stream, run)
-                self._learn(known, run)
+                self._learn(known, run, stream)
                 run()
                 return
         self.same = None
@@ -320,15 +324,15 @@ class LaunchReuse:
         self.seen.discard(key)
         if len(self.entries) >= MAX_ENTRIES:
             self._drop_dead()
-        entry = self.entries[key] = (run, refs)
+        entry = self.entries[key] = (run, refs, stream)
         self.last = (key, entry)
         self._remember(args, dims, stream, run)
-        self._learn(known, run)
+        self._learn(known, run, stream)
         run()
 
     def _drop_dead(self) -> None:
         """Drop the entries with a dead buffer; clear the table when none has one."""
-        dead = [k for k, (_, refs) in self.entries.items() if any(r() is None for r in refs)]
+        dead = [k for k, e in self.entries.items() if any(r() is None for r in e[1])]
         for k in dead:
             del self.entries[k]
         if not dead:

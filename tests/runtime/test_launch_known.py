@@ -156,3 +156,24 @@ def test_retain_grad_changes_the_adjoint_launch(device):
         np.testing.assert_allclose(xs[0].grad.numpy(), 4.0)
         assert np.all(xs[1].grad.numpy() == (2.0 if retain else 0.0))
         tape.zero()
+
+
+@cuda
+def test_streams_key_by_identity_cuda():
+    """Each stream object has its own entries (the key holds its id, the entry the
+    stream); launches on either give the right results."""
+    dev = "cuda:0"
+    xs = _arrays(dev, count=2)
+    g = wp.vec3(0.0, 0.0, 0.0)
+    streams = [wp.Stream(dev), wp.Stream(dev)]
+    reuse = launch_plan(step, dev, None).reuse
+    for k in range(4):
+        for s in streams:
+            for _ in range(3):
+                wp.launch(step, 4, [xs[0], g, 2.0, k, xs[1]], device=dev, stream=s)
+            s.synchronize()
+            np.testing.assert_array_equal(xs[1].numpy(), 2.0 + k)
+    stream_ids = {key[1] for key in reuse.known}
+    assert {id(s) for s in streams} <= stream_ids
+    assert all(entry[2] in streams for key, entry in reuse.known.items() if key[1] in
+               {id(s) for s in streams})  # fmt: skip
