@@ -329,12 +329,16 @@ def test_a_hit_builds_no_ir_and_gives_the_same_kernel(tmp_path, monkeypatch):
     np.testing.assert_allclose(out.numpy(), [(i + 1.0) * 2.0 for i in range(4)])
 
 
-def test_a_bad_index_entry_is_discarded_and_rebuilt(tmp_path):
-    mod = _load(tmp_path / "kern.py", BASE)
-    compile_kernel(BACKEND, mod.k, options={})
+def _compiled_index_entry(tmp_path):
+    """Compile BASE once; the index cache and the key of its one entry."""
+    compile_kernel(BACKEND, _load(tmp_path / "kern.py", BASE).k, options={})
     index = cache.DiskCache(cache.default_cache().directory, cache.INDEX_SUFFIX)
     (entry,) = index.entries()
-    key = entry.name[: -len(cache.INDEX_SUFFIX)]
+    return index, entry.name[: -len(cache.INDEX_SUFFIX)]
+
+
+def test_a_bad_index_entry_is_discarded_and_rebuilt(tmp_path):
+    index, key = _compiled_index_entry(tmp_path)
     index.store(key, b"not a pickle")  # valid header, payload that does not load
     cache.MEMORY.clear()
     discarded, stored = source_index.STATS.discarded, source_index.STATS.stored
@@ -350,11 +354,7 @@ class NotIR:
 def test_an_entry_naming_a_class_outside_kdsl_is_refused(tmp_path):
     import pickle
 
-    mod = _load(tmp_path / "kern.py", BASE)
-    compile_kernel(BACKEND, mod.k, options={})
-    index = cache.DiskCache(cache.default_cache().directory, cache.INDEX_SUFFIX)
-    (entry,) = index.entries()
-    key = entry.name[: -len(cache.INDEX_SUFFIX)]
+    index, key = _compiled_index_entry(tmp_path)
     index.store(key, pickle.dumps(NotIR()))
     discarded = source_index.STATS.discarded
     assert source_index.lookup(key) is None
