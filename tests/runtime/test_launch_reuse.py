@@ -209,5 +209,5 @@ def test_cuda_reuse_and_its_guards():
             wp.launch(axpy, dim=4, inputs=[x, z, 1.0], device=dev)
     s.synchronize()
     np.testing.assert_array_equal(z.numpy(), 5 * np.arange(4))
-    keys = launch_plan(axpy, dev, None).reuse.entries
-    assert any(k[1] is s or k[1] == s for k in keys)
+    entries = launch_plan(axpy, dev, None).reuse.entries  # keyed by the stream's id
+    assert any(key[1] == id(s) and entry[2] is s for key, entry in entries.items())
