@@ -559,6 +559,7 @@ def launch(
             reuse = plan.reuse
             if (reuse.same is not None and reuse.relaunch(args, dims, stream)) or (
                 reuse.tokens is not None
+                and not reuse.bypass
                 and (known := reuse.object_key(args, dims, stream)) is not None
                 and reuse.run_known(known)
             ):  # argument objects launched before: nothing to convert or key

@@ -44,6 +44,14 @@ parameter's exact class, dtype and shape by its bytes. Equal keys mean equal con
 values, so a hit runs the entry without converting anything; any other argument (a
 struct, an object id, a foreign array, a tuple for a vector) makes the launch take the
 general path. Entries are learnt when the general path runs a prepared launch.
+
+A launch whose key is new every time (a scalar that changes at every step: the
+simulation time, a frame number) gains nothing from keys and pays for them (the
+object key, the packed key, the table of keys seen once). After ``MISS_STREAK`` such
+launches in a row the plan stops keying for its next ``BYPASS`` launches (``bypass``,
+read by ``launch`` before the object key): they go straight to the backend, as they
+would after a miss. Any reuse resets the streak, so a kernel whose keys recur keeps
+its tables.
 """
 
 from __future__ import annotations
@@ -66,6 +74,11 @@ MAX_ENTRIES = 128
 #: Keys seen once, waiting for a second launch before they are prepared (larger than
 #: ``MAX_ENTRIES``, so a cycle through that many argument sets gets prepared).
 MAX_SEEN = 256
+#: New keys in a row after which a plan stops keying: no hit in as many launches as
+#: the seen table holds means no cycle the tables could learn.
+MISS_STREAK = MAX_SEEN
+#: Launches then run without keys before keying is tried again.
+BYPASS = 4096
 
 _REF = weakref.ref
 
@@ -143,8 +156,8 @@ class LaunchReuse:
     """The prepared launches of one plan (kernel, device, backend), by argument key."""
 
     __slots__ = (
-        "backend", "compiled", "enabled", "entries", "hits", "kinds", "known", "last", "same",
-        "same_ok", "seen", "tokens",
+        "backend", "bypass", "compiled", "enabled", "entries", "hits", "kinds", "known", "last",
+        "misses", "same", "same_ok", "seen", "tokens",
     )  # fmt: skip
 
     def __init__(self, backend: Backend, compiled: CompiledKernel, arg_types: Sequence[Any]):
@@ -171,6 +184,10 @@ class LaunchReuse:
         #: Object key (``object_key``) -> (run, weak references to the arrays it names,
         #: the stream it runs on).
         self.known: dict[tuple, tuple[Callable[[], None], list, Any]] = {}
+        #: Launches in a row whose key was new (see the module docstring).
+        self.misses = 0
+        #: Launches left to run without keys (nonzero after a streak of new keys).
+        self.bypass = 0
 
     def relaunch(self, args: Sequence[Any], dims: tuple, stream: Any) -> bool:
         """Run the last entry again if ``args`` are the objects it last ran with (see the
@@ -185,6 +202,7 @@ class LaunchReuse:
             if h is not a and (type(h) is not _REF or h() is not a):
                 return False
         self.hits += 1
+        self.misses = 0
         same[3]()
         return True
 
@@ -223,6 +241,7 @@ class LaunchReuse:
                 del self.known[key]
                 return False
         self.hits += 1
+        self.misses = 0
         run()
         return True
 
@@ -279,6 +298,11 @@ class LaunchReuse:
         same objects skip conversion and keying; ``known`` (an ``object_key`` of them, or
         None, and the objects whose arrays it names) lets ``run_known`` serve it.
         """
+        if self.bypass:
+            self.bypass -= 1
+            self.same = None
+            self.backend.launch(self.compiled, dims, converted, stream)
+            return
         key = self.key(dims, converted, stream) if self.enabled else None
         if key is None:
             self.same = None
@@ -296,6 +320,7 @@ class LaunchReuse:
                     break
             else:
                 self.hits += 1
+                self.misses = 0
                 self.last = (key, entry)
                 self._remember(args, dims, stream, run)
                 self._learn(known, run, stream)
@@ -306,8 +331,13 @@ class LaunchReuse:
             if len(self.seen) >= MAX_SEEN:
                 self.seen.clear()
             self.seen.add(key)
+            self.misses += 1
+            if self.misses >= MISS_STREAK:  # keys are not paying: skip them for a while
+                self.misses = 0
+                self.bypass = BYPASS
             self.backend.launch(self.compiled, dims, converted, stream)
             return
+        self.misses = 0
         self._prepare(key, dims, converted, stream, args, known)
 
     def _prepare(

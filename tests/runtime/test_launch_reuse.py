@@ -211,3 +211,43 @@ def test_cuda_reuse_and_its_guards():
     np.testing.assert_array_equal(z.numpy(), 5 * np.arange(4))
     entries = launch_plan(axpy, dev, None).reuse.entries  # keyed by the stream's id
     assert any(key[1] == id(s) and entry[2] is s for key, entry in entries.items())
+
+
+@wp.kernel
+def set_to(t: float, out: wp.array(dtype=float)):
+    out[wp.tid()] = t
+
+
+@pytest.mark.parametrize("backend", ["cpu"])  # the backend that prepares launches
+def test_new_keys_in_a_row_bypass_the_tables_and_keying_resumes(backend, monkeypatch):
+    from kdsl.runtime import launch_reuse
+
+    monkeypatch.setattr(launch_reuse, "MISS_STREAK", 4)
+    monkeypatch.setattr(launch_reuse, "BYPASS", 5)
+    out = wp.zeros(3, dtype=float, device="cpu")
+    wp.launch(set_to, 3, inputs=[0.5, out], backend=backend)
+    reuse = launch_plan(set_to, "cpu", backend).reuse
+    assert reuse.bypass == 0 and reuse.misses == 1  # the first key was new
+    for step in range(1, 4):  # a time that changes every step: three more new keys
+        wp.launch(set_to, 3, inputs=[0.5 + step, out], backend=backend)
+    assert reuse.bypass == 5 and reuse.misses == 0
+    for step in range(4, 9):  # bypassed: no keys, right values
+        wp.launch(set_to, 3, inputs=[0.5 + step, out], backend=backend)
+        np.testing.assert_array_equal(out.numpy(), np.full(3, 0.5 + step))
+    assert reuse.bypass == 0
+    hits = reuse.hits
+    for _ in range(3):  # keying again: a recurring key is prepared and reused
+        wp.launch(set_to, 3, inputs=[7.0, out], backend=backend)
+    assert reuse.hits > hits and reuse.misses == 0
+    np.testing.assert_array_equal(out.numpy(), np.full(3, 7.0))
+
+
+@pytest.mark.parametrize("backend", ["cpu"])
+def test_a_cycle_of_argument_sets_is_learnt_without_a_bypass(backend):
+    outs = [wp.zeros(2, dtype=float, device="cpu") for _ in range(100)]
+    for _ in range(3):  # a taped flight's pattern: 100 argument sets, over and over
+        for i, o in enumerate(outs):
+            wp.launch(set_to, 2, inputs=[float(i) + 0.25, o], backend=backend)
+    reuse = launch_plan(set_to, "cpu", backend).reuse
+    assert reuse.bypass == 0 and reuse.hits >= 100
+    assert [o.numpy()[0] for o in outs] == [i + 0.25 for i in range(100)]
