@@ -292,3 +292,16 @@ def test_a_kernel_whose_pool_launches_cost_more_stays_inline(adaptive_two_thread
     cost.seconds_per_thread = 1e-3
     assert _runs(fn, calls, 5000, cost) == [(0, 2500), (2500, 5000)]
     assert cost.pool_overhead < 10.0
+
+
+def test_one_fast_pool_launch_replaces_a_slow_estimate():
+    # The overhead estimate takes a cheaper measurement as it is (one good retry brings
+    # a kernel back to the pool) and averages a dearer one in (one slow launch, half).
+    cost = pool.RangeCost()
+    cost.seconds_per_thread = 1e-6
+    cost.record_pool(1.0 + 1e-3 / 2, 1000, 2)  # 1 s beyond its share of the work
+    assert cost.pool_overhead == pytest.approx(1.0)
+    cost.record_pool(1e-3 / 2 + 1e-4, 1000, 2)  # then a fast launch: 0.1 ms beyond
+    assert cost.pool_overhead == pytest.approx(1e-4)
+    cost.record_pool(1e-3 / 2 + 3e-4, 1000, 2)  # a slower one is averaged in
+    assert cost.pool_overhead == pytest.approx(2e-4)
