@@ -30,6 +30,7 @@ from kdsl.runtime.array import array
 from kdsl.runtime.array_access import check_launch, clear_read_marks
 from kdsl.runtime.device import Device, get_device
 from kdsl.runtime.modules import backward_enabled
+from kdsl.runtime.stream import current_stream
 from kdsl.runtime.zero_batch import zero_arrays
 
 # The active tapes, outermost first; launch() records on the last one.
@@ -55,6 +56,24 @@ class LaunchRecord(NamedTuple):
     metadata: dict
     backend: Any = None
     stream: Any = None
+
+
+def _side_streams(launches: Sequence[Any]) -> list[tuple[Any, Any]]:
+    """(stream, its device's current stream) for each recorded stream that is not the
+    current one of its device (by identity: a ``Stream`` hashes through CuPy)."""
+    found: dict[int, Any] = {}
+    for rec in launches:
+        s = getattr(rec, "stream", None)
+        if s is not None and id(s) not in found:
+            found[id(s)] = s
+    if not found:
+        return []
+    pairs = []
+    for s in found.values():
+        current = current_stream(s.device)
+        if current is not s and current.cuda_stream != s.cuda_stream:
+            pairs.append((s, current))
+    return pairs
 
 
 def _site(rec: LaunchRecord) -> str:
@@ -190,11 +209,18 @@ class Tape:
             else:
                 a.grad.assign(g)
             self.gradients[a] = a.grad
+        # Adjoints replay on their launch's stream; the seeds above, ``zero()`` and what
+        # reads the gradients after run on the current one: order the two both ways.
+        side = _side_streams(self.launches)
+        for s, current in side:
+            s.wait_stream(current)
         for step in reversed(self.launches):
             if isinstance(step, LaunchRecord):
                 self._replay(step)
             else:
                 step()
+        for s, current in side:
+            current.wait_stream(s)
         if config.verify_autograd_array_access:
             self._clear_read_marks()  # later writes can no longer corrupt these gradients
 

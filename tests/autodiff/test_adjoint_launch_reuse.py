@@ -132,3 +132,37 @@ def test_scratch_gradients_on_another_stream_cuda():
         wp.synchronize_device(dev)
         np.testing.assert_array_equal(x.grad.numpy(), np.full(4, 6.0, np.float32))
         tape.zero()
+
+
+def test_backward_orders_side_streams_with_the_current_one(monkeypatch):
+    """Adjoints replay on their launch's stream; ``backward`` makes that stream wait for
+    the current one (the seeded gradients, ``zero()``) before, and the current stream
+    wait for it after. Stand-in streams: no GPU needed."""
+    from kdsl.runtime import tape as tape_mod
+
+    log = []
+
+    class FakeStream:
+        def __init__(self, name, handle):
+            self.name, self.cuda_stream, self.device = name, handle, "gpu"
+
+        def wait_stream(self, other):
+            log.append(f"{self.name} waits for {other.name}")
+
+    current, side = FakeStream("current", 1), FakeStream("side", 2)
+    same_handle = FakeStream("alias", 1)  # another object over the current stream
+    monkeypatch.setattr(tape_mod, "current_stream", lambda device: current)
+    records = [tape_mod.LaunchRecord(None, 1, 0, [], [], None, 256, {}, None, s)
+               for s in (None, current, side, same_handle, side)]  # fmt: skip
+    assert tape_mod._side_streams(records) == [(side, current)]
+    tape = wp.Tape()
+    tape.launches.extend(records[:1])  # a cpu launch (no stream): nothing to order
+    tape.launches.append(lambda: log.append("replay"))
+    tape.backward()
+    assert log == ["replay"]
+    log.clear()
+    tape.launches.append(records[2])
+    monkeypatch.setattr(tape, "_replay", lambda rec: log.append(f"replay on {rec.stream and rec.stream.name}"))
+    tape.backward()
+    assert log == ["side waits for current", "replay on side", "replay", "replay on None",
+                   "current waits for side"]  # fmt: skip
