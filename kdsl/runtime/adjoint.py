@@ -28,7 +28,7 @@ from kdsl.runtime.graphs import state as _graphs
 from kdsl.runtime.graphs.state import run_or_record
 from kdsl.runtime.launch import check_tid, launch_plan, normalize_dim, resolve_stream
 from kdsl.runtime.modules import backward_enabled
-from kdsl.runtime.stream import current_stream
+from kdsl.runtime.stream import ScopedStream, current_stream
 
 _ADJ_ATTR = "_kdsl_adjoint"
 _COUNT_ATTR = "_kdsl_counter"
@@ -252,7 +252,12 @@ class _AdjointPlan:
         if not isinstance(v, array):
             return v
         if _graphs.ACTIVE or not (self.dev.is_cpu or stream is current_stream(self.dev)):
-            return alloc.zeros_like(v, device=self.dev)
+            if _graphs.ACTIVE or stream is None:
+                return alloc.zeros_like(v, device=self.dev)
+            # Zeroed (and taken from the pool) on the stream the adjoint runs on: zeroed
+            # on the current one, nothing would order the fill before the kernel.
+            with ScopedStream(stream, sync_enter=False):
+                return alloc.zeros_like(v, device=self.dev)
         key = (i, threading.get_ident(), v.shape, v.dtype)
         z = self.scratch.get(key)
         if z is None:
