@@ -110,24 +110,22 @@ def _make_plan(key: tuple[int, ...], arrays: Sequence[array]) -> _Plan:
     for a in arrays:
         span = a.memory_span()
         if span is None:
-            steps.append(a.zero_)
+            steps.append(_zero_later(a))
         elif span[1] == 0:
             continue
         elif a.device.kind not in KERNEL_KINDS:
-            steps.append(_memset(*span) if a.device.is_cpu else a.zero_)
+            steps.append(_memset(*span) if a.device.is_cpu else _zero_later(a))
         elif span[0] % 4 == 0 and span[1] % 4 == 0 and span[1] // 4 <= MAX_WORDS:
             by_device.setdefault(a.device, []).append((a, span))
         else:
-            steps.append(a.zero_)
+            steps.append(_zero_later(a))
     for dev, items in by_device.items():
         if len(items) < MIN_BATCH:
-            steps += [a.zero_ for a, _ in items]
+            steps += [_zero_later(a) for a, _ in items]
         else:
             steps.append(zero_spans_launch(dev, [span for _, span in items]))
             if dev.is_cuda:  # the table is in place before any stream runs it
                 get_stream(dev).synchronize()
-    # A bound method holds its array: steps keep the arrays alive only through the
-    # plan, which is dropped from the table once MAX_PLANS newer ones exist.
     plan = _Plan([weakref.ref(a) for a in arrays], steps)
     _PLANS.pop(key, None)
     while len(_PLANS) >= MAX_PLANS:
@@ -135,6 +133,13 @@ def _make_plan(key: tuple[int, ...], arrays: Sequence[array]) -> _Plan:
     _PLANS[key] = plan
     made += 1
     return plan
+
+
+def _zero_later(a: array) -> Callable[[], None]:
+    """``a.zero_`` without holding ``a``: a kept plan must not keep gradients alive (it
+    runs only after checking that every array it was made for is alive)."""
+    ref = weakref.ref(a)
+    return lambda: ref().zero_()
 
 
 def _memset(addr: int, nbytes: int) -> Callable[[], Any]:

@@ -237,3 +237,16 @@ def test_zero_kernel_compiles_for_cuda():
     m = zero_batch._zero_words.build_module()
     run_pipeline(m, DEFAULT_PIPELINE)
     nvrtc.compile_source(generate(m, [zero_batch._zero_words.key]).text, "sm_90")
+
+
+def test_a_kept_plan_does_not_keep_its_arrays_alive():
+    import gc
+    import weakref
+
+    # Strided views take array.zero_ in the plan: their steps must not hold them.
+    arrays = [wp.zeros((4, 4), dtype=float, device="cpu")[:, 1] for _ in range(3)]
+    zero_arrays(arrays)
+    refs = [weakref.ref(a) for a in arrays]
+    del arrays
+    gc.collect()
+    assert all(r() is None for r in refs)
