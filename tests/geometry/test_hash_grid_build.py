@@ -6,6 +6,8 @@ build and query kernels compiled for CUDA (compile only, no GPU needed)."""
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
@@ -130,6 +132,84 @@ def test_same_count_rebuild_reuses_buffers_and_steps(device, build_kind):
     grid.build(other, 0.3)
     assert b.steps is not steps
     assert (b.point_ids.ptr, b.cell_starts.ptr) == buffers
+
+
+def graph_counting(monkeypatch) -> dict[str, int]:
+    """Counting-sort grids that replay their steps as a graph, captured by a stand-in
+    (the CPU's own captures replay launch by launch): a callable that runs the steps.
+    Returns the counts of captures and replays."""
+    counts = {"captures": 0, "replays": 0}
+
+    def capture(steps, stream):
+        counts["captures"] += 1
+
+        def replay() -> None:
+            counts["replays"] += 1
+            for step in steps:
+                step()
+
+        return replay
+
+    monkeypatch.setattr(hash_grid_build, "counting_sort_on", lambda device: True)
+    monkeypatch.setattr(hash_grid_build, "graph_replay_on", lambda device: True)
+    monkeypatch.setattr(hash_grid_build, "capture_steps", capture)
+    return counts
+
+
+def test_steps_replay_as_a_graph_from_their_second_run(monkeypatch):
+    counts = graph_counting(monkeypatch)
+    rng, p, pts, grid = built_grid(9, 300, "cpu")
+    grid.build(pts, 0.2)  # new steps (a build after one): run one by one
+    assert counts == {"captures": 0, "replays": 0}
+    expected = [(1, 1), (1, 2), (1, 2), (2, 3), (2, 4)]
+    for radius, want in zip((0.2, 0.2, 0.3, 0.3, 0.3), expected):
+        p = move(rng, p, pts, 0.1)
+        grid.build(pts, radius)  # a new radius drops the graph and runs one by one
+        check_tables(grid, p, radius, "cpu")
+        assert (counts["captures"], counts["replays"]) == want, radius
+
+
+def test_steps_join_an_open_capture_one_by_one(monkeypatch):
+    counts = graph_counting(monkeypatch)
+    rng, p, pts, grid = built_grid(10, 200, "cpu")
+    # A user's capture open (on another device: the CPU's launches run as usual).
+    monkeypatch.setattr(hash_grid_build.graphs, "ACTIVE", [SimpleNamespace(device=None)])
+    for _ in range(3):
+        p = move(rng, p, pts, 0.1)
+        grid.build(pts, 0.2)
+        check_tables(grid, p, 0.2, "cpu")
+    assert counts == {"captures": 0, "replays": 0}
+
+
+def test_a_failed_capture_runs_the_steps_one_by_one_from_then_on(monkeypatch):
+    counts = graph_counting(monkeypatch)
+
+    def failing(steps, stream):
+        counts["captures"] += 1
+        return None
+
+    monkeypatch.setattr(hash_grid_build, "capture_steps", failing)
+    rng, p, pts, grid = built_grid(11, 200, "cpu")
+    for _ in range(4):
+        p = move(rng, p, pts, 0.1)
+        grid.build(pts, 0.2)
+        check_tables(grid, p, 0.2, "cpu")
+    assert counts == {"captures": 1, "replays": 0}
+
+
+@cuda
+def test_cuda_build_replays_a_cuda_graph():
+    rng, p, pts, grid = built_grid(12, 5000, "cuda:0")
+    for radius in (0.2, 0.2, 0.2, 0.3, 0.3):
+        p = move(rng, p, pts, 0.1)
+        grid.build(pts, radius)
+        check_tables(grid, p, radius, "cuda:0")
+    assert grid._builder.steps.graph is not None
+    with wp.ScopedCapture(device="cuda:0") as capture:  # inside a user's capture: joins it
+        grid.build(pts, 0.3)
+    p = move(rng, p, pts, 0.1)
+    wp.capture_launch(capture.graph)
+    check_tables(grid, p, 0.3, "cuda:0")
 
 
 def test_build_and_query_kernels_compile_for_cuda():
