@@ -190,6 +190,22 @@ class Backend(ABC):
         """
         return None
 
+    def prepare_patchable(
+        self, compiled: CompiledKernel, dims: Dims, args: Args, stream: Any = None,
+        values: Sequence[int] = (),
+    ) -> tuple[Callable[[], None], Callable[[Sequence[Any]], None]] | None:  # fmt: skip
+        """``prepare_reusable`` whose by-value parameters can change: (run, write).
+
+        ``values`` are the indices (ascending) of the scalar, vector, matrix and handle
+        parameters; ``write(new)`` puts new converted values of those parameters (one per
+        index) into the packed launch, in place, for the next ``run()``. The runtime
+        calls ``write`` only between runs and from one thread, so a backend may patch
+        its one buffer, provided a ``run`` has finished reading it when it returns (a
+        cpu launch runs synchronously; ``cuLaunchKernel`` copies its parameters). None
+        (the default) means the launch cannot be patched.
+        """
+        return None
+
     def support(self) -> list[SupportCode]:
         """Native support code to load before the first launch (none by default)."""
         return []

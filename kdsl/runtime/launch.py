@@ -170,7 +170,7 @@ class _Plan:
             for i, (n, t) in enumerate(zip(kernel.arg_names, kernel.arg_types))
         ]
         #: Plain launches with unchanged arguments reuse their packed form.
-        self.reuse = LaunchReuse(backend, self.compiled, kernel.arg_types)
+        self.reuse = LaunchReuse(backend, self.compiled, kernel.arg_types, self.converters)
         self.tid_ndim = getattr(kernel, "tid_ndim", 0) or 0
 
 

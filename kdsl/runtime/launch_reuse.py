@@ -11,7 +11,7 @@ depend on:
   microsecond; another device is another plan);
 - per array argument, the identity of the converted buffer with its shape and strides
   (an array reallocated, resized or reshaped is a new buffer or a new shape);
-- per scalar, vector, matrix or handle, the exact bytes of the converted value (so
+- then per scalar, vector, matrix or handle, the exact bytes of the converted value (so
   ``-0.0`` and ``0.0``, or two NaN payloads, are different keys).
 
 Struct arguments are not keyed (their fields may be mutated in place), so a kernel
@@ -45,19 +45,36 @@ values, so a hit runs the entry without converting anything; any other argument 
 struct, an object id, a foreign array, a tuple for a vector) makes the launch take the
 general path. Entries are learnt when the general path runs a prepared launch.
 
-A launch whose key is new every time (a scalar that changes at every step: the
-simulation time, a frame number) gains nothing from keys and pays for them (the
-object key, the packed key, the table of keys seen once). After ``MISS_STREAK`` such
-launches in a row the plan stops keying for its next ``BYPASS`` launches (``bypass``,
-read by ``launch`` before the object key): they go straight to the backend, as they
-would after a miss. Any reuse resets the streak, so a kernel whose keys recur keeps
-its tables.
+A launch whose arrays recur but whose by-value arguments change at every step (the
+simulation time, a frame number) never finds its key again. It takes a *patchable*
+launch instead (``patches``, ``Backend.prepare_patchable``): one per key of its arrays,
+grid and stream (the packed key's first ``split`` parts: no value bytes), made when
+those come a second time with a new key, whose packed buffer gets the by-value
+arguments (scalars of every width, bools, vectors, matrices, quaternions, handles)
+written in place before each run. Its buffer is its own (exact entries are never
+written, so ``entries``, ``known`` and ``relaunch``'s record of one stay right), a write
+only ever follows a finished run (a cpu launch is synchronous, ``cuLaunchKernel``
+copies its parameters), and only the thread that made it writes or runs it (another
+thread's launch packs afresh). ``relaunch`` serves the loop without converting the
+arrays: when the held arrays are the launch's but a by-value argument is another
+object, it converts the by-value arguments only, writes them and runs the patchable
+launch; a mutable vector is never held, so it is converted at every launch. A value of
+a key that does recur (a cycle of argument sets) still gets its exact entry.
+
+A launch whose key is new every time for its arrays too (new temporaries at every
+step) gains nothing from keys and pays for them (the object key, the packed key, the
+table of keys seen once). After ``MISS_STREAK`` such launches in a row the plan stops
+keying for its next ``BYPASS`` launches (``bypass``, read by ``launch`` before the
+object key): they go straight to the backend, as they would after a miss. Any reuse
+(a patched launch too) resets the streak, so a kernel whose keys recur keeps its
+tables.
 """
 
 from __future__ import annotations
 
 import weakref
 from collections.abc import Callable, Sequence
+from threading import get_ident
 from typing import Any
 
 import numpy as np
@@ -79,12 +96,19 @@ MAX_SEEN = 256
 MISS_STREAK = MAX_SEEN
 #: Launches then run without keys before keying is tried again.
 BYPASS = 4096
+#: Patchable launches kept per plan (one per set of arrays, grid and stream); when full,
+#: those whose buffers died are dropped, and the table is cleared if that frees nothing.
+MAX_PATCHES = 64
 
 _REF = weakref.ref
 
 # Per parameter: how one converted argument adds to the key, and whether it is a
 # buffer the entry must watch.
 _ARRAY, _BYTES = 0, 1
+# Per parameter, how ``relaunch`` holds its argument object: an array weakly, an
+# immutable scalar of a non-id type by identity, anything else not at all (converted
+# again at every launch of a patchable entry; no exact entry is remembered for it).
+_HOLD_REF, _HOLD_SAME, _HOLD_NONE = 0, 1, 2
 
 
 def _same_kind(t: Any) -> bool:
@@ -152,21 +176,52 @@ def _kind(t: T.Type) -> int | None:
     return None
 
 
+class _Patch:
+    """A patchable launch (``Backend.prepare_patchable``) of one set of arrays, grid and
+    stream: its buffers (held weakly), the stream (held) and the thread that owns it
+    (the only one that writes and runs it: a write on another thread could reach a
+    launch between its write and its run)."""
+
+    __slots__ = ("refs", "run", "stream", "thread", "write")
+
+    def __init__(self, run: Callable[[], None], write: Callable, refs: list, stream: Any):
+        self.run = run
+        self.write = write
+        self.refs = refs
+        self.stream = stream
+        self.thread = get_ident()
+
+    def alive(self) -> bool:
+        """Whether every buffer it was packed with is still alive."""
+        return all(ref() is not None for ref in self.refs)
+
+
 class LaunchReuse:
     """The prepared launches of one plan (kernel, device, backend), by argument key."""
 
     __slots__ = (
-        "backend", "bypass", "compiled", "enabled", "entries", "hits", "kinds", "known", "last",
-        "misses", "same", "same_ok", "seen", "tokens",
+        "array_at", "backend", "bypass", "compiled", "converters", "enabled", "entries",
+        "held_kinds", "hits", "known", "last", "misses", "patches", "same",
+        "same_ok", "seen", "split", "tokens", "value_at",
     )  # fmt: skip
 
-    def __init__(self, backend: Backend, compiled: CompiledKernel, arg_types: Sequence[Any]):
+    def __init__(
+        self, backend: Backend, compiled: CompiledKernel, arg_types: Sequence[Any],
+        converters: Sequence[Callable[[Any], Any]] | None = None,
+    ) -> None:  # fmt: skip
+        """``converters``: per parameter, the plan's converter of an argument object (lets
+        ``relaunch`` patch a changed scalar without converting the other arguments)."""
         self.backend = backend
         self.compiled = compiled
         kinds = [_kind(t) for t in arg_types]
         #: False for a signature with a struct (or unknown) parameter: never reused.
         self.enabled = all(k is not None for k in kinds)
-        self.kinds: list[int] = [k for k in kinds if k is not None]
+        #: The indices of the array parameters, and of the by-value ones (scalars,
+        #: vectors, matrices, handles: what a patchable launch writes in place).
+        self.array_at = [i for i, k in enumerate(kinds) if k == _ARRAY]
+        self.value_at = [i for i, k in enumerate(kinds) if k == _BYTES]
+        #: The length of a key's array part (``key``): the key of its patchable launch.
+        self.split = 2 + 3 * len(self.array_at)
         #: Key -> (run, weak references to its buffers, the stream it runs on).
         self.entries: dict[tuple, tuple[Callable[[], None], list, Any]] = {}
         self.seen: set[tuple] = set()
@@ -176,7 +231,14 @@ class LaunchReuse:
         self.hits = 0
         #: Whether ``relaunch`` may serve this signature (arrays and non-id scalars only).
         self.same_ok = self.enabled and all(_same_kind(t) for t in arg_types)
-        #: (dims, stream, held arguments, run) of the launch that used ``last``, or None.
+        self.held_kinds = [
+            _HOLD_REF if k == _ARRAY else _HOLD_SAME if _same_kind(t) else _HOLD_NONE
+            for k, t in zip(kinds, arg_types)
+        ]
+        self.converters = list(converters) if converters is not None else None
+        #: (dims, stream, held arguments, run, the patchable launch of its arrays or its
+        #: key, the thread owning that launch or None) of the launch that used ``last``
+        #: or a patchable launch, or None.
         self.same: tuple | None = None
         tokens = [_token(t) for t in arg_types]
         #: Per parameter, how its argument object keys ``known`` (None: no signature key).
@@ -184,13 +246,17 @@ class LaunchReuse:
         #: Object key (``object_key``) -> (run, weak references to the arrays it names,
         #: the stream it runs on).
         self.known: dict[tuple, tuple[Callable[[], None], list, Any]] = {}
+        #: Key of the arrays, grid and stream (``key``'s first ``split`` parts) ->
+        #: the ``_Patch`` launching them with any by-value arguments.
+        self.patches: dict[tuple, _Patch] = {}
         #: Launches in a row whose key was new (see the module docstring).
         self.misses = 0
         #: Launches left to run without keys (nonzero after a streak of new keys).
         self.bypass = 0
 
     def relaunch(self, args: Sequence[Any], dims: tuple, stream: Any) -> bool:
-        """Run the last entry again if ``args`` are the objects it last ran with (see the
+        """Run the last entry again if ``args`` are the objects it last ran with, or its
+        patchable launch with new by-value arguments if only those changed (see the
         module docstring); False (nothing done) otherwise."""
         same = self.same
         if same is None or same[1] is not stream or same[0] != dims:
@@ -200,10 +266,44 @@ class LaunchReuse:
             return False
         for h, a in zip(held, args):
             if h is not a and (type(h) is not _REF or h() is not a):
-                return False
+                return same[4] is not None and self._repatch(args, same)
+        if same[5] is not None and same[5] != get_ident():
+            return False  # another thread's patchable launch
         self.hits += 1
         self.misses = 0
         same[3]()
+        return True
+
+    def _repatch(self, args: Sequence[Any], same: tuple) -> bool:
+        """``relaunch`` when an argument is not the one held: run the patchable launch of
+        the held arrays with ``args``' by-value arguments, if its arrays are the held ones."""
+        patch = same[4]
+        if type(patch) is not _Patch:  # the key of the arrays of an exact entry
+            patch = self.patches.get(patch)
+            if patch is None or not patch.alive():  # dead: its key's ids may be reused
+                return False
+        convs = self.converters
+        if convs is None or patch.thread != get_ident():
+            return False
+        held, kinds = same[2], self.held_kinds
+        for i in self.array_at:
+            if held[i]() is not args[i]:
+                return False
+        values = [convs[i](args[i]) for i in self.value_at]  # may raise: nothing written yet
+        new = list(held)
+        for i in self.value_at:
+            a = args[i]
+            ta = type(a)
+            if kinds[i] == _HOLD_SAME and (ta is float or ta is int or isinstance(a, np.generic)):
+                new[i] = a
+            else:
+                new[i] = _NO  # never the same object: converted at every launch
+        self.same = None  # in case the write fails: nothing may run the patch unwritten
+        patch.write(values)
+        self.same = (same[0], same[1], tuple(new), patch.run, patch, patch.thread)
+        self.hits += 1
+        self.misses = 0
+        patch.run()
         return True
 
     def object_key(
@@ -259,40 +359,57 @@ class LaunchReuse:
                 self.known.clear()
         self.known[key] = (run, [weakref.ref(a) for a in objects if type(a) is array], stream)
 
-    def _remember(self, args: Sequence[Any] | None, dims: tuple, stream: Any, run: Any) -> None:
-        """Keep what ``relaunch`` compares, when every argument may be compared by identity."""
+    def _remember(
+        self, args: Sequence[Any] | None, dims: tuple, stream: Any, run: Any, key: tuple,
+        patch: _Patch | None = None,
+    ) -> None:  # fmt: skip
+        """Keep what ``relaunch`` compares: for an exact entry (``patch`` None) when every
+        argument may be compared by identity, for a patchable launch whenever its arrays
+        are ``kdsl.array`` objects (its other arguments are converted again when they are
+        not the same immutable scalars)."""
         self.same = None
-        if args is None or not self.same_ok:
+        if args is None or (patch is None and not self.same_ok):
             return
         held = []
-        for a in args:
+        for a, kind in zip(args, self.held_kinds):
             ta = type(a)
-            if ta is float or ta is int or isinstance(a, np.generic):
-                held.append(a)
-            elif ta is array:
+            if kind == _HOLD_REF:
+                if ta is not array:
+                    return
                 held.append(weakref.ref(a))
+            elif kind == _HOLD_SAME and (ta is float or ta is int or isinstance(a, np.generic)):
+                held.append(a)
+            elif patch is not None:
+                held.append(_NO)
             else:
                 return
-        self.same = (dims, stream, tuple(held), run)
+        if patch is not None:
+            self.same = (dims, stream, tuple(held), run, patch, patch.thread)
+        else:  # a later changed scalar finds the patchable launch by the arrays' key
+            akey = key[: self.split] if self.value_at and self.converters is not None else None
+            self.same = (dims, stream, tuple(held), run, akey, None)
 
     def key(self, dims: tuple, converted: Sequence[Any], stream: Any) -> tuple | None:
-        """Everything the packed launch depends on, or None when it cannot be keyed."""
+        """Everything the packed launch depends on, or None when it cannot be keyed: the
+        grid, the stream, the arrays, then the bytes of the by-value arguments (its first
+        ``split`` parts key the patchable launch)."""
         parts: list[Any] = [dims, id(stream)]  # the entry holds the stream (``_prepare``)
-        for kind, v in zip(self.kinds, converted):
-            if kind is _ARRAY:
-                parts += (id(v), v.shape, v.strides)
-            else:
-                try:
-                    parts.append(v.tobytes())
-                except AttributeError:  # a backend-specific value: not keyable
-                    return None
+        for i in self.array_at:
+            v = converted[i]
+            parts += (id(v), v.shape, v.strides)
+        for i in self.value_at:
+            try:
+                parts.append(converted[i].tobytes())
+            except AttributeError:  # a backend-specific value: not keyable
+                return None
         return tuple(parts)
 
     def launch(
         self, dims: tuple, converted: Sequence[Any], stream: Any, args: Sequence[Any] | None = None,
         known: tuple | None = None,
     ) -> None:  # fmt: skip
-        """Run the launch, reusing its prepared form when its key was prepared before.
+        """Run the launch, reusing its prepared form when its key was prepared before, or
+        its arrays' patchable launch when only by-value arguments are new.
 
         ``args`` (the launch's own argument objects) let the next ``relaunch`` of the
         same objects skip conversion and keying; ``known`` (an ``object_key`` of them, or
@@ -322,7 +439,7 @@ class LaunchReuse:
                 self.hits += 1
                 self.misses = 0
                 self.last = (key, entry)
-                self._remember(args, dims, stream, run)
+                self._remember(args, dims, stream, run, key)
                 self._learn(known, run, stream)
                 run()
                 return
@@ -331,6 +448,8 @@ class LaunchReuse:
             if len(self.seen) >= MAX_SEEN:
                 self.seen.clear()
             self.seen.add(key)
+            if self.value_at and self._patch(key, dims, converted, stream, args):
+                return
             self.misses += 1
             if self.misses >= MISS_STREAK:  # keys are not paying: skip them for a while
                 self.misses = 0
@@ -339,6 +458,56 @@ class LaunchReuse:
             return
         self.misses = 0
         self._prepare(key, dims, converted, stream, args, known)
+
+    def _patch(
+        self, key: tuple, dims: tuple, converted: Sequence[Any], stream: Any,
+        args: Sequence[Any] | None,
+    ) -> bool:  # fmt: skip
+        """Run the patchable launch of ``key``'s arrays with the by-value arguments of
+        ``converted``, made when those arrays (grid, stream) come a second time; False
+        (nothing done) when there is none yet, it died, or another thread owns it."""
+        akey = key[: self.split]
+        patch = self.patches.get(akey)
+        if patch is not None and not patch.alive():  # an id may now name another buffer
+            del self.patches[akey]
+            patch = None
+        if patch is None:
+            if akey not in self.seen:
+                self.seen.add(akey)
+                return False
+            patch = self._new_patch(akey, dims, converted, stream)
+            if patch is None:
+                return False
+        elif patch.thread != get_ident():
+            return False
+        self.same = None
+        patch.write([converted[i] for i in self.value_at])
+        self.hits += 1
+        self.misses = 0
+        self._remember(args, dims, stream, patch.run, key, patch)
+        patch.run()
+        return True
+
+    def _new_patch(
+        self, akey: tuple, dims: tuple, converted: Sequence[Any], stream: Any
+    ) -> _Patch | None:
+        """The patchable launch of ``converted``'s arrays, kept under ``akey`` (None when
+        the backend cannot make one or a buffer cannot be watched)."""
+        refs = self._watch(converted)
+        if refs is None:
+            return None
+        made = self.backend.prepare_patchable(self.compiled, dims, converted, stream,
+                                              self.value_at)  # fmt: skip
+        if made is None:
+            return None
+        if len(self.patches) >= MAX_PATCHES:
+            dead = [k for k, p in self.patches.items() if not p.alive()]
+            for k in dead:
+                del self.patches[k]
+            if not dead:
+                self.patches.clear()
+        patch = self.patches[akey] = _Patch(made[0], made[1], refs, stream)
+        return patch
 
     def _prepare(
         self, key: tuple, dims: tuple, converted: Sequence[Any], stream: Any,
@@ -356,7 +525,7 @@ class LaunchReuse:
             self._drop_dead()
         entry = self.entries[key] = (run, refs, stream)
         self.last = (key, entry)
-        self._remember(args, dims, stream, run)
+        self._remember(args, dims, stream, run, key)
         self._learn(known, run, stream)
         run()
 
@@ -373,7 +542,7 @@ class LaunchReuse:
     def _watch(self, converted: Sequence[Any]) -> list | None:
         """Weak references to the entry's buffers (None: one is not weak-referenceable)."""
         try:
-            return [weakref.ref(v) for kind, v in zip(self.kinds, converted) if kind == _ARRAY]
+            return [weakref.ref(converted[i]) for i in self.array_at]
         except TypeError:
             return None
 
@@ -382,5 +551,6 @@ class LaunchReuse:
         self.entries.clear()
         self.seen.clear()
         self.known.clear()
+        self.patches.clear()
         self.last = None
         self.same = None

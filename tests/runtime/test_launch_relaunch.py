@@ -89,11 +89,12 @@ def test_a_freed_array_is_never_matched_by_identity(backend):
 def test_mutable_or_foreign_arguments_never_take_the_shortcut(backend):
     out = wp.zeros(1, dtype=wp.vec3)
     v = wp.vec3(1.0, 2.0, 3.0)
-    for k in range(3):
+    for k in range(5):
         v[0] = float(k)  # mutated in place: the same object, a new value
         wp.launch(put_vec, dim=1, inputs=[v, out], device="cpu", backend=backend)
         assert out.numpy()[0].tolist() == [float(k), 2.0, 3.0]
-    assert _reuse(put_vec, backend).same is None
+    same = _reuse(put_vec, backend).same  # a patchable launch's record never holds it
+    assert same is None or all(h is not v for h in same[2])
     y = wp.zeros(4, dtype=float)
     host = np.ones(4, np.float32)  # a NumPy array may be refilled or reshaped in place
     for _ in range(3):

@@ -224,17 +224,19 @@ def test_new_keys_in_a_row_bypass_the_tables_and_keying_resumes(backend, monkeyp
 
     monkeypatch.setattr(launch_reuse, "MISS_STREAK", 4)
     monkeypatch.setattr(launch_reuse, "BYPASS", 5)
-    out = wp.zeros(3, dtype=float, device="cpu")
-    wp.launch(set_to, 3, inputs=[0.5, out], backend=backend)
+    # A new array at every step (a changing scalar alone is patched in place instead).
+    outs = [wp.zeros(3, dtype=float, device="cpu") for _ in range(9)]
+    wp.launch(set_to, 3, inputs=[0.5, outs[0]], backend=backend)
     reuse = launch_plan(set_to, "cpu", backend).reuse
     assert reuse.bypass == 0 and reuse.misses == 1  # the first key was new
-    for step in range(1, 4):  # a time that changes every step: three more new keys
-        wp.launch(set_to, 3, inputs=[0.5 + step, out], backend=backend)
+    for step in range(1, 4):  # three more new keys
+        wp.launch(set_to, 3, inputs=[0.5 + step, outs[step]], backend=backend)
     assert reuse.bypass == 5 and reuse.misses == 0
     for step in range(4, 9):  # bypassed: no keys, right values
-        wp.launch(set_to, 3, inputs=[0.5 + step, out], backend=backend)
-        np.testing.assert_array_equal(out.numpy(), np.full(3, 0.5 + step))
-    assert reuse.bypass == 0
+        wp.launch(set_to, 3, inputs=[0.5 + step, outs[step]], backend=backend)
+        np.testing.assert_array_equal(outs[step].numpy(), np.full(3, 0.5 + step))
+    assert reuse.bypass == 0 and not reuse.patches
+    out = outs[0]
     hits = reuse.hits
     for _ in range(3):  # keying again: a recurring key is prepared and reused
         wp.launch(set_to, 3, inputs=[7.0, out], backend=backend)

@@ -13,7 +13,7 @@ import functools
 import struct
 import threading
 import weakref
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -195,6 +195,56 @@ class ArgPacker:
         flat.extend(extra)
         self.struct.pack_into(buf, self.start, *flat)
         return ctypes.addressof(buf)
+
+    def writer(self, indices: Sequence[int]) -> Callable[[Any, Sequence[Any]], None]:
+        """A function writing new values of the by-value parameters ``indices`` (scalars,
+        vectors, matrices, handles; ascending) into a buffer ``pack_into`` filled, in
+        place: ``write(buf, values)``, one value per index. Other parameters' bytes are
+        left as they are (consecutive parameters are written by one ``pack_into``, which
+        rewrites only the padding between them)."""
+        if not self.supported:
+            raise TypeError("a signature with struct parameters is packed by Packed")
+        kinds = self._kinds
+        for i in indices:
+            if kinds[i] == "array":
+                raise TypeError(f"parameter {i} is an array, not a by-value parameter")
+        runs: list[tuple[int, struct.Struct, list, bool, int, int]] = []
+        k = 0
+        while k < len(indices):
+            lo = k
+            fmt, end = "<", self.offsets[indices[k]]
+            while k < len(indices) and (k == lo or indices[k] == indices[k - 1] + 1):
+                i = indices[k]
+                size, code, _ = _layout(self.types[i])
+                pad = self.offsets[i] - end
+                fmt += (f"{pad}x" if pad else "") + code
+                end = self.offsets[i] + size
+                k += 1
+            run_kinds = [kinds[i] for i in indices[lo:k]]
+            runs.append((self.offsets[indices[lo]], struct.Struct(fmt), run_kinds,
+                         all(kd == "scalar" for kd in run_kinds), lo, k))  # fmt: skip
+
+        def write(buf: Any, values: Sequence[Any]) -> None:
+            try:
+                for offset, st, run_kinds, plain, lo, hi in runs:
+                    if plain:
+                        st.pack_into(buf, offset, *values[lo:hi])
+                        continue
+                    flat: list = []
+                    for kd, v in zip(run_kinds, values[lo:hi]):
+                        if kd == "scalar":
+                            flat.append(v)
+                        elif kd == "handle":
+                            flat.append(int(v))
+                        else:
+                            flat.extend(np.asarray(v).reshape(-1).tolist())
+                    st.pack_into(buf, offset, *flat)
+            except struct.error as e:
+                raise KdslLaunchError(
+                    f"cannot pass the launch arguments to the kernel: {e}"
+                ) from None
+
+        return write
 
 
 def _align(n: int, to: int = 16) -> int:

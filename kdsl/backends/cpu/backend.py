@@ -5,7 +5,7 @@ from __future__ import annotations
 import ctypes
 import functools
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -176,7 +176,7 @@ class CpuBackend(Backend):
         self, compiled: CompiledKernel, dims: Dims, args: Args, stream: Any = None
     ) -> Callable[[], None]:
         """A launch with its arguments packed once: calling it only enters native code."""
-        return self._prepared(compiled, dims, args, hold=True)
+        return self._prepared(compiled, dims, args, hold=True)[0]
 
     def prepare_reusable(
         self, compiled: CompiledKernel, dims: Dims, args: Args, stream: Any = None
@@ -187,19 +187,39 @@ class CpuBackend(Backend):
         """
         if compiled.payload.sites is not None:
             return None
-        return self._prepared(compiled, dims, args, hold=False)
+        return self._prepared(compiled, dims, args, hold=False)[0]
+
+    def prepare_patchable(
+        self, compiled: CompiledKernel, dims: Dims, args: Args, stream: Any = None,
+        values: Sequence[int] = (),
+    ) -> tuple[Callable[[], None], Callable[[Sequence[Any]], None]] | None:  # fmt: skip
+        """``prepare_reusable`` with a ``write`` patching the by-value parameters ``values``
+        in the packed bytes (``ArgPacker.writer``): a run returns when every thread of the
+        launch is done, so a write never reaches a running launch. None for a debug build
+        or a signature ``ArgPacker`` cannot pack."""
+        k: CpuKernel = compiled.payload
+        if k.sites is not None or not k.packer.supported:
+            return None
+        into = k.packer.writer(values)
+        run, buf = self._prepared(compiled, dims, args, hold=False)
+        if buf is None:  # an empty grid: nothing runs, nothing to patch
+            return run, _nothing
+        return run, functools.partial(into, buf)
 
     def _prepared(
         self, compiled: CompiledKernel, dims: Dims, args: Args, hold: bool
-    ) -> Callable[[], None]:
-        """The packed launch; ``hold`` keeps the argument buffers alive with it."""
+    ) -> tuple[Callable[[], None], Any]:
+        """The packed launch and its argument buffer (None when there is none to patch:
+        an empty grid, a debug build, a signature ``Packed`` packs); ``hold`` keeps the
+        argument buffers alive with it."""
         k: CpuKernel = compiled.payload
         total = self._check_dims(compiled, dims)
         if total == 0:
-            return _nothing
+            return _nothing, None
         if k.sites is not None:
             args = list(args)
-            return lambda: self._launch_checked(compiled, dims, args, total)
+            return lambda: self._launch_checked(compiled, dims, args, total), None
+        buf = None
         if k.packer.supported:
             buf = k.packer.new_buffer()
             argp = k.packer.pack_into(buf, args)
@@ -219,7 +239,7 @@ class CpuBackend(Backend):
             run_range(fn, total, argp, dimp, cost=cost, address=address, whole=whole)
 
         run.keep = (keep, extents, record)  # type: ignore[attr-defined]
-        return run
+        return run, buf
 
     def _check_dims(self, compiled: CompiledKernel, dims: Dims) -> int:
         """The number of threads of ``dims``, checked against the kernel's tid()."""
@@ -261,5 +281,5 @@ def _load_binary(data: bytes, symbols: list[str]) -> dict[str, int]:
     return jit.add_object(data, symbols)
 
 
-def _nothing() -> None:
-    """The prepared form of a launch over zero threads."""
+def _nothing(*_: Any) -> None:
+    """The prepared form of a launch over zero threads (and its parameters' writer)."""

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import ctypes
 import functools
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -205,7 +205,7 @@ class CudaBackend(Backend):
         """A launch packed once: calling it is one ``cuLaunchKernel`` (release builds)."""
         if compiled.payload.sites is not None:  # a checked build needs a fresh error record
             return super().prepare(compiled, dims, args, stream)
-        return self._prepared(compiled, dims, args, stream, list(args))
+        return self._prepared(compiled, dims, args, stream, list(args))[0]
 
     def prepare_reusable(
         self, compiled: CompiledKernel, dims: Dims, args: Args, stream: Any = None
@@ -213,16 +213,33 @@ class CudaBackend(Backend):
         """``prepare`` holding only the packed parameters (the runtime keeps buffers alive)."""
         if compiled.payload.sites is not None:
             return None
-        return self._prepared(compiled, dims, args, stream, None)
+        return self._prepared(compiled, dims, args, stream, None)[0]
+
+    def prepare_patchable(
+        self, compiled: CompiledKernel, dims: Dims, args: Args, stream: Any = None,
+        values: Sequence[int] = (),
+    ) -> tuple[Callable[[], None], Callable[[Sequence[Any]], None]] | None:  # fmt: skip
+        """``prepare_reusable`` with a ``write`` patching the by-value parameters ``values``
+        in the packed buffer (``Packer.writer``): ``cuLaunchKernel`` copies the parameters
+        when it is called, so a write after a run never reaches that launch."""
+        k: CudaKernel = compiled.payload
+        if k.sites is not None:
+            return None
+        into = k.packer.writer(values)
+        run, buf = self._prepared(compiled, dims, args, stream, None)
+        if buf is None:  # an empty grid: nothing runs, nothing to patch
+            return run, _ignore
+        return run, functools.partial(into, buf)
 
     def _prepared(
         self, compiled: CompiledKernel, dims: Dims, args: Args, stream: Any, hold: Any
-    ) -> Callable[[], None]:
-        """The packed launch; ``hold`` (the arguments, or None) is kept alive with it."""
+    ) -> tuple[Callable[[], None], Any]:
+        """The packed launch and its parameter buffer (None for an empty grid); ``hold``
+        (the arguments, or None) is kept alive with it."""
         k: CudaKernel = compiled.payload
         total = launch_size(compiled, dims, k.tid_ndims, self.name)
         if total == 0:
-            return lambda: None
+            return _ignore, None
         ordinal, raw = _stream_of(stream)
         grid = (total, *dims, *([1] * (4 - len(dims))))
         buf, params = k.packer.pack(args, ordinal, grid)
@@ -242,7 +259,11 @@ class CudaBackend(Backend):
                 _on_device(ordinal, launch_kernel, fn, gx, gy, gz, bx, by, bz, 0, raw, addr, 0)
 
         run.keep = (buf, params, hold)  # type: ignore[attr-defined]
-        return run
+        return run, buf
+
+
+def _ignore(*_: Any) -> None:
+    """A prepared launch over an empty grid, and its parameters' writer."""
 
 
 def _source(job: Job) -> Any:

@@ -113,12 +113,17 @@ class Packer:
     """Packs one kernel's launch arguments (see the module docstring)."""
 
     def __init__(self, types: Sequence[T.Type], names: Sequence[str], debug: bool) -> None:
+        self.types = list(types)
         lay = _Layout()
         self.offsets: list[int] = []
+        #: Per parameter, its fields' format (from its offset) and its size in bytes.
+        self.fields: list[tuple[str, int]] = []
         for t in types:
             lay.align(CT.layout(t)[1])
             self.offsets.append(lay.offset)
+            first = len(lay.fmt)
             lay.add(t)
+            self.fields.append(("".join(lay.fmt[first:]), lay.offset - self.offsets[-1]))
         lay.align(4)
         self.offsets.append(lay.offset)
         lay.fmt.append(_GRID_FMT)
@@ -150,3 +155,46 @@ class Packer:
             raise KdslLaunchError(f"cannot pass the launch arguments to the kernel: {e}") from None
         base = ctypes.addressof(buf)
         return buf, self.ptr_array(*[base + o for o in self.offsets])
+
+    def writer(self, indices: Sequence[int]) -> Callable[[Any, Sequence[Any]], None]:
+        """A function writing new values of the by-value parameters ``indices`` (scalars,
+        vectors, matrices, handles; ascending) into a buffer ``pack`` filled, in place:
+        ``write(buf, values)``, one value per index. The other parameters' bytes are left
+        as they are (consecutive parameters are written by one ``pack_into``, so only
+        the padding between them is rewritten)."""
+        for i in indices:
+            if isinstance(self.types[i], T.ArrayType | T.StructType):
+                raise TypeError(f"parameter {i} is a {self.types[i]}, not a by-value parameter")
+        runs: list[tuple[int, struct.Struct, list, bool, int, int]] = []
+        k = 0
+        while k < len(indices):
+            lo = k
+            fmt, end = "<", self.offsets[indices[k]]
+            while k < len(indices) and (k == lo or indices[k] == indices[k - 1] + 1):
+                i = indices[k]
+                pad = self.offsets[i] - end
+                fmt += (f"{pad}x" if pad else "") + self.fields[i][0]
+                end = self.offsets[i] + self.fields[i][1]
+                k += 1
+            flat = [self.flatteners[i] for i in indices[lo:k]]
+            # Scalars and handles are one field each: their values need no flattening.
+            plain = all(isinstance(self.types[i], T.ScalarType | T.HandleType)
+                        for i in indices[lo:k])  # fmt: skip
+            runs.append((self.offsets[indices[lo]], struct.Struct(fmt), flat, plain, lo, k))
+
+        def write(buf: Any, values: Sequence[Any]) -> None:
+            try:
+                for offset, st, flat, plain, lo, hi in runs:
+                    if plain:
+                        st.pack_into(buf, offset, *values[lo:hi])
+                    else:
+                        vals: list = []
+                        for f, v in zip(flat, values[lo:hi]):
+                            f(v, vals, -1)
+                        st.pack_into(buf, offset, *vals)
+            except struct.error as e:
+                raise KdslLaunchError(
+                    f"cannot pass the launch arguments to the kernel: {e}"
+                ) from None
+
+        return write
