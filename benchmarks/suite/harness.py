@@ -212,6 +212,12 @@ def run_script(
     script can report ``first_epoch`` and the caller subtract, and ``process_s``.
     """
     full_env = {**os.environ, **env}
+    # As users run: bytecode cached (written by the cold run, read by the warm one). With
+    # PYTHONDONTWRITEBYTECODE set in the caller's environment (as on the development
+    # host) and a tree without __pycache__, every module a warm first launch imports
+    # lazily was compiled from source inside the timed region: the cpu n-body's warm
+    # compile took 33 ms instead of 10 (benchmarks/profile_warm_compile.py).
+    full_env.pop("PYTHONDONTWRITEBYTECODE", None)
     # The script runs elsewhere: relative PYTHONPATH entries ("." for a checkout) must
     # keep pointing where they did, and this checkout's kdsl comes first.
     repo = str(Path(__file__).resolve().parents[2])

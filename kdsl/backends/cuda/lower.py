@@ -31,7 +31,6 @@ from dataclasses import dataclass, field
 
 from kdsl.backends.cuda import ctypes_ as CT
 from kdsl.backends.cuda.emitter import FuncEmitter, Source
-from kdsl.backends.cuda.ops import TABLE
 from kdsl.backends.cuda.variants import FastPlan, fast_plan
 from kdsl.errors import KdslCapabilityError
 from kdsl.ir.core import Loc, Module, Operation
@@ -78,6 +77,10 @@ def fast_entry_name(symbol: str) -> str:
 
 def generate(module: Module, kernels: list[str], debug: bool = False) -> CudaSource:
     """The CUDA C unit holding ``kernels`` (and their callees); see the module docstring."""
+    # The op table (every op's emitter, about 5 ms to import) only when code is generated:
+    # a cache hit names its kernel (``entry_name``) without it.
+    from kdsl.backends.cuda.ops import TABLE
+
     src = Source(module, TABLE, debug)
     src.need("kd_grid", lambda: _GRID)
     bodies: list[tuple[str, list]] = []
