@@ -105,10 +105,6 @@ _REF = weakref.ref
 # Per parameter: how one converted argument adds to the key, and whether it is a
 # buffer the entry must watch.
 _ARRAY, _BYTES = 0, 1
-# Per parameter, how ``relaunch`` holds its argument object: an array weakly, an
-# immutable scalar of a non-id type by identity, anything else not at all (converted
-# again at every launch of a patchable entry; no exact entry is remembered for it).
-_HOLD_REF, _HOLD_SAME, _HOLD_NONE = 0, 1, 2
 
 
 def _same_kind(t: Any) -> bool:
@@ -201,7 +197,7 @@ class LaunchReuse:
 
     __slots__ = (
         "array_at", "backend", "bypass", "compiled", "converters", "enabled", "entries",
-        "held_kinds", "hits", "known", "last", "misses", "patches", "same",
+        "hits", "kinds", "known", "last", "misses", "patches", "same",
         "same_ok", "seen", "split", "tokens", "value_at",
     )  # fmt: skip
 
@@ -231,14 +227,11 @@ class LaunchReuse:
         self.hits = 0
         #: Whether ``relaunch`` may serve this signature (arrays and non-id scalars only).
         self.same_ok = self.enabled and all(_same_kind(t) for t in arg_types)
-        self.held_kinds = [
-            _HOLD_REF if k == _ARRAY else _HOLD_SAME if _same_kind(t) else _HOLD_NONE
-            for k, t in zip(kinds, arg_types)
-        ]
+        #: Per parameter, ``_ARRAY`` or ``_BYTES`` (None: not keyable).
+        self.kinds = kinds
         self.converters = list(converters) if converters is not None else None
-        #: (dims, stream, held arguments, run, the patchable launch of its arrays or its
-        #: key, the thread owning that launch or None) of the launch that used ``last``
-        #: or a patchable launch, or None.
+        #: (dims, stream, held arguments, run, the patchable launch of its arrays or their
+        #: key, or None) of the launch that used ``last`` or a patchable launch, or None.
         self.same: tuple | None = None
         tokens = [_token(t) for t in arg_types]
         #: Per parameter, how its argument object keys ``known`` (None: no signature key).
@@ -256,8 +249,8 @@ class LaunchReuse:
 
     def relaunch(self, args: Sequence[Any], dims: tuple, stream: Any) -> bool:
         """Run the last entry again if ``args`` are the objects it last ran with, or its
-        patchable launch with new by-value arguments if only those changed (see the
-        module docstring); False (nothing done) otherwise."""
+        arrays' patchable launch with ``args``' by-value arguments if only those differ
+        (see the module docstring); False (nothing done) otherwise."""
         same = self.same
         if same is None or same[1] is not stream or same[0] != dims:
             return False
@@ -267,8 +260,6 @@ class LaunchReuse:
         for h, a in zip(held, args):
             if h is not a and (type(h) is not _REF or h() is not a):
                 return same[4] is not None and self._repatch(args, same)
-        if same[5] is not None and same[5] != get_ident():
-            return False  # another thread's patchable launch
         self.hits += 1
         self.misses = 0
         same[3]()
@@ -276,31 +267,32 @@ class LaunchReuse:
 
     def _repatch(self, args: Sequence[Any], same: tuple) -> bool:
         """``relaunch`` when an argument is not the one held: run the patchable launch of
-        the held arrays with ``args``' by-value arguments, if its arrays are the held ones."""
+        the held arrays with ``args``' by-value arguments, if the arrays are the held ones.
+
+        A patchable launch's record holds no by-value argument (``_remember``), so every
+        launch through it converts and writes them; an exact entry's record names the
+        key of its arrays, and the first such launch remembers the patchable one instead.
+        """
         patch = same[4]
-        if type(patch) is not _Patch:  # the key of the arrays of an exact entry
+        fresh = type(patch) is not _Patch  # the key of an exact entry's arrays
+        if fresh:
             patch = self.patches.get(patch)
             if patch is None or not patch.alive():  # dead: its key's ids may be reused
                 return False
-        convs = self.converters
-        if convs is None or patch.thread != get_ident():
+        if patch.thread != get_ident():
             return False
-        held, kinds = same[2], self.held_kinds
+        held = same[2]
         for i in self.array_at:
             if held[i]() is not args[i]:
                 return False
-        values = [convs[i](args[i]) for i in self.value_at]  # may raise: nothing written yet
-        new = list(held)
-        for i in self.value_at:
-            a = args[i]
-            ta = type(a)
-            if kinds[i] == _HOLD_SAME and (ta is float or ta is int or isinstance(a, np.generic)):
-                new[i] = a
-            else:
-                new[i] = _NO  # never the same object: converted at every launch
-        self.same = None  # in case the write fails: nothing may run the patch unwritten
+        convs = self.converters
+        values = [convs[i](args[i]) for i in self.value_at]  # may raise: nothing written
+        if fresh:
+            new = list(held)
+            for i in self.value_at:
+                new[i] = _NO
+            self.same = (same[0], same[1], tuple(new), patch.run, patch)
         patch.write(values)
-        self.same = (same[0], same[1], tuple(new), patch.run, patch, patch.thread)
         self.hits += 1
         self.misses = 0
         patch.run()
@@ -365,29 +357,29 @@ class LaunchReuse:
     ) -> None:  # fmt: skip
         """Keep what ``relaunch`` compares: for an exact entry (``patch`` None) when every
         argument may be compared by identity, for a patchable launch whenever its arrays
-        are ``kdsl.array`` objects (its other arguments are converted again when they are
-        not the same immutable scalars)."""
+        are ``kdsl.array`` objects (its by-value arguments are held as ``_NO``, never the
+        same: ``relaunch`` converts and writes them at every launch)."""
         self.same = None
-        if args is None or (patch is None and not self.same_ok):
+        if args is None or (not self.same_ok if patch is None else self.converters is None):
             return
         held = []
-        for a, kind in zip(args, self.held_kinds):
+        for a, kind in zip(args, self.kinds):
             ta = type(a)
-            if kind == _HOLD_REF:
+            if kind == _ARRAY:
                 if ta is not array:
                     return
                 held.append(weakref.ref(a))
-            elif kind == _HOLD_SAME and (ta is float or ta is int or isinstance(a, np.generic)):
-                held.append(a)
             elif patch is not None:
                 held.append(_NO)
+            elif ta is float or ta is int or isinstance(a, np.generic):
+                held.append(a)
             else:
                 return
-        if patch is not None:
-            self.same = (dims, stream, tuple(held), run, patch, patch.thread)
-        else:  # a later changed scalar finds the patchable launch by the arrays' key
+        if patch is None:  # a later changed scalar finds the patchable launch by this key
             akey = key[: self.split] if self.value_at and self.converters is not None else None
-            self.same = (dims, stream, tuple(held), run, akey, None)
+            self.same = (dims, stream, tuple(held), run, akey)
+        else:
+            self.same = (dims, stream, tuple(held), run, patch)
 
     def key(self, dims: tuple, converted: Sequence[Any], stream: Any) -> tuple | None:
         """Everything the packed launch depends on, or None when it cannot be keyed: the
@@ -480,7 +472,6 @@ class LaunchReuse:
                 return False
         elif patch.thread != get_ident():
             return False
-        self.same = None
         patch.write([converted[i] for i in self.value_at])
         self.hits += 1
         self.misses = 0
