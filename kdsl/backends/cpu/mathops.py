@@ -1,6 +1,8 @@
 """Lowerings of the ``math`` dialect: LLVM intrinsics where LLVM has an exact one,
 the C math library (through symbols the JIT resolves, see ``jit``) for the rest.
-Vector and matrix operands are lowered one scalar component at a time (``em.map``)."""
+float32 and float16 ``sin`` and ``cos`` are computed inline (``trig``; float64 keeps
+``llvm.sin``/``llvm.cos``). Vector and matrix operands are lowered one scalar
+component at a time (``em.map``)."""
 
 from __future__ import annotations
 
@@ -8,6 +10,7 @@ from typing import Any
 
 from llvmlite import ir
 
+from kdsl.backends.cpu import trig
 from kdsl.backends.cpu import types as LT
 from kdsl.backends.cpu.arith import widen_half
 from kdsl.backends.cpu.emitter import Emitter, Lowering
@@ -41,6 +44,22 @@ def _intrinsic(name: str) -> Lowering:
         et = T.elem_type(op.results[0].type)
         return em.map(lambda a: widen_half(em, et, lambda x: em.call_intrinsic(name, x), a),
                       *em.args(op))  # fmt: skip
+
+    return lower
+
+
+def _sincos(index: int, name: str) -> Lowering:
+    """``sin`` (``index`` 0) or ``cos`` (1): ``trig`` for float32 and float16, else ``name``."""
+    fallback = _intrinsic(name)
+
+    def scalar(em: Emitter, x: ir.Value) -> ir.Value:
+        return trig.sincos_f32(em, x)[index]
+
+    def lower(em: Emitter, op: Operation) -> Any:
+        et = T.elem_type(op.results[0].type)
+        if not (et.is_float and et.bits <= 32):
+            return fallback(em, op)
+        return em.map(lambda a: widen_half(em, et, lambda x: scalar(em, x), a), *em.args(op))
 
     return lower
 
@@ -113,9 +132,12 @@ def _bit_count(em: Emitter, op: Operation) -> ir.Value:
 
 
 for _name, _intr in INTRINSICS.items():
-    CPU.register(f"math.{_name}", _intrinsic(_intr))
+    if _name not in ("sin", "cos"):
+        CPU.register(f"math.{_name}", _intrinsic(_intr))
 for _name in LIBM:
     CPU.register(f"math.{_name}", _libm(_name))
+CPU.register("math.sin", _sincos(0, INTRINSICS["sin"]))
+CPU.register("math.cos", _sincos(1, INTRINSICS["cos"]))
 CPU.register("math.abs", _componentwise(_abs))
 CPU.register("math.sign", _componentwise(_sign))
 CPU.register("math.isnan", _isnan)

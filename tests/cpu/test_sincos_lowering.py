@@ -1,0 +1,171 @@
+"""The cpu backend's inline float32 ``sin``/``cos`` (``kdsl/backends/cpu/trig.py``).
+
+What the IR holds (one range reduction for a ``sin`` and a ``cos`` of one value, no
+libm call on the fast path, float64 untouched), and that vectors, float16 and
+``fast_math`` kernels get the same accurate results. Accuracy over ranges and special
+values: ``tests/conformance/test_sincos_accuracy.py``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+import kdsl as wp
+from kdsl.backends.cpu import trig
+from kdsl.compiler import lower
+from kdsl.testing.conformance import ulp_distance
+
+
+def _ir(kernel, stage: str = "llvm-ir", options: dict | None = None) -> str:
+    from kdsl.backends.cpu import BACKEND
+
+    return lower(BACKEND, kernel.build_module(), stage, options)
+
+
+def _wave(
+    x: wp.array(dtype=float),
+    k: wp.array(dtype=float),
+    out: wp.array(dtype=wp.vec2),
+):
+    i = wp.tid()
+    acc = wp.vec2(0.0, 0.0)
+    for w in range(k.shape[0]):
+        theta = k[w] * x[i]
+        acc = acc + wp.vec2(wp.sin(theta), wp.cos(theta))
+    out[i] = acc
+
+
+wave = wp.kernel(_wave)
+wave_fast = wp.kernel(fast_math=True)(_wave)
+
+
+@wp.kernel
+def sin_only(x: wp.array(dtype=float), out: wp.array(dtype=float)):
+    i = wp.tid()
+    out[i] = wp.sin(x[i])
+
+
+def _sin_cos(x: wp.array(dtype=float), out: wp.array(dtype=float)):
+    i = wp.tid()
+    out[i] = wp.sin(x[i]) * wp.cos(x[i])
+
+
+sin_cos = wp.kernel(_sin_cos)
+sin_cos_fast = wp.kernel(fast_math=True)(_sin_cos)
+
+
+@wp.kernel
+def sin_f64(x: wp.array(dtype=wp.float64), out: wp.array(dtype=wp.float64)):
+    i = wp.tid()
+    out[i] = wp.sin(x[i]) + wp.cos(x[i])
+
+
+@wp.kernel
+def sincos_vec3(x: wp.array(dtype=wp.vec3), s: wp.array(dtype=wp.vec3), c: wp.array(dtype=wp.vec3)):
+    i = wp.tid()
+    s[i] = wp.sin(x[i])
+    c[i] = wp.cos(x[i])
+
+
+@wp.kernel
+def sincos_f16(x: wp.array(dtype=wp.float16), s: wp.array(dtype=wp.float16),
+               c: wp.array(dtype=wp.float16)):  # fmt: skip
+    i = wp.tid()
+    s[i] = wp.sin(x[i])
+    c[i] = wp.cos(x[i])
+
+
+def _llvm_hex(v: float) -> str:
+    return "0x" + np.float64(v).view(np.uint64).tobytes()[::-1].hex().upper()
+
+
+def test_sin_and_cos_of_one_value_share_one_reduction(cpu_backend):
+    text = _ir(wave)
+    # One multiply by 2/pi (the reduction), one fast-path polynomial of each kind.
+    assert text.count(_llvm_hex(trig.TWO_OVER_PI)) == 1
+    assert text.count(_llvm_hex(trig.SIN_COEFFS[0])) == 1
+    assert text.count(_llvm_hex(trig.COS_COEFFS[0])) == 1
+    # libm only on the cold path, behind kdsl.sincosf.slow.
+    assert "@sinf" not in text and "@sincosf" not in text.split(f"@{trig.SLOW_SYMBOL}(")[0]
+    assert f"define internal fastcc {{ float, float }} @{trig.SLOW_SYMBOL}" in text
+
+
+def test_sin_alone_has_one_reduction_and_no_libm_on_its_fast_path(cpu_backend):
+    text = _ir(sin_only)
+    assert text.count(_llvm_hex(trig.TWO_OVER_PI)) == 1
+    # Both polynomials: sin x is +-cos r in odd quadrants.
+    assert text.count(_llvm_hex(trig.COS_COEFFS[0])) == 1
+    assert "@sinf" not in text
+
+
+def test_float64_keeps_libm(cpu_backend):
+    text = _ir(sin_f64)
+    assert "llvm.sin.f64" in text or "@sin(" in text or "@sincos(" in text
+    assert trig.SYMBOL not in text
+
+
+def _dense(n: int, seed: int = 3) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    return np.concatenate([rng.uniform(-50.0, 50.0, n), rng.uniform(-1e4, 1e4, n)]).astype(
+        np.float32
+    )
+
+
+def test_fast_math_kernel_gives_the_same_bits(cpu_backend):
+    x = _dense(1 << 16)
+    outs = []
+    for kern in (sin_cos, sin_cos_fast):
+        out = wp.zeros(len(x), dtype=float, device="cpu")
+        wp.launch(kern, len(x), [wp.array(x, dtype=float, device="cpu"), out], device="cpu",
+                  backend="cpu")  # fmt: skip
+        outs.append(out.numpy())
+    np.testing.assert_array_equal(outs[1], outs[0])
+
+
+def test_fast_math_loop_matches_float64(cpu_backend):
+    x = _dense(4096)
+    k = np.array([1.0, -0.5, 3.0], np.float32)
+    outs = []
+    for kern in (wave, wave_fast):
+        xs = wp.array(x, dtype=float, device="cpu")
+        ks = wp.array(k, dtype=float, device="cpu")
+        out = wp.zeros(len(x), dtype=wp.vec2, device="cpu")
+        wp.launch(kern, len(x), [xs, ks, out], device="cpu", backend="cpu")
+        outs.append(out.numpy())
+    # The kernel's own sum may be reassociated in the fast_math build.
+    np.testing.assert_allclose(outs[1], outs[0], rtol=0, atol=4e-7 * len(k))
+    theta = k[None, :].astype(np.float32) * x[:, None]
+    want = np.stack([np.sin(theta.astype(np.float64)).sum(1),
+                     np.cos(theta.astype(np.float64)).sum(1)], axis=1)  # fmt: skip
+    np.testing.assert_allclose(outs[0], want, rtol=0, atol=1e-6)
+
+
+def test_fast_math_helper_carries_no_flags(cpu_backend):
+    text = _ir(wave_fast, "llvm-ir-unopt", {"fast_math": True})
+    body = text.split(f'define internal {{float, float}} @"{trig.SYMBOL}"(')[1].split("\n}\n")[0]
+    assert "double" in body
+    for flag in ("reassoc", "fast", "contract", "afn"):
+        assert f" {flag} " not in body, flag
+
+
+def test_vector_components(cpu_backend):
+    x = _dense(512).reshape(-1, 1)[: 3 * 341].reshape(-1, 3)
+    xs = wp.array(x, dtype=wp.vec3, device="cpu")
+    s = wp.zeros(len(x), dtype=wp.vec3, device="cpu")
+    c = wp.zeros(len(x), dtype=wp.vec3, device="cpu")
+    wp.launch(sincos_vec3, len(x), [xs, s, c], device="cpu", backend="cpu")
+    d = x.astype(np.float64)
+    assert ulp_distance(s.numpy(), np.sin(d)).max() <= 0.51
+    assert ulp_distance(c.numpy(), np.cos(d)).max() <= 0.51
+
+
+def test_float16_rounds_once_more(cpu_backend):
+    x = np.linspace(-60.0, 60.0, 3001).astype(np.float16)
+    xs = wp.array(x, dtype=wp.float16, device="cpu")
+    s = wp.zeros(len(x), dtype=wp.float16, device="cpu")
+    c = wp.zeros(len(x), dtype=wp.float16, device="cpu")
+    wp.launch(sincos_f16, len(x), [xs, s, c], device="cpu", backend="cpu")
+    d = x.astype(np.float64)
+    # float32 result (0.51 ulp of float32) rounded to float16: at most 0.5 + 2^-13 ulp.
+    assert ulp_distance(s.numpy(), np.sin(d)).max() <= 0.501
+    assert ulp_distance(c.numpy(), np.cos(d)).max() <= 0.501
