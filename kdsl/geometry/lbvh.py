@@ -41,14 +41,19 @@ build leaves as it found them (the zeroed counters zero again).
 
 from __future__ import annotations
 
+import functools
+import weakref
+
 from kdsl.errors import KdslError
 from kdsl.frontend.api import atomic_add, atomic_max, cast, func, inf, kernel, thread_fence, tid
 from kdsl.frontend.api import max as vmax
 from kdsl.frontend.api import min as vmin
 from kdsl.geometry.device_tree import UNUSED, DeviceTree, node_views
+from kdsl.geometry.recycle import RecycleBin
 from kdsl.runtime.alloc import empty
 from kdsl.runtime.array import array
 from kdsl.runtime.launch import Launch, launch
+from kdsl.runtime.stream import current_stream
 from kdsl.stdlib.bvh import BvhNode
 from kdsl.types import float32, int32, uint64, vec2i, vec3
 from kdsl.utils.scan import ScanInto
@@ -536,18 +541,37 @@ class LbvhBuild:
                 hi, packed_first, packed_next, with_parents, ints["pre_parent"],
                 ints["group_roots"], zero["starts"], zero["bounds"]]).launch,
         ]  # fmt: skip
-        self.tree = DeviceTree(
+        self._tree_fields = (
             ints["skip"], ints["first"], ints["count"], ints["items"],
             ints["group_roots"][:num_groups], ints["pre_parent"], zero["arrivals"], slots,
-            nodes, views, node_count=ints["before"][n:], bounded=True,
+            nodes, views, ints["before"][n:],
         )  # fmt: skip
+        #: Whether the last run completed (a run cut short may leave counters nonzero).
+        self.clean = True
 
-    def run(self) -> DeviceTree:
-        """Build the tree (again) from the boxes' current values; returns ``tree``."""
+    def run(self) -> None:
+        """Build the tree (again) from the boxes' current values."""
+        self.clean = False
         for step in self._steps:
             step()
-        self.tree.forget_count()
-        return self.tree
+        self.clean = True
+
+    def new_tree(self) -> DeviceTree:
+        """A ``DeviceTree`` over this build's arrays (one per owner: see ``build_lbvh``)."""
+        *links, slots, nodes, views, node_count = self._tree_fields
+        return DeviceTree(*links, slots, nodes, views, node_count=node_count, bounded=True)
+
+
+#: The builds of collected trees, for the next tree over the same boxes (``recycle``):
+#: two, a BVH's and a mesh's, say.
+BUILDS = RecycleBin(2)
+
+
+def _rebuild(build: LbvhBuild, tree: weakref.ref) -> None:
+    build.run()
+    t = tree()
+    if t is not None:
+        t.forget_count()
 
 
 def build_lbvh(lowers: array, uppers: array, leaf_size: int, groups: array | None,
@@ -571,9 +595,16 @@ def build_lbvh(lowers: array, uppers: array, leaf_size: int, groups: array | Non
         none.fill_(-1)
         return DeviceTree(none[:0], none[:0], none[:0], none[:0], none[:num_groups], none[:0],
                           none[:0], 0)  # fmt: skip
-    build = LbvhBuild(lowers, uppers, leaf_size, groups, num_groups, bottom_up, use_scan)
-    tree = build.run()
-    tree.rebuild = build.run
+    # Filed by what the prepared launches hold: the arrays and the stream they run on.
+    inputs = (lowers, uppers, groups, None if device.is_cpu else current_stream(device))
+    shape = (n, leaf_size, num_groups, bottom_up, use_scan)
+    build = BUILDS.take(inputs, shape)
+    if build is None:
+        build = LbvhBuild(lowers, uppers, leaf_size, groups, num_groups, bottom_up, use_scan)
+    build.run()
+    tree = build.new_tree()
+    tree.rebuild = functools.partial(_rebuild, build, weakref.ref(tree))
+    BUILDS.keep_when_collected(tree, inputs, shape, build, lambda b: b.clean)
     return tree
 
 

@@ -14,7 +14,7 @@ from typing import Any
 
 from kdsl.errors import KdslTypeError
 from kdsl.geometry.bvh import Bvh
-from kdsl.geometry.mesh_refit import FaceBoxes
+from kdsl.geometry.mesh_refit import face_boxes, keep_face_boxes
 from kdsl.ir import types as T
 from kdsl.runtime.array import array
 from kdsl.runtime.objects import ObjectRecord
@@ -107,13 +107,14 @@ class Mesh:
         self._points, self.indices, self.velocities = pts, idx, vel
         self.support_winding_number = bool(support_winding_number)
         self._num_tris = num_tris
-        self._faces = FaceBoxes(num_tris, self.device)  # the checks write them
+        self._faces = face_boxes(num_tris, self.device)  # the checks write them
         self._recorded: tuple | None = None
         self._write_boxes()
         self.bvh = Bvh(
             self._faces.lowers, self._faces.uppers, constructor=bvh_constructor, groups=groups,
             leaf_size=bvh_leaf_size,
         )  # fmt: skip
+        keep_face_boxes(self.bvh, self._faces)  # for a later mesh, once the BVH is collected
         self._record = ObjectRecord(self, MeshRecord.__kdsl_type__, "mesh", self.device)
         self._write_record()
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 from kdsl.frontend.api import atomic_max, isfinite, kernel, length, tid
 from kdsl.frontend.api import max as vmax
 from kdsl.frontend.api import min as vmin
+from kdsl.geometry.recycle import RecycleBin
 from kdsl.runtime.alloc import zeros
 from kdsl.runtime.array import array
 from kdsl.runtime.launch import launch
@@ -77,6 +78,8 @@ class FaceBoxes:
         self.edges, self.edge_sum = block[6 * num_tris : floats - 1], block[floats - 1 : floats]
         self._first_bad = block[floats:].view(int32)
         self._sum = SumInto(self.edges, self.edge_sum) if num_tris else None
+        #: Whether the last ``write`` completed (one cut short may leave a counter set).
+        self.clean = True
 
     def write(self, points: array, indices: array) -> tuple[int, int]:
         """Check the mesh and write its faces' boxes and edge lengths, in one launch and
@@ -89,6 +92,7 @@ class FaceBoxes:
         if max(num_points, num_tris) == 0:
             return -1, -1
         first_bad = self._first_bad
+        self.clean = False
         launch(
             _checked_face_boxes, dim=max(num_points, num_tris), device=points.device,
             inputs=[points, indices, num_points, num_tris, self.lowers, self.uppers,
@@ -98,6 +102,27 @@ class FaceBoxes:
         if bad_index == 0 and bad_point == 0:
             if self._sum is not None:
                 self._sum()
+            self.clean = True
             return -1, -1
         first_bad.zero_()  # "nothing found" again, for the next call
+        self.clean = True
         return (-1 if bad_index == 0 else _TOP - bad_index, -1 if bad_point == 0 else _TOP - bad_point)
+
+
+#: The face boxes of collected meshes, for the next mesh of as many faces (``recycle``:
+#: the mesh's BVH build, filed under these boxes, then comes back with them).
+FACE_BOXES = RecycleBin(2)
+
+
+def face_boxes(num_tris: int, device) -> FaceBoxes:
+    """``FaceBoxes`` for a mesh of ``num_tris`` faces on ``device``: those of a collected
+    mesh when the bin has them, else new ones (``keep_face_boxes`` files them)."""
+    boxes = FACE_BOXES.take((), (num_tris, device.alias))
+    return boxes if boxes is not None else FaceBoxes(num_tris, device)
+
+
+def keep_face_boxes(owner: object, boxes: FaceBoxes) -> None:
+    """File ``boxes`` in the bin when ``owner`` is collected: the mesh's BVH, which
+    reads them as its items (and outlives the mesh when the user keeps it)."""
+    shape = (boxes.lowers.shape[0], boxes.lowers.device.alias)
+    FACE_BOXES.keep_when_collected(owner, (), shape, boxes, lambda b: b.clean)

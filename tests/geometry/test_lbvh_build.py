@@ -12,7 +12,7 @@ import pytest
 
 import kdsl as wp
 from kdsl.errors import KdslError
-from kdsl.geometry import lbvh
+from kdsl.geometry import lbvh, recycle
 from kdsl.geometry.device_tree import UNUSED
 from kdsl.runtime.array import array
 
@@ -158,10 +158,14 @@ def test_build_reads_nothing_back_and_rebuild_prepares_nothing(device, monkeypat
     monkeypatch.setattr(lbvh, "empty", counting("alloc", lbvh.empty))
     monkeypatch.setattr(array, "zero_", counting("fill", array.zero_))
     monkeypatch.setattr(lbvh, "launch", counting("launch", lbvh.launch))
+    recycle.clear()  # (the first BVH's build, kept when it was collected)
     bvh = wp.Bvh(lo, hi, constructor="lbvh")
     assert calls == {"numpy": 0, "alloc": 1, "launch": 4, "fill": 1}  # one block, four kernels
     calls.update(numpy=0, alloc=0, launch=0, fill=0)
     bvh.rebuild()
+    assert calls == {"numpy": 0, "alloc": 0, "launch": 0, "fill": 0}
+    del bvh  # a fresh BVH over the same boxes takes the collected one's build
+    bvh = wp.Bvh(lo, hi, constructor="lbvh")
     assert calls == {"numpy": 0, "alloc": 0, "launch": 0, "fill": 0}
     monkeypatch.setattr(array, "numpy", real_numpy)
     assert bvh._tree.num_nodes == 2 * n - 1  # read back on demand only
