@@ -37,25 +37,22 @@ Both keep their buffers between builds, grow them only when the point count exce
 what they hold, and prepare their launches once per points array and count. On a GPU
 the counting sort's ten launches are captured as one CUDA graph at the second build of
 the same points array, count and radius, and replayed from then on (one graph launch
-of host time instead of ten kernel launches: ``_Steps``).
+of host time instead of ten kernel launches: ``_Steps``, ``graph_steps``).
 """
 
 from __future__ import annotations
 
-import contextlib
 from abc import ABC, abstractmethod
 from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
-from kdsl.errors import KdslError
 from kdsl.frontend.api import atomic_add, kernel, tid
 from kdsl.frontend.api import min as vmin
+from kdsl.geometry.graph_steps import StepGraph, graphs_on
 from kdsl.runtime.alloc import copy, empty, zeros
 from kdsl.runtime.array import array
-from kdsl.runtime.graphs import state as graphs
-from kdsl.runtime.graphs.capture import capture_begin, capture_end, capture_launch
 from kdsl.runtime.launch import Launch, launch
 from kdsl.stdlib.hash_grid import hash_grid_cell, hash_grid_cell_coord
 from kdsl.types import float32, int32, uint64, vec3
@@ -233,24 +230,19 @@ class _Scan:
 class _Steps:
     """One build's prepared steps for ``points`` (``n`` of them) after a build of
     ``emptied``: run again while those stay the same (it holds ``points``, as its
-    prepared launches do, until the grid builds another array).
+    prepared launches do, until the grid builds another array). ``graphed`` (a GPU's
+    counting sort, all kernel launches on the first one's stream): from the second run
+    at one cell width, one graph replay (``graph_steps.StepGraph``); a new cell width
+    drops the graph (its first launch holds the old one)."""
 
-    ``graphed`` (a GPU's counting sort, whose steps are all kernel launches on the first
-    one's stream): the second run at one cell width captures the steps as one graph
-    (``capture_steps``) and every later run replays it, one graph launch instead of ten
-    kernel launches of host time. A new cell width drops the graph (its first launch
-    holds the old one) and counts runs anew; while a capture of the user's is open the
-    steps run one by one (and join it)."""
-
-    __slots__ = ("emptied", "first", "graph", "graphed", "inv", "n", "points", "runs", "steps")
+    __slots__ = ("emptied", "first", "graph", "inv", "n", "points", "steps")
 
     def __init__(self, points: array, n: int, emptied: int, inv: np.float32,
                  first: Launch | None, steps: list[Callable[[], None]],
                  graphed: bool = False) -> None:  # fmt: skip
         self.points, self.n, self.emptied, self.inv = points, n, emptied, inv
-        self.first, self.steps, self.graphed = first, steps, graphed
-        self.runs = 0
-        self.graph: Callable[[], None] | None = None
+        self.first, self.steps = first, steps
+        self.graph = StepGraph(steps, first.stream if first is not None else None, graphed)
 
     def matches(self, points: array, n: int, emptied: int) -> bool:
         """Whether these steps fit a build of ``points`` after one of ``emptied``."""
@@ -260,45 +252,9 @@ class _Steps:
         """Run the steps with cell width ``1 / inv``."""
         if inv != self.inv and self.first is not None:
             self.first.set_param_at_index(_INV, inv)
-            self.inv, self.graph, self.runs = inv, None, 0
-        if graphs.ACTIVE or not self.graphed:
-            self._each()
-            return
-        if self.graph is None and self.runs:
-            assert self.first is not None  # (graphed steps start with a launch)
-            self.graph = capture_steps(self.steps, self.first.stream)
-            self.graphed = self.graph is not None  # a failed capture: one by one from now
-        if self.graph is not None:
-            self.graph()
-        else:
-            self._each()
-        self.runs += 1
-
-    def _each(self) -> None:
-        for step in self.steps:
-            step()
-
-
-def capture_steps(steps: list[Callable[[], None]], stream: Any) -> Callable[[], None] | None:
-    """``steps`` (kernel launches on the CUDA ``stream``) captured as one graph: a
-    callable that replays it on ``stream``; None when the capture fails (the steps then
-    run one by one, as before)."""
-    try:
-        capture_begin(stream=stream)
-    except KdslError:
-        return None
-    try:
-        for step in steps:
-            step()
-    except BaseException:
-        with contextlib.suppress(KdslError):
-            capture_end(stream=stream)  # closed; the error is the step's
-        raise
-    try:
-        graph = capture_end(stream=stream)
-    except KdslError:
-        return None
-    return lambda: capture_launch(graph, stream)
+            self.inv = inv
+            self.graph.drop()
+        self.graph()
 
 
 class _Build(ABC):
@@ -423,7 +379,7 @@ class CountBuild(_Build):
         order = self._launch(_count_order, n,
                              [scattered, buckets, self.offsets, n, self.point_ids])  # fmt: skip
         steps = [first.launch, scan, scatter.launch, order.launch]
-        return _Steps(points, n, self.built, inv, first, steps, graph_replay_on(self.device))
+        return _Steps(points, n, self.built, inv, first, steps, graphs_on(self.device))
 
 
 def builder(device: Any, dims: tuple[int, int, int]) -> _Build:
@@ -434,10 +390,4 @@ def builder(device: Any, dims: tuple[int, int, int]) -> _Build:
 
 def counting_sort_on(device: Any) -> bool:
     """Whether grids on ``device`` build by the counting sort (tests try both anywhere)."""
-    return bool(device.is_cuda)
-
-
-def graph_replay_on(device: Any) -> bool:
-    """Whether a counting-sort build on ``device`` replays its steps as a graph from its
-    second run (CUDA graphs: a GPU's; the CPU's captures replay launch by launch)."""
     return bool(device.is_cuda)

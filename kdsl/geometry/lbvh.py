@@ -49,6 +49,7 @@ from kdsl.frontend.api import atomic_add, atomic_max, cast, func, inf, kernel, t
 from kdsl.frontend.api import max as vmax
 from kdsl.frontend.api import min as vmin
 from kdsl.geometry.device_tree import UNUSED, DeviceTree, node_views
+from kdsl.geometry.graph_steps import StepGraph, graphs_on
 from kdsl.geometry.recycle import RecycleBin
 from kdsl.runtime.alloc import empty
 from kdsl.runtime.array import array
@@ -56,6 +57,7 @@ from kdsl.runtime.launch import Launch, launch
 from kdsl.runtime.stream import current_stream
 from kdsl.stdlib.bvh import BvhNode
 from kdsl.types import float32, int32, uint64, vec2i, vec3
+from kdsl.utils.merge_sort import MergeSortKeys
 from kdsl.utils.scan import ScanInto
 from kdsl.utils.sort import SortKeys
 
@@ -476,6 +478,13 @@ def key_layout(n: int, num_groups: int) -> tuple[int, int, int]:
     return MORTON_BITS - morton, index_bits, shift
 
 
+def device_sort_on(device) -> bool:
+    """Whether lbvh builds on ``device`` sort their keys with the kdsl merge sort
+    (``kdsl.utils.merge_sort``: kernel launches only, so the build can be one graph)
+    rather than ``SortKeys`` (NumPy's sort on the CPU). Tests try both anywhere."""
+    return bool(device.is_cuda)
+
+
 class LbvhBuild:
     """One lbvh build's buffers and prepared steps over boxes ``lowers``/``uppers`` (and
     ``groups``): ``tree`` is the ``DeviceTree`` it writes; each call of ``run`` builds
@@ -500,7 +509,10 @@ class LbvhBuild:
         zero_sizes = {"starts": n + 1, "climbs": n - 1, "arrivals": slots if bottom_up else 0,
                       "bounds": BOUND_SLOTS}  # fmt: skip
         num_ints = sum(layout.values()) + sum(zero_sizes.values())
-        tail = 24 * (n - 1) + 8 * n + 4 * num_ints  # inner bounds, keys, ints
+        # With the kdsl sort (a GPU's), its scratch keys follow the keys.
+        sorted_by_kernels = device_sort_on(device)
+        num_keys = 2 * n if sorted_by_kernels else n
+        tail = 24 * (n - 1) + 8 * num_keys + 4 * num_ints  # inner bounds, keys, ints
         # (an uninitialized struct allocation, then one fill of the int32 arrays that
         # must start at zero: a zero-filled struct array is slow to make on the CPU)
         self._block = empty(slots + -(-tail // 32), dtype=BvhNode, device=device)
@@ -510,8 +522,9 @@ class LbvhBuild:
         base = self._block.ptr + 32 * slots
         inner = array(ptr=base, dtype=vec3, shape=(2 * (n - 1),), device=device)
         node_lo, node_hi = inner[: n - 1], inner[n - 1 :]
-        keys = array(ptr=base + 24 * (n - 1), dtype=uint64, shape=(n,), device=device)
-        int_view = array(ptr=base + 24 * (n - 1) + 8 * n, dtype=int32, shape=(num_ints,),
+        all_keys = array(ptr=base + 24 * (n - 1), dtype=uint64, shape=(num_keys,), device=device)
+        keys = all_keys[:n]
+        int_view = array(ptr=base + 24 * (n - 1) + 8 * num_keys, dtype=int32, shape=(num_ints,),
                          device=device)  # fmt: skip
         ints = _carve(int_view, {**layout, **zero_sizes})
         zero = {name: ints[name] for name in zero_sizes}
@@ -523,11 +536,14 @@ class LbvhBuild:
         def prepared(kernel, dim: int, inputs: list) -> Launch:
             return launch(kernel, dim=dim, device=device, inputs=inputs, record_cmd=True)
 
-        self._steps = [
-            centre_bounds(lowers, uppers, zero["bounds"], record_cmd=True).launch,
+        sort = (MergeSortKeys(keys, all_keys[n:]).steps if sorted_by_kernels
+                else [SortKeys(keys)])  # fmt: skip
+        bounds = centre_bounds(lowers, uppers, zero["bounds"], record_cmd=True)
+        steps = [
+            bounds.launch,
             prepared(_morton_keys, n, [lowers, uppers, zero["bounds"], group_arg, has_groups,
                                        morton_drop, index_bits, group_shift, keys]).launch,
-            SortKeys(keys),
+            *sort,
             prepared(_emit_hierarchy, n, [
                 keys, n, leaf_size, group_shift, (1 << index_bits) - 1, lowers, uppers,
                 ints["items"], ints["parent"], ints["left"], ints["right"], node_lo, node_hi,
@@ -541,6 +557,9 @@ class LbvhBuild:
                 hi, packed_first, packed_next, with_parents, ints["pre_parent"],
                 ints["group_roots"], zero["starts"], zero["bounds"]]).launch,
         ]  # fmt: skip
+        # All kernel launches with the kdsl sort and no scan: one graph from the second run.
+        graphed = sorted_by_kernels and not use_scan and graphs_on(device)
+        self._steps = StepGraph(steps, bounds.stream, graphed)
         self._tree_fields = (
             ints["skip"], ints["first"], ints["count"], ints["items"],
             ints["group_roots"][:num_groups], ints["pre_parent"], zero["arrivals"], slots,
@@ -552,8 +571,7 @@ class LbvhBuild:
     def run(self) -> None:
         """Build the tree (again) from the boxes' current values."""
         self.clean = False
-        for step in self._steps:
-            step()
+        self._steps()
         self.clean = True
 
     def new_tree(self) -> DeviceTree:

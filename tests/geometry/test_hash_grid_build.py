@@ -13,7 +13,7 @@ import pytest
 
 import kdsl as wp
 from kdsl.errors import KdslTypeError
-from kdsl.geometry import hash_grid_build
+from kdsl.geometry import graph_steps, hash_grid_build
 from kdsl.geometry.hash_grid import HashGridError
 from kdsl.stdlib import hash_grid
 from tests.geometry.test_hash_grid import (
@@ -151,8 +151,8 @@ def graph_counting(monkeypatch) -> dict[str, int]:
         return replay
 
     monkeypatch.setattr(hash_grid_build, "counting_sort_on", lambda device: True)
-    monkeypatch.setattr(hash_grid_build, "graph_replay_on", lambda device: True)
-    monkeypatch.setattr(hash_grid_build, "capture_steps", capture)
+    monkeypatch.setattr(hash_grid_build, "graphs_on", lambda device: True)
+    monkeypatch.setattr(graph_steps, "capture_steps", capture)
     return counts
 
 
@@ -173,7 +173,7 @@ def test_steps_join_an_open_capture_one_by_one(monkeypatch):
     counts = graph_counting(monkeypatch)
     rng, p, pts, grid = built_grid(10, 200, "cpu")
     # A user's capture open (on another device: the CPU's launches run as usual).
-    monkeypatch.setattr(hash_grid_build.graphs, "ACTIVE", [SimpleNamespace(device=None)])
+    monkeypatch.setattr(graph_steps.graphs, "ACTIVE", [SimpleNamespace(device=None)])
     for _ in range(3):
         p = move(rng, p, pts, 0.1)
         grid.build(pts, 0.2)
@@ -188,7 +188,7 @@ def test_a_failed_capture_runs_the_steps_one_by_one_from_then_on(monkeypatch):
         counts["captures"] += 1
         return None
 
-    monkeypatch.setattr(hash_grid_build, "capture_steps", failing)
+    monkeypatch.setattr(graph_steps, "capture_steps", failing)
     rng, p, pts, grid = built_grid(11, 200, "cpu")
     for _ in range(4):
         p = move(rng, p, pts, 0.1)
@@ -204,7 +204,7 @@ def test_cuda_build_replays_a_cuda_graph():
         p = move(rng, p, pts, 0.1)
         grid.build(pts, radius)
         check_tables(grid, p, radius, "cuda:0")
-    assert grid._builder.steps.graph is not None
+    assert grid._builder.steps.graph.graph is not None
     with wp.ScopedCapture(device="cuda:0") as capture:  # inside a user's capture: joins it
         grid.build(pts, 0.3)
     p = move(rng, p, pts, 0.1)

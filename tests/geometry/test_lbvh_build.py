@@ -12,7 +12,7 @@ import pytest
 
 import kdsl as wp
 from kdsl.errors import KdslError
-from kdsl.geometry import lbvh, recycle
+from kdsl.geometry import graph_steps, lbvh, recycle
 from kdsl.geometry.device_tree import UNUSED
 from kdsl.runtime.array import array
 
@@ -202,3 +202,71 @@ def test_both_numberings_give_one_tree_on_adversarial_boxes(leaf_size, num_group
     for name in ("skip", "first", "count", "items", "group_roots", "parent"):
         np.testing.assert_array_equal(getattr(a, name).numpy(), getattr(b, name).numpy())
     assert a.nodes.numpy().tobytes() == b.nodes.numpy().tobytes()
+
+
+def gpu_config_tree(lo: np.ndarray, hi: np.ndarray, leaf_size: int, groups, num_groups: int):
+    """An lbvh tree built on the CPU as a GPU builds it (bottom-up parents, no scan)."""
+    return lbvh.build_lbvh(wp.array(lo, dtype=wp.vec3), wp.array(hi, dtype=wp.vec3), leaf_size,
+                           groups, num_groups, bottom_up=True, use_scan=False)  # fmt: skip
+
+
+def tree_arrays(t) -> list[bytes]:
+    names = ("skip", "first", "count", "items", "group_roots", "parent")
+    return [getattr(t, k).numpy().tobytes() for k in names] + [t.nodes.numpy().tobytes()]
+
+
+@pytest.mark.parametrize("leaf_size", [1, 4])
+@pytest.mark.parametrize("num_groups", [0, 3])
+def test_kernel_sort_builds_the_same_tree(monkeypatch, leaf_size, num_groups):
+    """The kdsl merge sort (a GPU's) and ``SortKeys`` sort the distinct keys alike: one
+    tree bit for bit, duplicates and NaN boxes included."""
+    rng = np.random.default_rng(leaf_size + 10 * num_groups)
+    n = 2500
+    c = rng.random((n, 3)).astype(np.float32)
+    c[: n // 4] = c[0]
+    lo, hi = c - np.float32(0.01), c + np.float32(0.01)
+    lo[rng.integers(0, n, 10)] = np.nan
+    groups = wp.array(rng.integers(0, num_groups, n).astype(np.int32)) if num_groups else None
+    trees = []
+    for kernels in (False, True):
+        monkeypatch.setattr(lbvh, "device_sort_on", lambda device, k=kernels: k)
+        trees.append(gpu_config_tree(lo, hi, leaf_size, groups, num_groups))
+    assert trees[0].num_nodes == trees[1].num_nodes
+    assert tree_arrays(trees[0]) == tree_arrays(trees[1])
+
+
+def test_kernel_sort_build_replays_as_a_graph_from_its_second_run(monkeypatch):
+    """All launches (the kdsl sort, no scan): run one by one, then captured once and
+    replayed (a stand-in capture here; the CPU's own captures replay launch by launch),
+    the tree always that of a build of its own."""
+    counts = {"captures": 0, "replays": 0}
+
+    def capture(steps, stream):
+        counts["captures"] += 1
+
+        def replay() -> None:
+            counts["replays"] += 1
+            for step in steps:
+                step()
+
+        return replay
+
+    monkeypatch.setattr(lbvh, "device_sort_on", lambda device: True)
+    monkeypatch.setattr(lbvh, "graphs_on", lambda device: True)
+    monkeypatch.setattr(graph_steps, "capture_steps", capture)
+    rng = np.random.default_rng(4)
+    n = 1200
+    lo = wp.array(rng.random((n, 3)).astype(np.float32), dtype=wp.vec3)
+    hi = wp.array(lo.numpy() + 0.01, dtype=wp.vec3)
+    tree = lbvh.build_lbvh(lo, hi, 2, None, 0, bottom_up=True, use_scan=False)
+    assert counts == {"captures": 0, "replays": 0}
+    for step in range(3):
+        c = rng.random((n, 3)).astype(np.float32) * (step + 1)
+        lo.assign(c)
+        hi.assign(c + np.float32(0.02))
+        tree.rebuild()
+        assert counts == {"captures": 1, "replays": step + 1}
+        recycle.clear()  # (a tree of its own, not the graphed build)
+        own = lbvh.build_lbvh(lo, hi, 2, None, 0, bottom_up=True, use_scan=False)
+        assert tree.num_nodes == own.num_nodes
+        assert tree_arrays(tree) == tree_arrays(own)

@@ -120,7 +120,7 @@ def test_a_build_cut_short_is_not_kept(monkeypatch):
     def broken() -> None:
         raise RuntimeError("cut short")
 
-    monkeypatch.setattr(build, "_steps", [*build._steps[:2], broken])
+    monkeypatch.setattr(build._steps, "steps", [*build._steps.steps[:2], broken])
     with pytest.raises(RuntimeError, match="cut short"):
         bvh.rebuild()
     del bvh
