@@ -48,6 +48,8 @@ _HEADER = struct.Struct("<8sI32sQ32s")
 SUFFIX = ".kobj"
 #: The source index's entries (``kdsl.compiler.source_index``): same format, own suffix.
 INDEX_SUFFIX = ".kidx"
+#: The source index's memos of kernels' source facts (``source_index.load_memo``).
+MEMO_SUFFIX = ".ksrc"
 _TMP_SUFFIX = ".tmp"
 
 T = TypeVar("T")
@@ -252,7 +254,7 @@ class DiskCache:
         except OSError:
             return 0, 0
         for p in names:
-            if not p.name.endswith((SUFFIX, INDEX_SUFFIX, _TMP_SUFFIX)):
+            if not p.name.endswith((SUFFIX, INDEX_SUFFIX, MEMO_SUFFIX, _TMP_SUFFIX)):
                 continue  # never delete files the cache did not write
             try:
                 n = p.stat().st_size

@@ -222,7 +222,11 @@ def _index_key(
         return None
     if kernel_cache.default_cache() is None:
         return None
-    digest = fingerprint()
+    fn = getattr(target, "fn", None)
+    memo = source_index.load_memo(fn) if fn is not None else None
+    digest = fingerprint(memo)
+    if memo is not None and memo.changed:  # facts read from source: recorded for next time
+        source_index.store_memo(fn, memo)
     if digest is None:
         return None
     return source_index.source_key(backend, digest, target.key, options)

@@ -16,6 +16,13 @@ steps produced, so a hit skips both:
   target, exactly as on a miss), the instrumentation flag and the frontend's facts
   (``tid_ndim``).
 
+Reading the kernel's source (and each called function's) is skipped too where the
+index holds a **source memo** for the kernel (``load_memo``/``store_memo``): the facts
+the fingerprint takes from each source (``kdsl.frontend.fingerprint.SourceFacts``),
+used while each file's size and modification time are unchanged. It is keyed on the
+kernel's function (file, first line, qualified name) and kdsl's code digest, stored
+(JSON, a ``.ksrc`` entry) whenever a fingerprint recorded new facts.
+
 On a hit the driver unpickles the module and hands it to the backend as if it had
 just built it; the backend then loads the IR-keyed binary (or builds it from that
 module if it is gone). A kernel whose fingerprint cannot be computed (it reads a value
@@ -37,11 +44,12 @@ from types import SimpleNamespace
 from typing import Any
 
 from kdsl.compiler import cache as kernel_cache
+from kdsl.frontend.fingerprint import SourceMemo
 from kdsl.ir.catalog import CATALOG, OpDef
 from kdsl.ir.core import Module
 
 #: Bump when the index entry's layout or the source key's recipe changes.
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
 #: The parts of kdsl whose code decides a kernel's IR (the backends' own code is in
 #: their ``code_version``): the frontend, the IR, the passes, the compile driver, the
 #: runtime's types and structs, the library of ``@kdsl.func`` functions and the
@@ -173,12 +181,40 @@ def store(key: str, payload: bytes) -> bool:
     return True
 
 
-def _index_cache() -> kernel_cache.DiskCache | None:
-    """The index entries beside the kernels (None when the disk cache is off)."""
+def memo_key(fn: Any) -> str:
+    """The key of the source memo of the kernel whose Python function is ``fn``."""
+    code = fn.__code__
+    doc = [FORMAT_VERSION, "memo", kdsl_code_digest(), code.co_filename, code.co_firstlineno,
+           getattr(fn, "__qualname__", code.co_name)]  # fmt: skip
+    return hashlib.sha256(json.dumps(doc).encode()).hexdigest()
+
+
+def load_memo(fn: Any) -> SourceMemo:
+    """The source memo of the kernel function ``fn`` (empty when there is none, or it is
+    bad: then discarded)."""
+    disk = _index_cache(kernel_cache.MEMO_SUFFIX)
+    payload = disk.load(memo_key(fn)) if disk is not None else None
+    if payload is None:
+        return SourceMemo()
+    try:
+        return SourceMemo.from_json(json.loads(payload))
+    except Exception:
+        STATS.discarded += 1
+        disk.discard(memo_key(fn))  # type: ignore[union-attr]
+        return SourceMemo()
+
+
+def store_memo(fn: Any, memo: SourceMemo) -> None:
+    """Write ``memo`` as the source memo of the kernel function ``fn`` (best effort)."""
+    disk = _index_cache(kernel_cache.MEMO_SUFFIX)
+    if disk is not None:
+        disk.store(memo_key(fn), json.dumps(memo.as_json()).encode())
+
+
+def _index_cache(suffix: str = kernel_cache.INDEX_SUFFIX) -> kernel_cache.DiskCache | None:
+    """The index entries (or memos) beside the kernels (None when the disk cache is off)."""
     disk = kernel_cache.default_cache()
-    return (
-        None if disk is None else kernel_cache.DiskCache(disk.directory, kernel_cache.INDEX_SUFFIX)
-    )
+    return None if disk is None else kernel_cache.DiskCache(disk.directory, suffix)
 
 
 class _Pickler(pickle.Pickler):

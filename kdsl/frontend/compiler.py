@@ -5,6 +5,7 @@ from __future__ import annotations
 import ast
 import builtins as pybuiltins
 import inspect
+from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
 from kdsl.errors import KdslError, KdslSyntaxError, KdslTypeError
@@ -270,6 +271,44 @@ class ModuleCompiler:
         return func
 
 
+def annotation_types(fn: Any, names: Sequence[str]) -> list[Type] | None:
+    """The IR types of the annotations of ``fn``'s parameters ``names``, resolved as
+    ``resolve_annotation`` resolves them but without the function's source; None where
+    one would raise (``resolve_annotation`` then says where)."""
+    from kdsl.types import type_of
+
+    anns = fn.__annotations__
+    scope: dict[str, Any] | None = None
+    out: list[Type] = []
+    for name in names:
+        ann = anns.get(name)
+        if ann is None:
+            return None
+        if isinstance(ann, str):
+            try:
+                scope = scope if scope is not None else annotation_scope(fn)
+                ann = eval(ann, scope)
+            except Exception:
+                return None
+        if isinstance(ann, InOut):
+            ann = ann.type
+        generic = generic_of(ann)
+        if generic is not None:
+            out.append(generic)  # type: ignore[arg-type]
+            continue
+        try:
+            out.append(type_of(ann))
+        except (TypeError, KdslError):
+            return None
+    return out
+
+
+def annotation_scope(fn: Any) -> dict[str, Any]:
+    """The names a string annotation of ``fn`` is evaluated with: Python's builtins, the
+    function's globals, then its closure (a kernel factory's dtype lives there)."""
+    return {**vars(pybuiltins), **fn.__globals__, **inspect.getclosurevars(fn).nonlocals}
+
+
 def resolve_annotation(target: Any, name: str, ann: Any, node: ast.AST | None) -> Type:
     """The IR type of a parameter annotation, or a located KdslTypeError."""
     from kdsl.types import type_of
@@ -300,10 +339,7 @@ def evaluate_annotation(target: Any, name: str, ann: Any, node: ast.AST | None) 
     src = target.src
     if isinstance(ann, str):
         try:
-            # Closure variables count too: a kernel factory's dtype lives there.
-            scope = {**vars(pybuiltins), **src.fn.__globals__,
-                     **inspect.getclosurevars(src.fn).nonlocals}  # fmt: skip
-            ann = eval(ann, scope)
+            ann = eval(ann, annotation_scope(src.fn))
         except Exception:
             raise KdslTypeError(f"cannot resolve the annotation {ann!r} of '{name}'",
                                 src.loc(node), src.name) from None  # fmt: skip

@@ -17,12 +17,16 @@ frontend reads while it builds a kernel:
   its custom gradient and replay functions);
 - nothing else: the caller adds the options, backend, target and kdsl's own code.
 
-A value it cannot digest (an arbitrary object, a plain Python function outside kdsl,
-a global shadowed by a local of the same name whose value it cannot digest) makes the
-whole fingerprint ``None`` (an object only used as the base of an attribute, as
-``settings`` in ``settings.n``, is named by its type: the value read is ``settings.n``): the kernel is then keyed by its IR as before (correct,
-only slower). Names the kernel binds only as parameters are never looked up: the
-frontend finds the parameter first.
+The source itself is read through ``SourceFacts``: what the walk takes from a
+function's source (its file, first line, a digest of its text, its parameter names and
+the chains it reads). Parsing costs 1 to 2 ms a function (``inspect`` tokenizes the
+file to find the function's end, then ``ast.parse``), so the caller may pass a
+``SourceMemo`` (kept in the kernel cache by ``kdsl.compiler.source_index``): facts
+recorded by an earlier process, keyed by the function's code (file, first line,
+qualified name) and used while the file's bytes are those they were recorded from (a
+sha256 of the file, tens of microseconds). Facts are recorded only from a parse made by
+this walk while the file read the same before and after it, and whose text is the
+file's at that line (``linecache`` can serve an older copy of a file).
 """
 
 from __future__ import annotations
@@ -30,7 +34,11 @@ from __future__ import annotations
 import ast
 import builtins as pybuiltins
 import hashlib
+import importlib.util
+import inspect
+import io
 import types
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -43,17 +51,120 @@ _MAX_ARRAY_BYTES = 1 << 20
 _MAX_ITEMS = 4096
 
 
+@dataclass(frozen=True)
+class SourceFacts:
+    """What the fingerprint reads of one function's source (see the module docstring)."""
+
+    file: str
+    #: sha256 of the file's bytes when the facts were recorded ("" when not recordable).
+    file_digest: str
+    line_offset: int
+    text_digest: str
+    params: tuple[str, ...]
+    chains: tuple[tuple[str, ...], ...]
+
+    def as_json(self) -> list:
+        """The facts as JSON-able data (``SourceMemo.as_json``)."""
+        return [self.file, self.file_digest, self.line_offset, self.text_digest,
+                list(self.params), [list(c) for c in self.chains]]  # fmt: skip
+
+    @classmethod
+    def from_json(cls, data: list) -> SourceFacts:
+        """Facts from ``as_json`` data (raises on malformed data)."""
+        file, file_digest, line_offset, text_digest, params, chains = data
+        return cls(str(file), str(file_digest), int(line_offset), str(text_digest),
+                   tuple(map(str, params)), tuple(tuple(map(str, c)) for c in chains))  # fmt: skip
+
+
+class SourceMemo:
+    """Recorded ``SourceFacts`` by function (its code's file, first line and qualified
+    name); ``changed`` says a walk recorded new facts (the caller then stores it)."""
+
+    def __init__(self, facts: dict[tuple[str, int, str], SourceFacts] | None = None) -> None:
+        self.facts = dict(facts or {})
+        self.changed = False
+        self._digests: dict[str, str | None] = {}  # file -> sha256 now, once per memo
+
+    def get(self, fn: Any) -> SourceFacts | None:
+        """The facts of ``fn`` when recorded and its file's bytes are unchanged since."""
+        got = self.facts.get(_where(fn))
+        if got is None:
+            return None
+        if got.file not in self._digests:
+            data = _read(got.file)
+            self._digests[got.file] = None if data is None else hashlib.sha256(data).hexdigest()
+        return got if self._digests[got.file] == got.file_digest else None
+
+    def record(self, fn: Any, facts: SourceFacts) -> None:
+        """Remember the facts of ``fn``."""
+        if self.facts.get(_where(fn)) != facts:
+            self.facts[_where(fn)] = facts
+            self.changed = True
+
+    def as_json(self) -> list:
+        """Every recorded fact, as JSON-able data."""
+        return [[list(w), f.as_json()] for w, f in sorted(self.facts.items())]
+
+    @classmethod
+    def from_json(cls, data: list) -> SourceMemo:
+        """The memo ``as_json`` gave (raises on malformed data)."""
+        out: dict[tuple[str, int, str], SourceFacts] = {}
+        for (file, line, qualname), facts in data:
+            out[(str(file), int(line), str(qualname))] = SourceFacts.from_json(facts)
+        return cls(out)
+
+
+def _where(fn: Any) -> tuple[str, int, str]:
+    code = fn.__code__
+    return (code.co_filename, code.co_firstlineno, getattr(fn, "__qualname__", code.co_name))
+
+
+def _read(path: str) -> bytes | None:
+    try:
+        with open(path, "rb") as f:
+            return f.read()
+    except OSError:
+        return None
+
+
+def source_facts(t: Any, memo: SourceMemo | None) -> SourceFacts:
+    """The ``SourceFacts`` of compile target ``t``: from ``memo`` while its file is
+    unchanged, else from its parsed source (recorded in ``memo`` when that is safe: see
+    the module docstring). Raises what parsing raises."""
+    if memo is not None:
+        got = memo.get(t.fn)
+        if got is not None:
+            return got
+    fresh = "src" not in t.__dict__  # parsed here, not earlier (maybe from an older file)
+    path = inspect.getsourcefile(t.fn) or t.fn.__code__.co_filename
+    before = _read(path) if fresh and memo is not None else None
+    src = t.src  # parsed once per target and kept (the frontend reuses it)
+    file_digest = ""
+    if before is not None and src.file == path and _read(path) == before:
+        lines = io.StringIO(importlib.util.decode_source(before)).readlines()
+        if "".join(lines[src.line_offset : src.line_offset + src.text.count("\n")]) == src.text:
+            file_digest = hashlib.sha256(before).hexdigest()
+    facts = SourceFacts(
+        src.file, file_digest, src.line_offset, hashlib.sha256(src.text.encode()).hexdigest(),
+        tuple(a.arg for a in src.tree.args.args), tuple(sorted(_chains(src.tree))),
+    )  # fmt: skip
+    if memo is not None and file_digest:
+        memo.record(t.fn, facts)
+    return facts
+
+
 class _Opaque(Exception):
     """A value the fingerprint cannot digest (the kernel falls back to its IR key)."""
 
 
-def source_fingerprint(target: Any) -> str | None:
+def source_fingerprint(target: Any, memo: SourceMemo | None = None) -> str | None:
     """The digest (64 hex digits) of ``target``'s sources and what they read, or None.
 
     ``target`` is a kernel (or a generic kernel's instance); see the module docstring.
+    ``memo`` gives recorded source facts and receives new ones.
     """
     try:
-        return _Walk().target(target, "kernel")
+        return _Walk(memo).target(target, "kernel")
     except Exception:
         # _Opaque, or anything a user's object raises when looked at (a repr, an
         # attribute), or source the frontend cannot read either: it reports that itself.
@@ -63,25 +174,26 @@ def source_fingerprint(target: Any) -> str | None:
 class _Walk:
     """One fingerprint computation: memoizes functions (and cuts recursion cycles)."""
 
-    def __init__(self) -> None:
+    def __init__(self, memo: SourceMemo | None = None) -> None:
         self.done: dict[int, str] = {}
+        self.sources = memo
 
     def target(self, t: Any, kind: str) -> str:
         """The digest of one compile target (a kernel or a ``@func`` overload)."""
         from kdsl.frontend.kernel import CompileTarget
 
-        src = t.src  # parsed once per target and kept (the frontend reuses it)
+        src = source_facts(t, self.sources)
         h = hashlib.sha256()
-        lines = [kind, src.file, str(src.line_offset), src.text]
+        lines = [kind, src.file, str(src.line_offset), src.text_digest]
         h.update("\0".join(lines).encode())
         try:
             arg_types = CompileTarget.arg_types(t)
         except Exception:
             raise _Opaque from None  # the frontend reports it: let it
         h.update(repr(arg_types).encode())
-        params = {a.arg for a in src.tree.args.args}
-        scope = _Scope(src.fn)
-        for chain in sorted(_chains(src.tree)):
+        params = set(src.params)
+        scope = _Scope(t.fn)
+        for chain in src.chains:
             if chain[0] in params:
                 continue
             digest = self.chain(scope, chain)

@@ -11,7 +11,7 @@ from functools import cached_property
 from typing import Any
 
 from kdsl.errors import KdslError, KdslTypeError, full_tracebacks
-from kdsl.frontend.fingerprint import source_fingerprint
+from kdsl.frontend.fingerprint import SourceMemo, source_fingerprint
 from kdsl.frontend.generic import Generic, is_generic
 from kdsl.frontend.source import ParsedSource
 from kdsl.frontend.structs import register_structs
@@ -42,11 +42,20 @@ class CompileTarget:
 
     def arg_types(self) -> list[Type]:
         if not hasattr(self, "_arg_types"):
-            from kdsl.frontend.compiler import resolve_annotation
+            from kdsl.frontend.compiler import annotation_types, resolve_annotation
 
-            args = self.src.tree.args.args
-            anns = self.fn.__annotations__
-            self._arg_types = [resolve_annotation(self, a.arg, anns.get(a.arg), a) for a in args]
+            # Plain parameters: resolved without the source (a warm start never parses
+            # it); the source only to locate what is wrong.
+            params = _plain_params(self.fn)
+            fast = annotation_types(self.fn, params) if params else None
+            if fast is not None:
+                self._arg_types = fast
+            else:
+                args = self.src.tree.args.args
+                anns = self.fn.__annotations__
+                self._arg_types = [
+                    resolve_annotation(self, a.arg, anns.get(a.arg), a) for a in args
+                ]
         return self._arg_types
 
     @property
@@ -114,6 +123,17 @@ class CompileTarget:
         return self._inout
 
 
+def _plain_params(fn: Callable[..., Any]) -> tuple[str, ...]:
+    """The parameter names of ``fn`` when they are all plain positional ones (what the
+    frontend's ``args.args`` lists), else ``()`` (the caller then reads the source)."""
+    code = getattr(fn, "__code__", None)
+    if code is None or code.co_posonlyargcount or code.co_kwonlyargcount:
+        return ()
+    if code.co_flags & (inspect.CO_VARARGS | inspect.CO_VARKEYWORDS):
+        return ()
+    return code.co_varnames[: code.co_argcount]
+
+
 class Kernel(CompileTarget):
     """A compiled-on-demand kernel. Launch it with ``kdsl.launch``.
 
@@ -153,10 +173,11 @@ class Kernel(CompileTarget):
         """A fresh, verified, unoptimized module: this kernel plus the funcs it calls."""
         return _trimmed(self._build)
 
-    def source_fingerprint(self) -> str | None:
+    def source_fingerprint(self, memo: SourceMemo | None = None) -> str | None:
         """The digest of everything ``build_module`` reads (``kdsl.frontend.fingerprint``),
-        or None when it cannot be known without building (the cache then keys the IR)."""
-        return None if self.is_generic else source_fingerprint(self)
+        or None when it cannot be known without building (the cache then keys the IR).
+        ``memo`` holds recorded source facts (read without parsing) and gets new ones."""
+        return None if self.is_generic else source_fingerprint(self, memo)
 
     def build_facts(self) -> dict[str, Any]:
         """What the last ``build_module`` learnt that launches need (``tid_ndim``)."""

@@ -25,7 +25,8 @@ import pytest
 import kdsl as wp
 from kdsl.backends.cpu import BACKEND
 from kdsl.compiler import cache, compile_kernel, source_index
-from kdsl.frontend.fingerprint import source_fingerprint
+from kdsl.frontend.fingerprint import SourceMemo, source_fingerprint
+from kdsl.frontend.source import ParsedSource
 
 ROOT = Path(wp.__file__).resolve().parents[1]
 
@@ -111,6 +112,83 @@ def test_every_edit_changes_the_fingerprint(tmp_path, edit):
     old, new = edit
     assert old in BASE
     assert _fp(tmp_path, BASE) != _fp(tmp_path, BASE.replace(old, new, 1))
+    # Also through a memo of the unedited file's facts: the edit is seen, never the memo.
+    memo = SourceMemo()
+    base = source_fingerprint(_load(tmp_path / "kern.py", BASE).k, memo)
+    assert memo.changed and base == _fp(tmp_path, BASE)
+    edited = _load(tmp_path / "kern.py", BASE.replace(old, new, 1))
+    through_memo = source_fingerprint(edited.k, _round_trip(memo))
+    assert through_memo == _fp(tmp_path, BASE.replace(old, new, 1)) != base
+
+
+def _round_trip(memo: SourceMemo) -> SourceMemo:
+    """``memo`` as another process reads it from the cache."""
+    return SourceMemo.from_json(json.loads(json.dumps(memo.as_json())))
+
+
+def _count_parses(monkeypatch) -> list[str]:
+    """The names of the functions whose source is parsed from now on."""
+    parsed: list[str] = []
+    init = ParsedSource.__init__
+
+    def counting(self, fn):
+        parsed.append(fn.__name__)
+        init(self, fn)
+
+    monkeypatch.setattr(ParsedSource, "__init__", counting)
+    return parsed
+
+
+def test_a_memo_gives_the_fingerprint_without_reading_the_source(tmp_path, monkeypatch):
+    memo = SourceMemo()
+    first = source_fingerprint(_load(tmp_path / "kern.py", BASE).k, memo)
+    assert first is not None and memo.changed
+    assert {w[2] for w in memo.facts} == {"k", "inner", "outer"}
+    parsed = _count_parses(monkeypatch)
+    again = _load(tmp_path / "kern.py", BASE)  # new objects, as in a new process
+    warm = _round_trip(memo)
+    assert source_fingerprint(again.k, warm) == first
+    assert parsed == [] and not warm.changed
+    # Any change of the file's bytes (here a comment at its end) sets the memo aside.
+    _load(tmp_path / "kern.py", BASE + "# a comment\n")
+    edited = _load(tmp_path / "kern.py", BASE + "# a comment\n")
+    assert source_fingerprint(edited.k, _round_trip(memo)) == first  # same text and lines
+    assert sorted(parsed) == ["inner", "k", "outer"]
+
+
+def test_facts_of_a_source_parsed_before_are_not_recorded(tmp_path):
+    mod = _load(tmp_path / "kern.py", BASE)
+    assert mod.k.src.text  # parsed by someone else first: maybe from an older file
+    memo = SourceMemo()
+    assert source_fingerprint(mod.k, memo) == _fp(tmp_path, BASE)
+    assert {w[2] for w in memo.facts} == {"inner", "outer"}
+
+
+def test_facts_are_not_recorded_from_a_stale_linecache(tmp_path):
+    """``linecache`` trusts a file's size and time: a same-size edit that keeps both is
+    served from its old copy. The memo then records nothing for that function."""
+    path = tmp_path / "kern.py"
+    assert _load(path, BASE).k.src.text  # linecache now holds BASE
+    st = path.stat()
+    edited = BASE.replace("out[i] = outer(p.a)", "out[i] = inner(p.a)")
+    assert len(edited) == len(BASE)
+    fresh = _load(path, edited)
+    os.utime(path, ns=(st.st_atime_ns, st.st_mtime_ns))
+    memo = SourceMemo()
+    source_fingerprint(fresh.k, memo)
+    assert "k" not in {w[2] for w in memo.facts}
+
+
+def test_a_bad_memo_is_discarded(tmp_path):
+    mod = _load(tmp_path / "kern.py", BASE)
+    compile_kernel(BACKEND, mod.k, options={})
+    memos = cache.DiskCache(cache.default_cache().directory, cache.MEMO_SUFFIX)
+    (entry,) = memos.entries()
+    assert entry.name == source_index.memo_key(mod.k.fn) + cache.MEMO_SUFFIX
+    memos.store(source_index.memo_key(mod.k.fn), b"[[1, 2]]")  # valid header, bad facts
+    discarded = source_index.STATS.discarded
+    assert source_index.load_memo(mod.k.fn).facts == {}
+    assert source_index.STATS.discarded == discarded + 1 and memos.entries() == []
 
 
 def test_a_rebound_global_changes_the_fingerprint_in_process(tmp_path):
@@ -445,6 +523,13 @@ def counting_build(self):
     built.append(self.name)
     return _build(self)
 Kernel._build = counting_build
+from kdsl.frontend.source import ParsedSource
+parsed = []
+_parse = ParsedSource.__init__
+def counting_parse(self, fn):
+    parsed.append(fn.__name__)
+    _parse(self, fn)
+ParsedSource.__init__ = counting_parse
 
 from kdsl.compiler import cache, source_index
 # kdsl's own code is keyed by test_the_code_digest_sees_an_edit_of_kdsl; pinned here so
@@ -470,7 +555,7 @@ else:
     out = a.numpy().tolist()
 new = sorted(set(sys.modules) - before)
 print(json.dumps({
-    "out": out, "built": built, "index": vars(source_index.STATS),
+    "out": out, "built": built, "parsed": parsed, "index": vars(source_index.STATS),
     "kernel_builds": cache.STATS.builds, "new_modules": new,
     "nvrtc_mapped": nvrtc_mapped(), "nvrtc_steps": steps,
 }))
@@ -519,6 +604,8 @@ def test_cpu_warm_start_skips_frontend_passes_and_llvmlite(project):
     assert warm["out"] == _expected()
     assert warm["built"] == [] and warm["index"]["hits"] == 1 and warm["kernel_builds"] == 0
     assert _lowering_modules(warm["new_modules"]) == []
+    assert sorted(cold["parsed"]) == ["k", "weigh"]
+    assert warm["parsed"] == []  # the source memo: no source read or parsed
 
 
 @pytest.mark.parametrize(
@@ -540,7 +627,7 @@ def test_cpu_an_edit_between_processes_recompiles(project, edit):
     assert after["built"] == ["k"] and after["index"]["misses"] == 1
     np.testing.assert_allclose(after["out"], expected)
     again = _run(project)  # and the edited kernel is found from then on
-    assert again["built"] == [] and again["index"]["hits"] == 1
+    assert again["built"] == [] and again["index"]["hits"] == 1 and again["parsed"] == []
 
 
 def _has_nvrtc() -> bool:
@@ -558,7 +645,7 @@ def test_cuda_warm_compile_skips_frontend_passes_and_nvrtc(project):
     warm = _run(project, "cuda-compile")
     assert warm["out"] == [True] and warm["built"] == [] and warm["index"]["hits"] == 1
     assert warm["kernel_builds"] == 0 and not warm["nvrtc_mapped"]
-    assert _lowering_modules(warm["new_modules"]) == []
+    assert _lowering_modules(warm["new_modules"]) == [] and warm["parsed"] == []
     _edit(project / "helpers.py", "SCALE = 2.0", "SCALE = 5.0")
     edited = _run(project, "cuda-compile")
     assert edited["built"] == ["k"] and edited["index"]["misses"] == 1
