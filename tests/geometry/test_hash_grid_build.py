@@ -16,6 +16,7 @@ from kdsl.errors import KdslTypeError
 from kdsl.geometry import graph_steps, hash_grid_build
 from kdsl.geometry.hash_grid import HashGridError
 from kdsl.stdlib import hash_grid
+from tests.geometry.graph_stand_in import counting_capture
 from tests.geometry.test_hash_grid import (
     brute_sums,
     bucket,
@@ -135,25 +136,11 @@ def test_same_count_rebuild_reuses_buffers_and_steps(device, build_kind):
 
 
 def graph_counting(monkeypatch) -> dict[str, int]:
-    """Counting-sort grids that replay their steps as a graph, captured by a stand-in
-    (the CPU's own captures replay launch by launch): a callable that runs the steps.
-    Returns the counts of captures and replays."""
-    counts = {"captures": 0, "replays": 0}
-
-    def capture(steps, stream):
-        counts["captures"] += 1
-
-        def replay() -> None:
-            counts["replays"] += 1
-            for step in steps:
-                step()
-
-        return replay
-
+    """Counting-sort grids that replay their steps as a graph, captured by the stand-in
+    (``graph_stand_in``). Returns the counts of captures and replays."""
     monkeypatch.setattr(hash_grid_build, "counting_sort_on", lambda device: True)
     monkeypatch.setattr(hash_grid_build, "graphs_on", lambda device: True)
-    monkeypatch.setattr(graph_steps, "capture_steps", capture)
-    return counts
+    return counting_capture(monkeypatch)
 
 
 def test_steps_replay_as_a_graph_from_their_second_run(monkeypatch):

@@ -12,9 +12,10 @@ import pytest
 
 import kdsl as wp
 from kdsl.errors import KdslError
-from kdsl.geometry import graph_steps, lbvh, recycle
+from kdsl.geometry import lbvh, recycle
 from kdsl.geometry.device_tree import UNUSED
 from kdsl.runtime.array import array
+from tests.geometry.graph_stand_in import counting_capture
 
 cuda = pytest.mark.skipif(not wp.is_cuda_available(), reason="no GPU")
 DEVICES = ["cpu", pytest.param("cuda:0", marks=cuda)]
@@ -239,21 +240,9 @@ def test_kernel_sort_build_replays_as_a_graph_from_its_second_run(monkeypatch):
     """All launches (the kdsl sort, no scan): run one by one, then captured once and
     replayed (a stand-in capture here; the CPU's own captures replay launch by launch),
     the tree always that of a build of its own."""
-    counts = {"captures": 0, "replays": 0}
-
-    def capture(steps, stream):
-        counts["captures"] += 1
-
-        def replay() -> None:
-            counts["replays"] += 1
-            for step in steps:
-                step()
-
-        return replay
-
+    counts = counting_capture(monkeypatch)
     monkeypatch.setattr(lbvh, "device_sort_on", lambda device: True)
     monkeypatch.setattr(lbvh, "graphs_on", lambda device: True)
-    monkeypatch.setattr(graph_steps, "capture_steps", capture)
     rng = np.random.default_rng(4)
     n = 1200
     lo = wp.array(rng.random((n, 3)).astype(np.float32), dtype=wp.vec3)
