@@ -12,8 +12,11 @@ scene (``kdsl.scenes``: their kernels' first launches), with timers wrapped arou
 the functions of the warm path (``time.perf_counter``, inclusive, summed over calls):
 
 - ``launch (first)``: the first ``kdsl.launch`` of each kernel, everything included;
+- ``source parse``: reading and parsing kernels' and functions' sources (``inspect``,
+  ``ast``), wherever it happens;
 - ``backend import``: resolving the backend (importing its modules) at the first launch;
-- ``compile_kernel``: the compile driver, of which ``fingerprint`` (the kernel's
+- ``compile_kernel``: the compile driver, of which ``source memo`` (the recorded facts
+  of the kernel's sources, ``source_index.load_memo``), ``fingerprint`` (the kernel's
   source digest), ``source key`` (the index key around it), ``index read`` (the
   ``.kidx`` entry read and checked), ``unpickle`` (the module restored),
   ``backend.load``, of which ``kernel key`` (the IR key, a sha256 of the IR text),
@@ -27,7 +30,8 @@ On cuda the cubin is read in ``backend.load`` but loaded (``binary load``) at th
 launch, inside ``backend.launch``. ``--no-bytecode`` runs a copy of kdsl without
 ``__pycache__`` under ``PYTHONDONTWRITEBYTECODE=1`` (what a fresh checkout run that way
 pays: every lazily imported module compiled from source); ``--repo DIR`` profiles
-another checkout (e.g. a worktree of an older commit) with this script.
+another checkout with this script, and ``--against DIR`` profiles a second one in the
+same run, the two trees' processes interleaved (before/after columns on a noisy host).
 
 Medians over ``--reps`` processes; ``--cprofile`` also prints the top of a cProfile
 of one warm process. JSON in benchmarks/results/warm_compile_phases.json.
@@ -67,7 +71,9 @@ PHASES = {}
 _DEPTH = {}
 
 def _wrap(owner, attr, name, pick=None):
-    fn = getattr(owner, attr)
+    fn = getattr(owner, attr, None)
+    if fn is None:  # not in this version of kdsl
+        return
     def timed(*a, **k):
         label = name if pick is None else pick(*a, **k)
         if label is None or _DEPTH.get(label):
@@ -85,6 +91,8 @@ _wrap(_launch, "_resolve_backend", "backend import")
 _wrap(_launch, "compile_kernel", "compile_kernel")
 _wrap(_launch, "load_support", "support")
 _wrap(_kernel, "source_fingerprint", "fingerprint")
+_wrap(_kernel, "ParsedSource", "source parse")
+_wrap(_index, "load_memo", "source memo")
 _wrap(_index, "source_key", "source key")
 _wrap(_cache.DiskCache, "load", None,
       lambda self, key: "index read" if self.suffix == _cache.INDEX_SUFFIX else "binary read")
@@ -177,13 +185,17 @@ for name, (integrator, params, dt, _) in SIZES.items():
     scene.wp.synchronize_device(scene.device)
 """
 
-ROWS = ("launch (first)", "backend import", "compile_kernel", "fingerprint", "source key",
-        "code version", "index read", "unpickle", "backend.load", "target", "toolchain name",
-        "kernel key", "binary read", "binary load", "launch facts", "support", "backend.launch",
-        "sync")  # fmt: skip
-INDENT = {"fingerprint": 1, "source key": 1, "code version": 2, "index read": 1, "unpickle": 1,
-          "backend.load": 1, "target": 2, "toolchain name": 2, "kernel key": 2,
-          "binary read": 2, "binary load": 2, "launch facts": 2}  # fmt: skip
+ROWS = (
+    "launch (first)", "source parse", "backend import", "compile_kernel", "source memo",
+    "fingerprint", "source key", "code version", "index read", "unpickle", "backend.load",
+    "target", "toolchain name", "kernel key", "binary read", "binary load", "launch facts",
+    "support", "backend.launch", "sync",
+)  # fmt: skip
+INDENT = {
+    "source memo": 1, "fingerprint": 1, "source key": 1, "code version": 2, "index read": 1,
+    "unpickle": 1, "backend.load": 1, "target": 2, "toolchain name": 2, "kernel key": 2,
+    "binary read": 2, "binary load": 2, "launch facts": 2,
+}  # fmt: skip
 
 
 def _script(kind: str, device: str) -> str:
@@ -204,6 +216,24 @@ def _run(workdir: Path, name: str, env: dict[str, str]) -> dict:
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
+def _tree_env(work: Path, label: str, repo: Path, no_bytecode: bool) -> dict[str, str]:
+    """The environment of the processes profiling the kdsl checkout ``repo``."""
+    env = {**os.environ, "KDSL_CACHE_DIR": str(work / f"cache-{label}")}
+    if no_bytecode:  # a tree without __pycache__ that nothing writes bytecode for
+        shutil.copytree(repo / "kdsl", work / f"tree-{label}" / "kdsl",
+                        ignore=shutil.ignore_patterns("__pycache__"))  # fmt: skip
+        env["PYTHONDONTWRITEBYTECODE"] = "1"
+        root = work / f"tree-{label}"
+    else:
+        env.pop("PYTHONDONTWRITEBYTECODE", None)  # as users run: bytecode cached
+        root = repo
+    paths = [str(root), str(REPO / "benchmarks"),
+             *filter(None, env.get("PYTHONPATH", "").split(os.pathsep))]  # fmt: skip
+    env["PYTHONPATH"] = os.pathsep.join(paths)
+    env["CUDA_CACHE_PATH"] = str(work / f"cuda-jit-cache-{label}")
+    return env
+
+
 def main() -> int:
     """Fill a cache, time warm processes, print the phases."""
     p = script_parser(__doc__, RESULTS, reps=5)
@@ -211,68 +241,64 @@ def main() -> int:
     p.add_argument("--kernels", default="nbody,spring", help="nbody, spring, scenes")
     p.add_argument("--cprofile", action="store_true", help="print a cProfile of one warm run")
     p.add_argument(
-        "--no-bytecode",
-        action="store_true",
+        "--no-bytecode", action="store_true",
         help="kdsl copied without __pycache__ and PYTHONDONTWRITEBYTECODE=1 (every "
         "module compiled from source in every process)",
-    )
+    )  # fmt: skip
     p.add_argument("--repo", default="", help="the kdsl checkout to profile (default: this one)")
+    p.add_argument("--against", default="",
+                   help="another checkout (e.g. a worktree of an older commit), profiled "
+                        "in the same run, processes interleaved: columns 'before'")  # fmt: skip
     args = p.parse_args()
     kinds = [k for k in args.kernels.split(",") if k]
+    trees = [("after" if args.against else "", Path(args.repo).resolve() if args.repo else REPO)]
+    if args.against:
+        trees.insert(0, ("before", Path(args.against).resolve()))
     data: dict[str, dict] = {}
     with tempfile.TemporaryDirectory(prefix="kdsl-phases-") as tmp:
         work = Path(tmp)
-        env = {**os.environ, "KDSL_CACHE_DIR": str(work / "cache")}
-        repo = Path(args.repo).resolve() if args.repo else REPO
-        if args.no_bytecode:  # a tree without __pycache__ that nothing writes bytecode for
-            shutil.copytree(repo / "kdsl", work / "tree" / "kdsl",
-                            ignore=shutil.ignore_patterns("__pycache__"))  # fmt: skip
-            env["PYTHONDONTWRITEBYTECODE"] = "1"
-            root = work / "tree"
-        else:
-            env.pop("PYTHONDONTWRITEBYTECODE", None)  # as users run: bytecode cached
-            root = repo
-        paths = [str(root), str(REPO / "benchmarks"),
-                 *filter(None, env.get("PYTHONPATH", "").split(os.pathsep))]  # fmt: skip
-        env["PYTHONPATH"] = os.pathsep.join(paths)
-        env["CUDA_CACHE_PATH"] = str(work / "cuda-jit-cache")
+        envs = {label: _tree_env(work, label or "this", repo, args.no_bytecode)
+                for label, repo in trees}  # fmt: skip
         for kind in kinds:
             name = f"warm_{kind}.py"
             (work / name).write_text(_script(kind, args.device))
-            cold = _run(work, name, env)
-            _run(work, name, env)  # bytecode written, support code cached
-            samples: dict[str, list[float]] = {}
-            last = {}
+            cols = {label: f"{kind} {label}".strip() for label in envs}
+            cold = {label: _run(work, name, env) for label, env in envs.items()}
+            for env in envs.values():
+                _run(work, name, env)  # bytecode written, support code cached
+            samples: dict[str, dict[str, list[float]]] = {c: {} for c in cols.values()}
+            last: dict[str, dict] = {}
             for _ in range(args.reps):
-                last = _run(work, name, env)
-                for row in ROWS:
-                    samples.setdefault(row, []).append(last["phases"].get(row, 0.0))
-            data[kind] = {"samples_s": samples, "cold_builds": cold["builds"],
-                          "warm_builds": last["builds"], "index_hits": last["index_hits"]}  # fmt: skip
+                for label, env in envs.items():  # interleaved: the same load for both
+                    got = last[label] = _run(work, name, env)
+                    for row in ROWS:
+                        samples[cols[label]].setdefault(row, []).append(got["phases"].get(row, 0.0))
+            for label, col in cols.items():
+                data[col] = {"samples_s": samples[col], "cold_builds": cold[label]["builds"],
+                             "warm_builds": last[label]["builds"],
+                             "index_hits": last[label]["index_hits"]}  # fmt: skip
             if args.cprofile:
                 proc = subprocess.run(
                     [sys.executable, "-m", "cProfile", "-s", "cumulative", name], cwd=work,
-                    env=env, capture_output=True, text=True, timeout=300,
+                    env=envs[trees[-1][0]], capture_output=True, text=True, timeout=300,
                 )  # fmt: skip
                 print(f"--- cProfile of a warm {kind} process (top 40) ---")
                 print("\n".join(proc.stdout.splitlines()[:48]))
-    headers = ["phase [ms]", *kinds]
+    headers = ["phase [ms]", *data]
     rows = []
     for row in ROWS:
-        cells = []
-        for kind in kinds:
-            got = data[kind]["samples_s"][row]
-            cells.append(f"{statistics.median(got) * 1e3:.2f}")
+        cells = [f"{statistics.median(d['samples_s'][row]) * 1e3:.2f}" for d in data.values()]
         rows.append(["  " * INDENT.get(row, 0) + row, *cells])
     code = "no bytecode" if args.no_bytecode else "bytecode cached"
     print(f"warm compile phases on {args.device} ({code}): medians of {args.reps} fresh "
           "processes, inclusive times [ms]")  # fmt: skip
+    if args.against:
+        print(f"before: {trees[0][1]}; after: {trees[1][1]}")
     print_table(headers, rows)
-    for kind in kinds:
-        d = data[kind]
-        print(f"{kind}: warm builds {d['warm_builds']} (must be 0), index hits {d['index_hits']}")
+    for col, d in data.items():
+        print(f"{col}: warm builds {d['warm_builds']} (must be 0), index hits {d['index_hits']}")
     meta = {**script_meta("profile_warm_compile.py"), "device": args.device,
-            "bytecode": not args.no_bytecode, "repo": str(args.repo or REPO),
+            "bytecode": not args.no_bytecode, "trees": {k: str(v) for k, v in trees},
             "time": time.strftime("%Y-%m-%d %H:%M:%S")}  # fmt: skip
     save_json({"meta": meta, "results": data}, args.json)
     return 0
