@@ -3,7 +3,8 @@
     python tools/fit_sincos.py [--check]
 
 Needs ``mpmath``. Prints the Cody-Waite split of pi/2 (33-bit ``HI`` and ``MID``, then
-``LO``), ``2/pi`` and the near-minimax (Chebyshev) coefficients of
+``LO``), ``2/pi``, the 192 bits of 4/pi and ``2 pi 2^-64`` of the large-argument
+reduction, and the near-minimax (Chebyshev) coefficients of
 
     S(u) = (sin r - r) / r^3,   C(u) = (cos r - 1) / r^2,   u = r^2 <= (pi/4)^2
 
@@ -17,11 +18,11 @@ import argparse
 import sys
 
 
-def fit() -> dict[str, tuple[float, ...]]:
+def fit() -> dict[str, tuple[float | int, ...]]:
     """The constants, by name as ``trig`` spells them."""
     import mpmath as mp
 
-    mp.mp.dps = 50
+    mp.mp.dps = 80  # the 192 bits of 4/pi need 58 digits
     top = (mp.pi / 4 * (1 + mp.mpf("1e-6"))) ** 2  # a little past pi/4: n may be off by ulps
 
     def s(u):
@@ -31,7 +32,7 @@ def fit() -> dict[str, tuple[float, ...]]:
     def c(u):
         return mp.mpf(-1) / 2 if u == 0 else (mp.cos(mp.sqrt(u)) - 1) / u
 
-    out: dict[str, tuple[float, ...]] = {}
+    out: dict[str, tuple[float | int, ...]] = {}
     for name, f in (("SIN_COEFFS", s), ("COS_COEFFS", c)):
         poly, err = mp.chebyfit(f, [0, top], 4, error=True)
         out[name] = tuple(float(k) for k in reversed(poly))
@@ -47,6 +48,8 @@ def fit() -> dict[str, tuple[float, ...]]:
     out["PIO2_HI"], out["PIO2_MID"] = (float(hi),), (float(mid),)
     out["PIO2_LO"] = (float(mp.pi / 2 - hi - mid),)
     out["TWO_OVER_PI"] = (float(2 / mp.pi),)
+    out["PI_2_POW_M64"] = (float(2 * mp.pi * mp.mpf(2) ** -64),)
+    out["INV_PIO4"] = (int(mp.floor(4 / mp.pi * mp.mpf(2) ** 191)),)
     return out
 
 
@@ -57,12 +60,12 @@ def main() -> int:
     args = parser.parse_args()
     found = fit()
     for name, values in found.items():
-        print(f"{name} = {', '.join(v.hex() for v in values)}")
+        print(f"{name} = {', '.join(hex(v) if isinstance(v, int) else v.hex() for v in values)}")
     if not args.check:
         return 0
     from kdsl.backends.cpu import trig
 
-    def as_tuple(v: float | tuple[float, ...]) -> tuple[float, ...]:
+    def as_tuple(v: object) -> tuple:
         return v if isinstance(v, tuple) else (v,)
 
     bad = [name for name, v in found.items() if as_tuple(getattr(trig, name)) != v]

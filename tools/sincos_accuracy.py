@@ -1,9 +1,9 @@
 """Max error in ulp of a backend's float32 ``sin``/``cos`` against NumPy float64.
 
-    python tools/sincos_accuracy.py [--backend cpu] [--bound 1e4] [--stride 1]
+    python tools/sincos_accuracy.py [--backend cpu] [--low 0] [--bound 1e4] [--stride 1]
                                     [--chunk 16777216]
 
-Every float32 in ``[0, bound)`` whose bit pattern is a multiple of ``stride`` (1:
+Every float32 in ``[low, bound)`` whose bit pattern is a multiple of ``stride`` (1:
 every one), both signs, plus special values (+-0, denormals, the fast path's bound,
 large arguments, +-inf, NaN), each evaluated by one kdsl kernel and compared with
 ``np.sin``/``np.cos`` of the float64 value, in float32 ulps at the float64 result
@@ -57,11 +57,13 @@ def special_report(device: str) -> list[str]:
             for x, a, b, u, v in zip(SPECIAL, s, c, es, ec)]  # fmt: skip
 
 
-def sweep(device: str, bound: float, stride: int, chunk: int) -> dict[str, tuple[float, float]]:
-    """Max ulp error of sin and cos (and where) over the floats in ``(-bound, bound)``."""
-    top = int(np.float32(bound).view(np.uint32))
+def sweep(
+    device: str, low: float, bound: float, stride: int, chunk: int
+) -> dict[str, tuple[float, float]]:
+    """Max ulp error of sin and cos (and where) over the floats with ``low <= |x| < bound``."""
+    bottom, top = (int(np.float32(v).view(np.uint32)) for v in (low, bound))
     worst = {"sin": (0.0, 0.0), "cos": (0.0, 0.0)}
-    for start in range(0, top, chunk * stride):
+    for start in range(bottom, top, chunk * stride):
         bits = np.arange(start, min(start + chunk * stride, top), stride, dtype=np.uint32)
         x = bits.view(np.float32)
         x = np.concatenate([x, -x])
@@ -79,6 +81,7 @@ def main() -> int:
     """Print the special values and the sweep's max errors."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--backend", default="cpu", choices=["cpu", "cuda", "interp"])
+    parser.add_argument("--low", type=float, default=0.0)
     parser.add_argument("--bound", type=float, default=1e4)
     parser.add_argument("--stride", type=int, default=1)
     parser.add_argument("--chunk", type=int, default=1 << 24)
@@ -86,9 +89,9 @@ def main() -> int:
     device = "cuda:0" if args.backend == "cuda" else args.backend
     for line in special_report(device):
         print(line)
-    for name, (err, x) in sweep(device, args.bound, args.stride, args.chunk).items():
-        print(f"{name}: max {err:.4f} ulp at x = {x!r} over |x| < {args.bound:g}, "
-              f"stride {args.stride}")  # fmt: skip
+    for name, (err, x) in sweep(device, args.low, args.bound, args.stride, args.chunk).items():
+        print(f"{name}: max {err:.4f} ulp at x = {x!r} over {args.low:g} <= |x| < "
+              f"{args.bound:g}, stride {args.stride}")  # fmt: skip
     return 0
 
 
