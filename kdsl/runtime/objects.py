@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import collections
 import ctypes
+import struct
 import threading
 import weakref
 from typing import Any
@@ -90,18 +91,57 @@ def pack_record(t: T.StructType, fields: dict[str, Any]) -> bytes:
 
     ``fields`` maps each field but the tag (the first) to its value: a ``kdsl.array``
     for an array field (its descriptor is written: address, shape, byte strides), a
-    number or vector otherwise.
+    number or vector otherwise. (Array descriptors, Python ints in integer fields and
+    Python floats in float fields are packed by ``struct``, the rest by NumPy: a
+    record write is on the path of every geometry object's construction.)
     """
-    rec = np.zeros((), dtype=record_dtype(t))
-    tag_name = t.fields[0][0]
-    rec[tag_name] = record_tag(t.name)
-    for name, ft in t.fields[1:]:
+    template, packers = _packer(t)
+    buf = bytearray(template)
+    for name, offset, words, scalar in packers:
         value = fields[name]
-        if isinstance(ft, T.ArrayType):
-            rec[name] = [value.ptr or 0, *value.shape, *value.strides]
-        else:
-            rec[name] = np.asarray(value)
-    return rec.tobytes()
+        if words:
+            if value.ndim * 2 + 1 == words.size // 8:
+                words.pack_into(buf, offset, value.ptr or 0, *value.shape, *value.strides)
+                continue
+        elif scalar is not None and type(value) in scalar[1]:
+            try:
+                scalar[0].pack_into(buf, offset, value)
+                continue
+            except (struct.error, OverflowError):  # out of the field's range: NumPy's cast
+                pass
+        one = np.zeros((), dtype=record_dtype(t))  # NumPy's casts and errors, as before
+        one[name] = [value.ptr or 0, *value.shape, *value.strides] if words else np.asarray(value)
+        size = one.dtype.fields[name][0].itemsize
+        buf[offset : offset + size] = one.tobytes()[offset : offset + size]
+    return bytes(buf)
+
+
+#: Per record type, by identity (hashing a struct type hashes all its fields): (the
+#: type, its bytes with the tag and zeros, one packer per other field).
+_packers: dict[int, tuple[T.StructType, bytes, list]] = {}
+#: The Python types ``struct`` packs exactly as NumPy casts them, per field kind.
+_EXACT = {"i": (int,), "u": (int,), "f": (float,)}
+
+
+def _packer(t: T.StructType) -> tuple[bytes, list]:
+    """(template, [(field, offset, descriptor struct or None, (scalar struct, exact
+    Python types) or None)]) of record type ``t``, made once."""
+    hit = _packers.get(id(t))
+    if hit is not None and hit[0] is t:
+        return hit[1], hit[2]
+    dt = record_dtype(t)
+    rec = np.zeros((), dtype=dt)
+    rec[t.fields[0][0]] = record_tag(t.name)
+    packers = []
+    for name, ft in t.fields[1:]:
+        fdt, offset = dt.fields[name][0], dt.fields[name][1]
+        words = struct.Struct(f"<{fdt.shape[0]}q") if isinstance(ft, T.ArrayType) else None
+        scalar = None
+        if words is None and fdt.shape == () and fdt.kind in _EXACT and fdt.byteorder in "=<|":
+            scalar = (struct.Struct("<" + fdt.char), _EXACT[fdt.kind])
+        packers.append((name, offset, words, scalar))
+    _packers[id(t)] = (t, rec.tobytes(), packers)
+    return rec.tobytes(), packers
 
 
 class ObjectRecord:

@@ -166,3 +166,49 @@ def test_an_id_of_another_devices_object_is_refused_at_launch(monkeypatch):
     monkeypatch.setitem(objects._owners, grid.id, (objects._owners[grid.id][0], kind, "cuda:0"))
     with pytest.raises(wp.KdslLaunchError, match="is the id of a grid on device 'cuda:0'"):
         wp.launch(read_count, dim=1, inputs=[grid.id, wp.zeros(1, dtype=wp.int32)])
+
+
+def numpy_record(t, fields: dict) -> bytes:
+    """A record's bytes by NumPy field assignment (``pack_record``'s reference)."""
+    from kdsl.ir.records import record_dtype, record_tag
+
+    rec = np.zeros((), dtype=record_dtype(t))
+    rec[t.fields[0][0]] = record_tag(t.name)
+    for name, _ in t.fields[1:]:
+        v = fields[name]
+        rec[name] = [v.ptr or 0, *v.shape, *v.strides] if isinstance(v, wp.array) else np.asarray(v)
+    return rec.tobytes()
+
+
+@pytest.mark.parametrize("count", [7, np.int32(7), True, 7.9, np.float64(-3.0), 2**31 + 5])
+@pytest.mark.parametrize("scale", [2.5, np.float32(0.1), 3, np.float64(1e40), 1e40])
+def test_packed_records_match_numpy_field_by_field(count, scale):
+    """``pack_record`` packs descriptors and exact Python scalars by ``struct``, the rest
+    by NumPy: the same bytes as NumPy's assignment of every field, casts included."""
+    from kdsl.stdlib.hash_grid import HashGridRecord
+
+    values = wp.zeros((3, 4), dtype=wp.float32)
+    points = wp.zeros(5, dtype=wp.vec3)[1::2]  # a strided view
+    inner = np.zeros((), dtype=[("scale", np.float32), ("flag", np.bool_)])
+    fields = {"values": values, "points": points, "inner": inner, "origin": (1.0, 2.0, scale),
+              "count": count}  # fmt: skip
+    with np.errstate(over="ignore"):
+        same_as_numpy(GridRecord.__kdsl_type__, fields)
+        ids = wp.zeros(6, dtype=wp.int32)
+        grid = {"point_ids": ids, "cell_starts": ids[::3], "cell_ends": ids[:0],
+                "dim_x": count, "dim_y": 2, "dim_z": 3, "num_points": count,
+                "cell_width_inv": scale}  # fmt: skip
+        same_as_numpy(HashGridRecord.__kdsl_type__, grid)
+
+
+def same_as_numpy(t, fields: dict) -> None:
+    """``pack_record`` gives NumPy's bytes, or raises NumPy's error."""
+    from kdsl.runtime.objects import pack_record
+
+    try:
+        want = numpy_record(t, fields)
+    except (OverflowError, ValueError, TypeError) as e:
+        with pytest.raises(type(e)):
+            pack_record(t, fields)
+        return
+    assert pack_record(t, fields) == want
