@@ -28,7 +28,9 @@ def graphs_on(device: Any) -> bool:
 
 def capture_steps(steps: list[Callable[[], None]], stream: Any) -> Callable[[], None] | None:
     """``steps`` (kernel launches on the CUDA ``stream``) captured as one graph: a
-    callable that replays it on ``stream``; None when the capture fails."""
+    callable that replays it on ``stream``; None when the capture fails, a step
+    included (a captured step runs nothing, so the caller runs them one by one, and a
+    step's own error comes again there)."""
     try:
         capture_begin(stream=stream)
     except KdslError:
@@ -36,13 +38,17 @@ def capture_steps(steps: list[Callable[[], None]], stream: Any) -> Callable[[], 
     try:
         for step in steps:
             step()
+    except Exception:
+        with contextlib.suppress(Exception):
+            capture_end(stream=stream)
+        return None
     except BaseException:
-        with contextlib.suppress(KdslError):
-            capture_end(stream=stream)  # closed; the error is the step's
+        with contextlib.suppress(Exception):
+            capture_end(stream=stream)
         raise
     try:
         graph = capture_end(stream=stream)
-    except KdslError:
+    except Exception:
         return None
     return lambda: capture_launch(graph, stream)
 
