@@ -36,7 +36,10 @@ arrays have ``2n - 1`` slots, those after the last node marked ``first = -2``
 (``UNUSED``). Its buffers are views of one allocation (which the tree's
 ``rebuild`` keeps alive); the launches are prepared once
 (``record_cmd``) and ``rebuild`` runs them again over the same buffers, which every
-build leaves as it found them (the zeroed counters zero again).
+build leaves as it found them (the zeroed counters zero again). On a GPU a build's
+second run sorts with the kdsl merge sort instead of CuPy's (which synchronizes the
+stream) and runs as one captured CUDA graph from then on (``LbvhBuild.run``). A fresh
+tree over the same boxes as a collected one takes its build (``recycle``, ``BUILDS``).
 """
 
 from __future__ import annotations
@@ -479,9 +482,10 @@ def key_layout(n: int, num_groups: int) -> tuple[int, int, int]:
 
 
 def device_sort_on(device) -> bool:
-    """Whether lbvh builds on ``device`` sort their keys with the kdsl merge sort
-    (``kdsl.utils.merge_sort``: kernel launches only, so the build can be one graph)
-    rather than ``SortKeys`` (NumPy's sort on the CPU). Tests try both anywhere."""
+    """Whether lbvh builds on ``device`` sort their keys with the kdsl merge sort from
+    their second run (``kdsl.utils.merge_sort``: kernel launches only, so the build can
+    be one graph) rather than always with ``SortKeys`` (CuPy's sort on a GPU, NumPy's
+    on the CPU, which stays faster there). Tests try both anywhere."""
     return bool(device.is_cuda)
 
 
@@ -536,14 +540,13 @@ class LbvhBuild:
         def prepared(kernel, dim: int, inputs: list) -> Launch:
             return launch(kernel, dim=dim, device=device, inputs=inputs, record_cmd=True)
 
-        sort = (MergeSortKeys(keys, all_keys[n:]).steps if sorted_by_kernels
-                else [SortKeys(keys)])  # fmt: skip
         bounds = centre_bounds(lowers, uppers, zero["bounds"], record_cmd=True)
-        steps = [
+        self._before = [
             bounds.launch,
             prepared(_morton_keys, n, [lowers, uppers, zero["bounds"], group_arg, has_groups,
                                        morton_drop, index_bits, group_shift, keys]).launch,
-            *sort,
+        ]  # fmt: skip
+        self._after = [
             prepared(_emit_hierarchy, n, [
                 keys, n, leaf_size, group_shift, (1 << index_bits) - 1, lowers, uppers,
                 ints["items"], ints["parent"], ints["left"], ints["right"], node_lo, node_hi,
@@ -557,9 +560,12 @@ class LbvhBuild:
                 hi, packed_first, packed_next, with_parents, ints["pre_parent"],
                 ints["group_roots"], zero["starts"], zero["bounds"]]).launch,
         ]  # fmt: skip
-        # All kernel launches with the kdsl sort and no scan: one graph from the second run.
-        graphed = sorted_by_kernels and not use_scan and graphs_on(device)
-        self._steps = StepGraph(steps, bounds.stream, graphed)
+        # The first run sorts with ``SortKeys``; with the kdsl sort, later runs sort with
+        # it (see ``run``) and, all launches then when there is no scan, as one graph.
+        self._keys, self._scratch = keys, (all_keys[n:] if sorted_by_kernels else None)
+        self._stream, self._graphed = bounds.stream, not use_scan and graphs_on(device)
+        self._steps = StepGraph([*self._before, SortKeys(keys), *self._after], None, False)
+        self.runs = 0
         self._tree_fields = (
             ints["skip"], ints["first"], ints["count"], ints["items"],
             ints["group_roots"][:num_groups], ints["pre_parent"], zero["arrivals"], slots,
@@ -569,9 +575,22 @@ class LbvhBuild:
         self.clean = True
 
     def run(self) -> None:
-        """Build the tree (again) from the boxes' current values."""
+        """Build the tree (again) from the boxes' current values.
+
+        With the kdsl sort (``device_sort_on``), the first run still sorts with
+        ``SortKeys`` (CuPy's sort on a GPU: one call, where the kdsl sort's fifteen
+        launches for 200k boxes would each cost a preparation and a first packing, which
+        a build made once never earns back); the second prepares the kdsl sort and runs
+        every step as one captured graph from then on (``graph_steps``). Both sorts
+        order the distinct keys alike: the same tree."""
         self.clean = False
+        if self._scratch is not None and self.runs == 1:
+            sort = MergeSortKeys(self._keys, self._scratch)
+            steps = [*self._before, *sort.steps, *self._after]
+            self._steps = StepGraph(steps, self._stream, self._graphed)
+            self._steps.runs = 1  # captured at once: this is the build's second run
         self._steps()
+        self.runs += 1
         self.clean = True
 
     def new_tree(self) -> DeviceTree:

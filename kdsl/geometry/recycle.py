@@ -42,8 +42,10 @@ class RecycleBin:
         """The newest build filed under ``inputs`` and ``shape`` (removed), or None."""
         with self._lock:
             for k, (kept_inputs, kept_shape, _) in reversed(list(self._kept.items())):
-                if kept_shape == shape and len(kept_inputs) == len(inputs) and all(
-                    a is b for a, b in zip(kept_inputs, inputs)
+                if (
+                    kept_shape == shape
+                    and len(kept_inputs) == len(inputs)
+                    and all(a is b for a, b in zip(kept_inputs, inputs))
                 ):
                     entry = self._kept.pop(k, None)
                     if entry is not None:

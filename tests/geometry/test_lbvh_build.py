@@ -15,6 +15,7 @@ from kdsl.errors import KdslError
 from kdsl.geometry import lbvh, recycle
 from kdsl.geometry.device_tree import UNUSED
 from kdsl.runtime.array import array
+from kdsl.utils.merge_sort import merge_passes
 from tests.geometry.graph_stand_in import counting_capture
 
 cuda = pytest.mark.skipif(not wp.is_cuda_available(), reason="no GPU")
@@ -219,8 +220,8 @@ def tree_arrays(t) -> list[bytes]:
 @pytest.mark.parametrize("leaf_size", [1, 4])
 @pytest.mark.parametrize("num_groups", [0, 3])
 def test_kernel_sort_builds_the_same_tree(monkeypatch, leaf_size, num_groups):
-    """The kdsl merge sort (a GPU's) and ``SortKeys`` sort the distinct keys alike: one
-    tree bit for bit, duplicates and NaN boxes included."""
+    """The kdsl merge sort (a GPU's, from a build's second run) and ``SortKeys`` sort the
+    distinct keys alike: one tree bit for bit, duplicates and NaN boxes included."""
     rng = np.random.default_rng(leaf_size + 10 * num_groups)
     n = 2500
     c = rng.random((n, 3)).astype(np.float32)
@@ -232,6 +233,10 @@ def test_kernel_sort_builds_the_same_tree(monkeypatch, leaf_size, num_groups):
     for kernels in (False, True):
         monkeypatch.setattr(lbvh, "device_sort_on", lambda device, k=kernels: k)
         trees.append(gpu_config_tree(lo, hi, leaf_size, groups, num_groups))
+    assert tree_arrays(trees[0]) == tree_arrays(trees[1])  # (both sorted by SortKeys)
+    trees[1].rebuild()  # the second run sorts with the kdsl merge sort
+    steps = trees[1].rebuild.args[0]._steps.steps
+    assert len(steps) == 4 + 1 + merge_passes(n)  # its chunk sort and merges
     assert trees[0].num_nodes == trees[1].num_nodes
     assert tree_arrays(trees[0]) == tree_arrays(trees[1])
 
