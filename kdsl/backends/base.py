@@ -14,6 +14,7 @@ structs as tuples of field values.
 from __future__ import annotations
 
 import hashlib
+import os
 import time
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterable, Sequence
@@ -265,7 +266,14 @@ def split_block(block: Block) -> tuple[list[Operation], list[Value]]:
 SETTLED_S = 2.0
 
 
-def source_version(version: str, sources: Iterable[Path]) -> str:
+def package_sources(directory: str | Path) -> list[str]:
+    """The ``.py`` files directly in ``directory``, for ``source_version`` (``os.scandir``:
+    a ``pathlib`` glob costs more than the rest of a warm ``source_version``)."""
+    with os.scandir(directory) as entries:
+        return [e.path for e in entries if e.name.endswith(".py")]
+
+
+def source_version(version: str, sources: Iterable[str | Path]) -> str:
     """``version`` plus a digest of a backend's ``sources``, for kernel cache keys.
 
     Edited code generation then never reuses stale cache entries (a developer rarely
@@ -277,17 +285,18 @@ def source_version(version: str, sources: Iterable[Path]) -> str:
     is read every time: an edit within the same clock tick as the recorded one would
     keep its size and time.
     """
-    paths = sorted(sources)
-    stats = [p.stat() for p in paths]
+    paths = sorted(map(str, sources))
+    stats = [os.stat(p) for p in paths]
 
     def digest() -> bytes:
         h = hashlib.sha256(version.encode())
         for path in paths:
-            h.update(path.name.encode() + b"\0" + path.read_bytes())
+            with open(path, "rb") as f:
+                h.update(os.path.basename(path).encode() + b"\0" + f.read())
         return h.hexdigest()[:16].encode()
 
     if time.time_ns() - max((st.st_mtime_ns for st in stats), default=0) < SETTLED_S * 1e9:
         return f"{version}+{digest().decode()}"
-    where = repr([version, *((str(p), st.st_size, st.st_mtime_ns) for p, st in zip(paths, stats))])
+    where = repr([version, *((p, st.st_size, st.st_mtime_ns) for p, st in zip(paths, stats))])
     name = f"source-version-{hashlib.sha256(where.encode()).hexdigest()[:32]}"
     return f"{version}+{stored_fact(name, digest).decode()}"

@@ -6,7 +6,6 @@ import ctypes
 import functools
 import os
 from collections.abc import Callable, Sequence
-from pathlib import Path
 from typing import Any
 
 import llvmlite  # the package only (its version); the binding is imported on a miss
@@ -20,6 +19,7 @@ from kdsl.backends.base import (
     Job,
     SupportCode,
     launch_size,
+    package_sources,
     source_version,
 )
 from kdsl.backends.cpu import host, native_pool, pool, print_order, shared_object
@@ -40,7 +40,7 @@ RANGE_FN = ctypes.CFUNCTYPE(None, _INDEX, _INDEX, ctypes.c_void_p, ctypes.c_void
 @functools.cache
 def _code_version(version: str) -> str:
     """``version`` plus a digest of this backend's sources (``base.source_version``)."""
-    return source_version(version, Path(__file__).parent.glob("*.py"))
+    return source_version(version, package_sources(os.path.dirname(__file__)))
 
 
 def _llvm_name(job: Job, target: str) -> str:

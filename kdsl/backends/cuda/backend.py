@@ -8,12 +8,21 @@ from __future__ import annotations
 
 import ctypes
 import functools
+import os
 from collections.abc import Callable, Sequence
-from pathlib import Path
 from typing import Any
 
 from kdsl.backends import checks_common
-from kdsl.backends.base import Args, Backend, CompiledKernel, Dims, Job, launch_size, source_version
+from kdsl.backends.base import (
+    Args,
+    Backend,
+    CompiledKernel,
+    Dims,
+    Job,
+    launch_size,
+    package_sources,
+    source_version,
+)
 from kdsl.backends.cuda import nvrtc
 from kdsl.backends.cuda.devices import device_count
 from kdsl.backends.cuda.geometry import Geometry, fast_geometry, linear_geometry
@@ -29,8 +38,9 @@ from kdsl.passes import DEFAULT_PIPELINE
 @functools.cache
 def _code_version(version: str) -> str:
     """``version`` plus a digest of this backend's sources (``base.source_version``)."""
-    here = Path(__file__).parent
-    return source_version(version, [*here.glob("*.py"), here.parent / "checks_common.py"])
+    here = os.path.dirname(__file__)
+    shared = os.path.join(os.path.dirname(here), "checks_common.py")
+    return source_version(version, [*package_sources(here), shared])
 
 
 def device_arch(ordinal: int) -> str:
