@@ -13,8 +13,11 @@ to 0.002) built by each kdsl constructor and by Warp's (its CPU default, ``"sah"
 and ``"median"``; on a GPU ``"lbvh"``), then ``--queries`` box queries (half size
 0.01) and rays (random starts in the cube, random directions, ``max_dist`` 0.05)
 counting the items each meets. Times are medians of ``--reps`` runs after a warm-up
-(compiles excluded). Every kdsl tree must give exactly Warp's total hit count; a
-mismatch exits 1 with the reason.
+(compiles excluded). ``build`` is a fresh ``Bvh`` over the same box arrays each time:
+kdsl's takes the build of the one collected before it (``kdsl.geometry.recycle``);
+``cold`` (kdsl only) empties that bin first, so every build allocates and prepares
+its own. Every kdsl tree must give exactly Warp's total hit count; a mismatch exits 1
+with the reason.
 
 Mesh section (``bench_geometry_mesh.py``, which also runs alone): the bumpy
 cube-sphere of about ``--tris`` triangles, ``--queries`` closest points and rays
@@ -99,6 +102,11 @@ def _bvh_rows(m, side: str, constructors, data, max_t: float, dev: str, reps: in
                "queries": queries}  # fmt: skip
         row["build_s"] = median_seconds(lambda cons=cons: m.Bvh(lo, hi, constructor=cons),
                                         reps, sync)  # fmt: skip
+        if m is wp:  # without a collected BVH's build (kdsl.geometry.recycle)
+            row["cold_s"] = median_seconds(
+                lambda cons=cons: (wp.geometry.recycle.clear(), m.Bvh(lo, hi, constructor=cons)),
+                reps, sync,
+            )  # fmt: skip
         row["refit_s"] = median_seconds(bvh.refit, reps, sync)
         for name, kernel, inputs in (
             ("aabb", box_hits, [bvh.id, qlo, qhi, out]),
@@ -144,11 +152,12 @@ def bvh_section(args) -> list[dict]:
 
 
 def _print_bvh(rows: list[dict]) -> None:
-    print(f"{'side':<5} {'constructor':<12} {'build ms':>9} {'refit ms':>9} "
+    print(f"{'side':<5} {'constructor':<12} {'build ms':>9} {'cold ms':>8} {'refit ms':>9} "
           f"{'1M aabb ms':>11} {'1M ray ms':>10}")  # fmt: skip
     for r in rows:
         scale = 1e6 / r["queries"] * 1e3  # per million queries, in ms
-        print(f"{r['side']:<5} {r['constructor']:<12} {1e3 * r['build_s']:9.1f} "
+        cold = f"{1e3 * r['cold_s']:8.2f}" if "cold_s" in r else f"{'-':>8}"
+        print(f"{r['side']:<5} {r['constructor']:<12} {1e3 * r['build_s']:9.2f} {cold} "
               f"{1e3 * r['refit_s']:9.2f} {r['aabb_s'] * scale:11.1f} {r['ray_s'] * scale:10.1f}")  # fmt: skip
 
 

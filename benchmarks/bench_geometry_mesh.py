@@ -11,7 +11,9 @@ point finds a face); as many rays from points in that box in uniform random
 directions, asking for the closest hit (``mesh_query_ray``) and for any hit
 (``mesh_query_ray_anyhit``), ``max_t`` 1e6; and a refit after every vertex moved (a
 kernel scales the points by 1.01, then ``refit()``; the move is timed with it). Each
-side also builds its mesh (``Mesh(points, indices)``: the BVH and the record).
+side also builds its mesh (``Mesh(points, indices)``: the BVH and the record; kdsl's
+takes the face boxes and BVH build of the mesh collected before it,
+``kdsl.geometry.recycle``; ``cold``, kdsl only, empties that bin before each build).
 
 Times are medians of ``--reps`` runs after a warm-up (compiles excluded). Warp runs on
 the same device (on the CPU it uses one core; kdsl uses every core the process may run
@@ -139,6 +141,9 @@ def _run_side(m, name: str, data: dict, device: str, reps: int, sync) -> tuple[d
     row = {"section": "mesh", "side": name, "device": device, "tris": len(data["faces"]),
            "queries": n}  # fmt: skip
     row["build_s"] = median_seconds(lambda: m.Mesh(pts, idx), reps, sync)
+    if m is wp:  # without the collected mesh's face boxes and BVH build (kdsl.geometry.recycle)
+        row["cold_s"] = median_seconds(lambda: (wp.geometry.recycle.clear(), m.Mesh(pts, idx)),
+                                       reps, sync)  # fmt: skip
     mesh = m.Mesh(pts, idx)
     launches = {
         "closest": (closest, [mesh.id, xs, face, dist]),
@@ -260,7 +265,7 @@ def print_mesh(rows: list[dict]) -> None:
     r0 = rows[0]
     print(f"bumpy cube-sphere, {r0['tris']:,} triangles, {r0['queries']:,} queries on "
           f"{r0['device']}; ms, queries scaled to 1M")  # fmt: skip
-    cols = ("build", "closest", "ray", "anyhit", "refit")
+    cols = ("build", "cold", "closest", "ray", "anyhit", "refit")
     print(f"{'side':<7}" + "".join(f"{c + ' ms':>12}" for c in cols))
     for r in rows:
         scale = {c: 1e3 * (1e6 / r["queries"] if c in ("closest", "ray", "anyhit") else 1)
