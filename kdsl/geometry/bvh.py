@@ -20,7 +20,6 @@ from kdsl.runtime.alloc import empty
 from kdsl.runtime.array import array
 from kdsl.runtime.objects import ObjectRecord
 from kdsl.stdlib.bvh import BvhNode, BvhRecord
-from kdsl.types import type_of
 
 VEC3 = T.VectorType(3, T.F32)
 
@@ -50,7 +49,7 @@ CONSTRUCTORS = {
 
 def _check_boxes(lowers: Any, uppers: Any) -> None:
     for name, a in (("lowers", lowers), ("uppers", uppers)):
-        if not isinstance(a, array) or type_of(a.dtype) != VEC3 or a.ndim != 1:
+        if not isinstance(a, array) or a.__kdsl_type__.dtype != VEC3 or a.ndim != 1:
             raise KdslTypeError(f"Bvh {name} must be a 1-d kdsl.array of vec3, not {a!r}")
     if lowers.shape != uppers.shape:
         raise KdslTypeError(
@@ -66,7 +65,7 @@ def _check_groups(groups: Any, lowers: array) -> int:
     """Check ``groups`` against the boxes; the number of groups (0 without groups)."""
     if groups is None:
         return 0
-    if not isinstance(groups, array) or type_of(groups.dtype) != T.I32 or groups.ndim != 1:
+    if not isinstance(groups, array) or groups.__kdsl_type__.dtype != T.I32 or groups.ndim != 1:
         raise KdslTypeError(f"Bvh groups must be a 1-d kdsl.array of int32, not {groups!r}")
     if groups.shape != lowers.shape:
         raise KdslTypeError(f"Bvh groups has {groups.shape[0]} entries for {lowers.shape[0]} boxes")

@@ -19,7 +19,6 @@ from kdsl.ir import types as T
 from kdsl.runtime.array import array
 from kdsl.runtime.objects import ObjectRecord
 from kdsl.stdlib.mesh import MeshRecord
-from kdsl.types import type_of
 
 VEC3 = T.VectorType(3, T.F32)
 
@@ -33,7 +32,7 @@ def _as_points(a: Any, name: str) -> array:
             f"{type(a).__name__}; convert with kdsl.array(...), kdsl.from_torch(...) or "
             "kdsl.from_dlpack(...)"
         )
-    t = type_of(a.dtype)
+    t = a.__kdsl_type__.dtype  # (cheaper than type_of(a.dtype))
     if t == VEC3 and a.ndim == 1:
         return a
     if t == T.F32 and a.ndim == 2 and a.shape[1] == 3:
@@ -49,7 +48,7 @@ def _as_indices(a: Any) -> array:
     flattened, without a copy when contiguous)."""
     if not isinstance(a, array):
         raise KdslTypeError(f"Mesh indices must be a kdsl.array of int32, not {type(a).__name__}")
-    if type_of(a.dtype) != T.I32:
+    if a.__kdsl_type__.dtype != T.I32:
         raise KdslTypeError(f"Mesh indices must be int32, not {a.dtype}")
     if a.ndim == 2:
         if a.shape[1] != 3:
