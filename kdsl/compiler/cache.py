@@ -50,6 +50,8 @@ SUFFIX = ".kobj"
 INDEX_SUFFIX = ".kidx"
 #: The source index's memos of kernels' source facts (``source_index.load_memo``).
 MEMO_SUFFIX = ".ksrc"
+#: Backends' facts (``stored_fact``: NVRTC's version, a backend's code digest).
+FACT_SUFFIX = ".kfact"
 _TMP_SUFFIX = ".tmp"
 
 T = TypeVar("T")
@@ -254,7 +256,7 @@ class DiskCache:
         except OSError:
             return 0, 0
         for p in names:
-            if not p.name.endswith((SUFFIX, INDEX_SUFFIX, MEMO_SUFFIX, _TMP_SUFFIX)):
+            if not p.name.endswith((SUFFIX, INDEX_SUFFIX, MEMO_SUFFIX, FACT_SUFFIX, _TMP_SUFFIX)):
                 continue  # never delete files the cache did not write
             try:
                 n = p.stat().st_size
@@ -425,18 +427,22 @@ def stored_fact(name: str, learn: Callable[[], bytes]) -> bytes:
     """
     key = kernel_key("", "facts", str(FORMAT_VERSION), {"fact": name}, "")
     with outside_aot_directory():
-        return get_or_build(key, learn, bytes, FACT_STATS)
+        return get_or_build(key, learn, bytes, FACT_STATS, FACT_SUFFIX)
 
 
 def get_or_build(
-    key: str, build: Callable[[], bytes], load: Callable[[bytes], T], stats: Stats | None = None
+    key: str,
+    build: Callable[[], bytes],
+    load: Callable[[bytes], T],
+    stats: Stats | None = None,
+    suffix: str = SUFFIX,
 ) -> T:
     """The loaded value of ``key``: from memory, else from disk, else built and stored.
 
     ``build()`` makes the payload (object code); ``load(payload)`` turns it into the
     value kept in memory (e.g. a function address). A disk payload that ``load``
     rejects by raising is discarded and rebuilt. Lookups count in ``stats`` (default
-    ``STATS``, the kernels' counters).
+    ``STATS``, the kernels' counters); entries are files ending in ``suffix``.
     """
     if stats is None:
         stats = STATS
@@ -446,7 +452,7 @@ def get_or_build(
         stats.memory_hits += 1
         return value
     if value is not None:  # compile_aot_module: loaded here, but the directory needs it
-        disk = DiskCache(aot.directory)  # type: ignore[union-attr]
+        disk = DiskCache(aot.directory, suffix)  # type: ignore[union-attr]
         if disk.load(key) is None and not disk.store(key, build()):
             raise KdslError(f"compile_aot_module: could not write to {disk.directory}")
         return value
@@ -456,6 +462,8 @@ def get_or_build(
             stats.memory_hits += 1
             return value
         disk = default_cache()
+        if disk is not None and suffix != SUFFIX:
+            disk = DiskCache(disk.directory, suffix)
         payload = disk.load(key) if disk is not None else None
         if payload is not None:
             try:

@@ -47,16 +47,20 @@ class _Artifacts:
         self.symbol = symbol
         self.ir_text = ir_text
         self.loaded: dict[str, Any] = {}
+        self.keys: dict[str, str] = {}
         self.job: Job | None = None
         #: Sizes of the binaries built (not loaded from the cache), for ``records``.
         self.built: list[int] = []
 
     def key(self, target: str) -> str:
-        b = self.backend
-        return kernel_cache.kernel_key(
-            self.ir_text, b.name, b.code_version(), {**self.options, "kernel": self.symbol},
-            b.cache_target(target),
-        )  # fmt: skip
+        key = self.keys.get(target)
+        if key is None:  # a sha256 of the IR text: once per target (backends ask again)
+            b = self.backend
+            key = self.keys[target] = kernel_cache.kernel_key(
+                self.ir_text, b.name, b.code_version(), {**self.options, "kernel": self.symbol},
+                b.cache_target(target),
+            )  # fmt: skip
+        return key
 
     def artifact(self, target: str) -> Any:
         hit = self.loaded.get(target)

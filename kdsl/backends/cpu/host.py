@@ -23,7 +23,6 @@ import hashlib
 import importlib.util
 import os
 import sys
-from pathlib import Path
 
 #: The ``/proc/cpuinfo`` fields that decide the code LLVM generates for the host (x86,
 #: Arm, RISC-V and POWER spellings); per-core and changing fields (MHz, ids) are left out.
@@ -63,16 +62,26 @@ def _first_block(path: str = "/proc/cpuinfo") -> str:
 
 
 def llvm_build_id() -> str | None:
-    """llvmlite's version with its library's size and mtime, read without importing it."""
-    spec = importlib.util.find_spec("llvmlite")
-    if spec is None or not spec.submodule_search_locations:
+    """llvmlite's version with its library's size and mtime, read without importing its
+    binding (``os.scandir``, and the package's path from ``sys.modules`` once imported:
+    ``find_spec`` and a ``pathlib`` glob cost 0.3 ms of a warm compile)."""
+    mod = sys.modules.get("llvmlite")
+    if mod is not None and getattr(mod, "__path__", None):
+        package = next(iter(mod.__path__))
+    else:
+        spec = importlib.util.find_spec("llvmlite")
+        if spec is None or not spec.submodule_search_locations:
+            return None
+        package = next(iter(spec.submodule_search_locations))
+    try:
+        with os.scandir(os.path.join(package, "binding")) as entries:
+            libs = sorted(e.path for e in entries if "llvmlite" in e.name
+                          and e.name.endswith((".so", ".dylib", ".dll")))  # fmt: skip
+    except OSError:
         return None
-    package = Path(next(iter(spec.submodule_search_locations)))
-    libs = sorted((package / "binding").glob("*llvmlite*"))
-    libs = [p for p in libs if p.suffix in (".so", ".dylib", ".dll")]
     if not libs:
         return None
-    st = libs[0].stat()
+    st = os.stat(libs[0])
     import llvmlite  # the package's __init__ only: its version, not the binding
 
     return f"llvmlite-{llvmlite.__version__}-{st.st_size}-{st.st_mtime_ns}"
