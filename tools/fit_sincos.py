@@ -2,8 +2,7 @@
 
     python tools/fit_sincos.py [--check]
 
-Needs ``mpmath``. Prints the Cody-Waite split of pi/2 (33-bit ``HI`` and ``MID``, then
-``LO``), ``2/pi``, the 192 bits of 4/pi and ``2 pi 2^-64`` of the large-argument
+Needs ``mpmath``. Prints the Cody-Waite split of pi/2 (a 33-bit ``HI``, then ``LO``), ``2/pi``, the 192 bits of 4/pi and ``2 pi 2^-64`` of the large-argument
 reduction, and the near-minimax (Chebyshev) coefficients of
 
     S(u) = (sin r - r) / r^3,   C(u) = (cos r - 1) / r^2,   u = r^2 <= (pi/4)^2
@@ -44,9 +43,7 @@ def fit() -> dict[str, tuple[float | int, ...]]:
         return mp.nint(v / step) * step
 
     hi = split(mp.pi / 2, 33)
-    mid = split(mp.pi / 2 - hi, 33)
-    out["PIO2_HI"], out["PIO2_MID"] = (float(hi),), (float(mid),)
-    out["PIO2_LO"] = (float(mp.pi / 2 - hi - mid),)
+    out["PIO2_HI"], out["PIO2_LO"] = (float(hi),), (float(mp.pi / 2 - hi),)
     out["TWO_OVER_PI"] = (float(2 / mp.pi),)
     out["PI_2_POW_M64"] = (float(2 * mp.pi * mp.mpf(2) ** -64),)
     out["INV_PIO4"] = (int(mp.floor(4 / mp.pi * mp.mpf(2) ** 191)),)
