@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from kdsl.backends.param_writer import make_writer
 from kdsl.errors import KdslLaunchError
 from kdsl.ir import types as T
 
@@ -199,52 +200,32 @@ class ArgPacker:
     def writer(self, indices: Sequence[int]) -> Callable[[Any, Sequence[Any]], None]:
         """A function writing new values of the by-value parameters ``indices`` (scalars,
         vectors, matrices, handles; ascending) into a buffer ``pack_into`` filled, in
-        place: ``write(buf, values)``, one value per index. Other parameters' bytes are
-        left as they are (consecutive parameters are written by one ``pack_into``, which
-        rewrites only the padding between them)."""
+        place: ``write(buf, values)``, one value per index (``param_writer.make_writer``)."""
         if not self.supported:
             raise TypeError("a signature with struct parameters is packed by Packed")
-        kinds = self._kinds
+        fields: list = [None] * len(self.types)
+        flatten: list = [None] * len(self.types)
         for i in indices:
-            if kinds[i] == "array":
+            kind = self._kinds[i]
+            if kind == "array":
                 raise TypeError(f"parameter {i} is an array, not a by-value parameter")
-        runs: list[tuple[int, struct.Struct, list, bool, int, int]] = []
-        k = 0
-        while k < len(indices):
-            lo = k
-            fmt, end = "<", self.offsets[indices[k]]
-            while k < len(indices) and (k == lo or indices[k] == indices[k - 1] + 1):
-                i = indices[k]
-                size, code, _ = _layout(self.types[i])
-                pad = self.offsets[i] - end
-                fmt += (f"{pad}x" if pad else "") + code
-                end = self.offsets[i] + size
-                k += 1
-            run_kinds = [kinds[i] for i in indices[lo:k]]
-            runs.append((self.offsets[indices[lo]], struct.Struct(fmt), run_kinds,
-                         all(kd == "scalar" for kd in run_kinds), lo, k))  # fmt: skip
+            size, code, _ = _layout(self.types[i])
+            fields[i] = (code, size)
+            if kind == "handle":
+                flatten[i] = _flatten_handle
+            elif kind == "vector":
+                flatten[i] = _flatten_composite
+        return make_writer(indices, self.offsets, fields, flatten)
 
-        def write(buf: Any, values: Sequence[Any]) -> None:
-            try:
-                for offset, st, run_kinds, plain, lo, hi in runs:
-                    if plain:
-                        st.pack_into(buf, offset, *values[lo:hi])
-                        continue
-                    flat: list = []
-                    for kd, v in zip(run_kinds, values[lo:hi]):
-                        if kd == "scalar":
-                            flat.append(v)
-                        elif kd == "handle":
-                            flat.append(int(v))
-                        else:
-                            flat.extend(np.asarray(v).reshape(-1).tolist())
-                    st.pack_into(buf, offset, *flat)
-            except struct.error as e:
-                raise KdslLaunchError(
-                    f"cannot pass the launch arguments to the kernel: {e}"
-                ) from None
 
-        return write
+def _flatten_handle(v: Any, out: list) -> None:
+    """A handle's one field."""
+    out.append(int(v))
+
+
+def _flatten_composite(v: Any, out: list) -> None:
+    """A vector's or matrix's fields, row-major."""
+    out.extend(np.asarray(v).reshape(-1).tolist())
 
 
 def _align(n: int, to: int = 16) -> int:

@@ -14,6 +14,7 @@ in bytes). An array on another GPU than the launch is refused.
 from __future__ import annotations
 
 import ctypes
+import functools
 import struct
 from collections.abc import Callable, Sequence
 from typing import Any
@@ -21,6 +22,7 @@ from typing import Any
 import numpy as np
 
 from kdsl.backends.cuda import ctypes_ as CT
+from kdsl.backends.param_writer import make_writer
 from kdsl.errors import KdslLaunchError
 from kdsl.ir import types as T
 
@@ -159,42 +161,17 @@ class Packer:
     def writer(self, indices: Sequence[int]) -> Callable[[Any, Sequence[Any]], None]:
         """A function writing new values of the by-value parameters ``indices`` (scalars,
         vectors, matrices, handles; ascending) into a buffer ``pack`` filled, in place:
-        ``write(buf, values)``, one value per index. The other parameters' bytes are left
-        as they are (consecutive parameters are written by one ``pack_into``, so only
-        the padding between them is rewritten)."""
+        ``write(buf, values)``, one value per index (``param_writer.make_writer``)."""
+        flatten: list = [None] * len(self.types)
         for i in indices:
-            if isinstance(self.types[i], T.ArrayType | T.StructType):
-                raise TypeError(f"parameter {i} is a {self.types[i]}, not a by-value parameter")
-        runs: list[tuple[int, struct.Struct, list, bool, int, int]] = []
-        k = 0
-        while k < len(indices):
-            lo = k
-            fmt, end = "<", self.offsets[indices[k]]
-            while k < len(indices) and (k == lo or indices[k] == indices[k - 1] + 1):
-                i = indices[k]
-                pad = self.offsets[i] - end
-                fmt += (f"{pad}x" if pad else "") + self.fields[i][0]
-                end = self.offsets[i] + self.fields[i][1]
-                k += 1
-            flat = [self.flatteners[i] for i in indices[lo:k]]
-            # Scalars and handles are one field each: their values need no flattening.
-            plain = all(isinstance(self.types[i], T.ScalarType | T.HandleType)
-                        for i in indices[lo:k])  # fmt: skip
-            runs.append((self.offsets[indices[lo]], struct.Struct(fmt), flat, plain, lo, k))
+            t = self.types[i]
+            if isinstance(t, T.ArrayType | T.StructType):
+                raise TypeError(f"parameter {i} is a {t}, not a by-value parameter")
+            if isinstance(t, T.VectorType | T.MatrixType):
+                flatten[i] = functools.partial(_flatten_composite, self.flatteners[i])
+        return make_writer(indices, self.offsets, self.fields, flatten)
 
-        def write(buf: Any, values: Sequence[Any]) -> None:
-            try:
-                for offset, st, flat, plain, lo, hi in runs:
-                    if plain:
-                        st.pack_into(buf, offset, *values[lo:hi])
-                    else:
-                        vals: list = []
-                        for f, v in zip(flat, values[lo:hi]):
-                            f(v, vals, -1)
-                        st.pack_into(buf, offset, *vals)
-            except struct.error as e:
-                raise KdslLaunchError(
-                    f"cannot pass the launch arguments to the kernel: {e}"
-                ) from None
 
-        return write
+def _flatten_composite(flattener: Callable[[Any, list, int], None], v: Any, out: list) -> None:
+    """A vector's or matrix's fields, by its ``_flattener`` (which needs no device)."""
+    flattener(v, out, -1)
