@@ -257,42 +257,54 @@ class LaunchReuse:
         held = same[2]
         if len(held) != len(args):
             return False
+        values = False
         for h, a in zip(held, args):
             if h is not a and (type(h) is not _REF or h() is not a):
+                if h is _NO:  # a patchable launch's by-value argument
+                    values = True
+                    continue
                 return same[4] is not None and self._repatch(args, same)
+        if values:  # the arrays are the held ones: write the by-value arguments
+            return self._rewrite(args, same[4])
         self.hits += 1
         self.misses = 0
         same[3]()
         return True
 
     def _repatch(self, args: Sequence[Any], same: tuple) -> bool:
-        """``relaunch`` when an argument is not the one held: run the patchable launch of
-        the held arrays with ``args``' by-value arguments, if the arrays are the held ones.
-
-        A patchable launch's record holds no by-value argument (``_remember``), so every
-        launch through it converts and writes them; an exact entry's record names the
-        key of its arrays, and the first such launch remembers the patchable one instead.
-        """
+        """``relaunch`` when an argument of an exact entry's launch is not the one held:
+        run the patchable launch of the held arrays (found by their key) with ``args``'
+        by-value arguments, if the arrays are the held ones, and remember it instead."""
         patch = same[4]
-        fresh = type(patch) is not _Patch  # the key of an exact entry's arrays
-        if fresh:
-            patch = self.patches.get(patch)
-            if patch is None or not patch.alive():  # dead: its key's ids may be reused
-                return False
-        if patch.thread != get_ident():
+        if type(patch) is _Patch:  # a patchable launch's record: another array
+            return False
+        patch = self.patches.get(patch)
+        if patch is None or not patch.alive():  # dead: its key's ids may be reused
             return False
         held = same[2]
         for i in self.array_at:
             if held[i]() is not args[i]:
                 return False
+        if not self._rewrite(args, patch):
+            return False
+        new = list(held)
+        for i in self.value_at:
+            new[i] = _NO
+        self.same = (same[0], same[1], tuple(new), patch.run, patch)
+        return True
+
+    def _rewrite(self, args: Sequence[Any], patch: _Patch) -> bool:
+        """Run ``patch`` with ``args``' by-value arguments (converted, then written), its
+        arrays being ``args``' (checked by the caller); False (nothing done) on a thread
+        that does not own it.
+
+        A patchable launch's record holds no by-value argument (``_remember``), so every
+        launch through it converts and writes them.
+        """
+        if patch.thread != get_ident():
+            return False
         convs = self.converters
-        values = [convs[i](args[i]) for i in self.value_at]  # may raise: nothing written
-        if fresh:
-            new = list(held)
-            for i in self.value_at:
-                new[i] = _NO
-            self.same = (same[0], same[1], tuple(new), patch.run, patch)
-        patch.write(values)
+        patch.write([convs[i](args[i]) for i in self.value_at])  # a bad value: nothing written
         self.hits += 1
         self.misses = 0
         patch.run()
