@@ -358,3 +358,13 @@ def test_cpu_packer_writer_matches_a_fresh_pack():
         packer.writer([5])
     with pytest.raises(wp.KdslLaunchError, match="cannot pass the launch arguments"):
         packer.writer([1])(buf, [1000])
+
+
+def test_every_kind_compiles_for_cuda_without_a_gpu():
+    """The cuda variants above need a GPU; NVRTC alone checks their kernel compiles."""
+    pytest.importorskip("cupy_backends.cuda.libs.nvrtc")
+    from kdsl.backends.cuda import BACKEND
+    from kdsl.compiler import lower
+
+    for kernel in (every_kind, advance, pull, put_vec, narrow):
+        assert ".entry" in lower(BACKEND, kernel.build_module(), "ptx", {"arch": "sm_90"})
