@@ -19,7 +19,7 @@ import numpy as np
 from kdsl import config
 from kdsl.compiler import adjoint_module
 from kdsl.errors import KdslError, KdslLaunchError, KdslRuntimeError
-from kdsl.ir import Module, Operation
+from kdsl.ir import Module
 from kdsl.ir import types as T
 from kdsl.ir.vjp import is_differentiable
 from kdsl.passes.adjoint.analysis import has_grad_arrays
@@ -35,7 +35,13 @@ _COUNT_ATTR = "_kdsl_counter"
 
 
 class DerivedKernel:
-    """A kernel-like object for the launch machinery: a kernel's adjoint or tape counter."""
+    """A kernel-like object for the launch machinery: a kernel's adjoint or tape counter.
+
+    Its module derives from the kernel's source alone, so it is found in the kernel
+    cache's source index like a kernel (``source_fingerprint``): a warm start restores
+    what launches need (``build_facts``) instead of running the frontend, the adjoint
+    pass and the pipelines.
+    """
 
     def __init__(self, kernel: Any, suffix: str, what: str) -> None:
         self.base = kernel
@@ -43,7 +49,7 @@ class DerivedKernel:
         self.name = f"{kernel.name} ({what})"
         self.module = getattr(kernel, "module", None)
         self.source_file = getattr(kernel, "source_file", None)
-        self._func: Operation | None = None
+        self._facts: dict[str, Any] | None = None
 
     @property
     def options(self) -> dict[str, Any]:
@@ -52,6 +58,17 @@ class DerivedKernel:
     @property
     def tid_ndim(self) -> int:
         return self.base.tid_ndim
+
+    @property
+    def fn(self) -> Any:
+        """The kernel's Python function (its source is this module's source)."""
+        return self.base.fn
+
+    def source_fingerprint(self, memo: Any = None) -> str | None:
+        """The kernel's fingerprint (``Kernel.source_fingerprint``): the derived module
+        is a function of it and of kdsl's code; the symbol (``key``) tells them apart."""
+        fingerprint = getattr(self.base, "source_fingerprint", None)
+        return None if fingerprint is None else fingerprint(memo)
 
     def build_module(self) -> Module:
         """The kernel's module, optimized, with only this derived function in it."""
@@ -63,29 +80,53 @@ class DerivedKernel:
             raise KdslError(f"kernel '{self.base.name}' has no {self.name}")
         func = module.get_func(self.key)
         args = func.regions[0].block.args
-        self._func = func
-        self._arg_names = [a.name_hint or f"arg{i}" for i, a in enumerate(args)]
-        self._arg_types = [a.type for a in args]
-        #: (name, type, whether the code uses it) of each parameter after the adjoints.
         n = len(self.base.arg_types)
-        self.hidden = [(a.name_hint, a.type, bool(a.uses)) for a in args[2 * n :]]
+        self._facts = {
+            "arg_names": [a.name_hint or f"arg{i}" for i, a in enumerate(args)],
+            "arg_types": [a.type for a in args],
+            # (name, type, whether the code uses it) of each parameter after the adjoints.
+            "hidden": [(a.name_hint, a.type, bool(a.uses)) for a in args[2 * n :]],
+            "tape_sites": func.attrs.get("tape_sites"),
+            "tape_slots": func.attrs.get("tape_slots"),
+        }
         return module
 
-    @property
-    def func(self) -> Operation:
-        if self._func is None:
+    def build_facts(self) -> dict[str, Any]:
+        """What the last ``build_module`` learnt that launches need."""
+        return dict(self._facts or {})
+
+    def restore_build_facts(self, facts: dict[str, Any]) -> None:
+        """Take ``build_facts`` of an earlier build of this same source (a cache hit)."""
+        if self._facts is None and facts:
+            self._facts = dict(facts)
+
+    def _fact(self, name: str) -> Any:
+        if self._facts is None:
             self.build_module()
-        return self._func  # type: ignore[return-value]
+        return self._facts[name]  # type: ignore[index]
 
     @property
     def arg_names(self) -> list[str]:
-        self.func  # noqa: B018 - builds on first use
-        return self._arg_names
+        return self._fact("arg_names")
 
     @property
     def arg_types(self) -> list[T.Type]:
-        self.func  # noqa: B018 - builds on first use
-        return self._arg_types
+        return self._fact("arg_types")
+
+    @property
+    def hidden(self) -> list[tuple[str, T.Type, bool]]:
+        """(name, type, used) of each parameter after the adjoints (tapes, flags)."""
+        return self._fact("hidden")
+
+    @property
+    def tape_sites(self) -> Any:
+        """Where each tape is written (the adjoint pass's ``tape_sites``)."""
+        return self._fact("tape_sites")
+
+    @property
+    def tape_slots(self) -> Any:
+        """Each loop's tape length (the adjoint pass's ``tape_slots``; -1: at run time)."""
+        return self._fact("tape_slots")
 
 
 def adjoint_kernel(kernel: Any) -> DerivedKernel:
@@ -339,14 +380,13 @@ def _hidden_args(kernel, adj, dims, primal, dev, backend, stream) -> tuple[list,
     from kdsl.runtime import alloc
     from kdsl.types import class_of
 
-    adj.func  # noqa: B018 - builds on first use
     if not adj.hidden:
         return [], None
     threads = int(np.prod(dims))
     used = [(name, t) for name, t, live in adj.hidden
             if live and name not in ("tape_status", "grad_owned")]  # fmt: skip
     slots = _tape_slots(kernel, adj, dims, primal, dev, backend, stream, used)
-    _check_budget(kernel, used, slots, adj.func.attrs["tape_sites"], threads)
+    _check_budget(kernel, used, slots, adj.tape_sites, threads)
     hidden: list[Any] = []
     status = None
     for name, t, live in adj.hidden:
@@ -393,7 +433,7 @@ def _tape_slots(kernel, adj, dims, primal, dev, backend, stream, used) -> list[i
     from kdsl.runtime import alloc
     from kdsl.types import class_of
 
-    slots = list(adj.func.attrs["tape_slots"])
+    slots = list(adj.tape_slots)
     read = {_tape_index(name) for name, _ in used}
     if all(s >= 0 or i not in read for i, s in enumerate(slots)):
         return [s if i in read else 0 for i, s in enumerate(slots)]

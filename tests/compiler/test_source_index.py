@@ -672,3 +672,75 @@ def test_cuda_warm_start_on_a_gpu_skips_frontend_and_passes(project):
     # kernels: that is not the kernel cache's doing, and the message says so).
     steps = warm["nvrtc_steps"]
     assert steps["allocated"] or not steps["launched"], f"the launch loaded NVRTC: {steps}"
+
+
+GRADIENT_KERNEL = """\
+import kdsl as wp
+
+SCALE = 2.0
+
+
+@wp.kernel
+def k(x: wp.array(dtype=float), loss: wp.array(dtype=float)):
+    i = wp.tid()
+    v = x[i]
+    for _ in range(x.shape[0]):  # a run-time trip count: a tape and a counting kernel
+        v = wp.sin(v)
+    wp.atomic_add(loss, 0, v * SCALE)
+"""
+
+GRADIENT_RUN = """\
+import json
+import kdsl as wp
+from kdsl.compiler import cache, source_index
+from kdsl.frontend.kernel import Kernel
+from kdsl.frontend.source import ParsedSource
+
+source_index.kdsl_code_digest = lambda: "pinned for the test"
+built, parsed = [], []
+_build, _parse = Kernel._build, ParsedSource.__init__
+def counting_build(self):
+    built.append(self.name)
+    return _build(self)
+def counting_parse(self, fn):
+    parsed.append(fn.__name__)
+    _parse(self, fn)
+Kernel._build, ParsedSource.__init__ = counting_build, counting_parse
+from kern import k
+
+x = wp.array([1.0, 2.0, 3.0], dtype=float, requires_grad=True)
+loss = wp.zeros(1, dtype=float, requires_grad=True)
+tape = wp.Tape()
+with tape:
+    wp.launch(k, 3, inputs=[x], outputs=[loss])
+tape.backward(loss=loss)
+print(json.dumps({"grad": x.grad.numpy().tolist(), "built": built, "parsed": parsed,
+                  "index": vars(source_index.STATS), "kernel_builds": cache.STATS.builds}))
+"""
+
+
+def _gradient(x: float, scale: float = 2.0, n: int = 3) -> float:
+    g = scale  # d/dx of scale * sin(sin(...sin(x)))
+    for _ in range(n):
+        g *= np.cos(x)
+        x = np.sin(x)
+    return g
+
+
+def test_cpu_a_kernels_adjoint_is_found_by_its_source_too(tmp_path):
+    (tmp_path / "kern.py").write_text(GRADIENT_KERNEL)
+    (tmp_path / "run.py").write_text(GRADIENT_RUN)
+    expected = [_gradient(x) for x in (1.0, 2.0, 3.0)]
+    cold = _run(tmp_path)
+    np.testing.assert_allclose(cold["grad"], expected, rtol=1e-5)
+    assert cold["built"] == ["k", "k", "k"]  # the kernel, its adjoint and its tape counter
+    assert cold["index"]["stored"] == 3
+    warm = _run(tmp_path)
+    np.testing.assert_allclose(warm["grad"], expected, rtol=1e-5)
+    assert warm["built"] == [] and warm["parsed"] == [] and warm["kernel_builds"] == 0
+    assert warm["index"]["hits"] == 3
+    _edit(tmp_path / "kern.py", "SCALE = 2.0", "SCALE = 5.0")
+    edited = _run(tmp_path)
+    np.testing.assert_allclose(edited["grad"], [_gradient(x, 5.0) for x in (1.0, 2.0, 3.0)],
+                               rtol=1e-5)  # fmt: skip
+    assert edited["built"] == ["k", "k", "k"] and edited["index"]["misses"] == 3
