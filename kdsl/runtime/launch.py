@@ -33,7 +33,7 @@ from kdsl.runtime.array import array
 from kdsl.runtime.descriptor import ArrayDescriptor
 from kdsl.runtime.device import Device, get_device
 from kdsl.runtime.graphs import state as _graphs
-from kdsl.runtime.launch_reuse import LaunchReuse
+from kdsl.runtime.launch_reuse import LaunchReuse, by_value_indices
 from kdsl.runtime.objects import foreign_id
 from kdsl.runtime.stream import current_stream
 
@@ -380,9 +380,11 @@ def _composite_converter(t: T.Type, slow: Any) -> Any:
 class Launch:
     """A recorded launch (``record_cmd=True``) that relaunches with little Python work.
 
-    The arguments are converted and packed once, when recorded and when a parameter
-    or the grid changes; ``launch()`` then goes straight to the backend's prepared
-    call (``Backend.prepare``). ``params`` are the converted arguments.
+    The arguments are converted and packed once, when recorded and when an array
+    parameter or the grid changes; ``launch()`` then goes straight to the backend's
+    prepared call. A new scalar, vector or matrix argument is written into the packed
+    form in place (``Backend.prepare_patchable``, where the backend has it; else the
+    launch is packed again, ``Backend.prepare``). ``params`` are the converted arguments.
     """
 
     kernel: Any
@@ -393,6 +395,15 @@ class Launch:
     device: Device
     stream: Any
     _run: Any = field(default=None, init=False, repr=False)
+    #: Writes the by-value arguments into ``_run``'s packed form (None: repack instead).
+    _write: Any = field(default=None, init=False, repr=False)
+    #: The arguments ``_run`` was packed with (its buffers stay alive while it may run).
+    _held: Any = field(default=None, init=False, repr=False)
+    #: The indices of the by-value parameters (``by_value_indices``).
+    _value_at: list = field(default_factory=list, init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        self._value_at = by_value_indices(self.kernel.arg_types)
 
     def set_param_at_index(self, index: int, value: Any) -> None:
         """Replace argument ``index`` (checked like ``launch`` checks it)."""
@@ -408,7 +419,15 @@ class Launch:
             )
         except KdslLaunchError as e:
             raise locate_launch_error(e, self.kernel) from None
-        self._run = None
+        write = self._write
+        if write is None or self._run is None or index not in self._value_at:
+            self._run = None
+            return
+        try:  # the packed form takes the new value in place
+            write([self.params[i] for i in self._value_at])
+        except KdslLaunchError as e:
+            self._run = None  # maybe half-written: pack afresh
+            raise locate_launch_error(e, self.kernel) from None
 
     def set_param_by_name(self, name: str, value: Any) -> None:
         """Replace the argument of parameter ``name``."""
@@ -436,10 +455,23 @@ class Launch:
             return
         run = self._run
         if run is None:
-            run = self._run = self.backend.prepare(
-                self.compiled, self.dims, self.params, self.stream
-            )
+            run = self._prepare()
         run()
+
+    def _prepare(self) -> Any:
+        """Pack the launch, patchable where the backend can make it so."""
+        made = None
+        if self._value_at:
+            made = self.backend.prepare_patchable(
+                self.compiled, self.dims, self.params, self.stream, self._value_at
+            )
+        if made is None:
+            self._write = self._held = None
+            self._run = self.backend.prepare(self.compiled, self.dims, self.params, self.stream)
+        else:
+            self._run, self._write = made
+            self._held = list(self.params)  # ``params`` is public: it may be reassigned
+        return self._run
 
 
 def _convert_one(kernel: Any, index: int, name: str, t: Any, value: Any, device: Device) -> Any:

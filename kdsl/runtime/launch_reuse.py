@@ -163,6 +163,12 @@ def _token(t: Any) -> Callable[[Any], Any] | None:
     return None
 
 
+def by_value_indices(arg_types: Sequence[Any]) -> list[int]:
+    """The indices of the parameters passed by value that a patchable launch rewrites:
+    scalars, vectors, matrices (quaternions, transforms) and handles."""
+    return [i for i, t in enumerate(arg_types) if _kind(t) == _BYTES]
+
+
 def _kind(t: T.Type) -> int | None:
     """How a converted argument of type ``t`` is keyed (None: not keyable)."""
     if isinstance(t, T.ArrayType):
@@ -215,7 +221,7 @@ class LaunchReuse:
         #: The indices of the array parameters, and of the by-value ones (scalars,
         #: vectors, matrices, handles: what a patchable launch writes in place).
         self.array_at = [i for i, k in enumerate(kinds) if k == _ARRAY]
-        self.value_at = [i for i, k in enumerate(kinds) if k == _BYTES]
+        self.value_at = by_value_indices(arg_types)
         #: The length of a key's array part (``key``): the key of its patchable launch.
         self.split = 2 + 3 * len(self.array_at)
         #: Key -> (run, weak references to its buffers, the stream it runs on).

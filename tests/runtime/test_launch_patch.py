@@ -368,3 +368,30 @@ def test_every_kind_compiles_for_cuda_without_a_gpu():
 
     for kernel in (every_kind, advance, pull, put_vec, narrow):
         assert ".entry" in lower(BACKEND, kernel.build_module(), "ptx", {"arch": "sm_90"})
+
+
+@pytest.mark.parametrize("where", DEVICES)
+def test_a_recorded_launch_takes_new_scalars_in_place(where):
+    dev, backend = where
+    x = wp.array(np.arange(4, dtype=np.float32), dtype=float, device=dev)
+    y = wp.zeros(4, dtype=float, device=dev)
+    cmd = wp.launch(scaled, 4, inputs=[1.0, x, y], device=dev, backend=backend, record_cmd=True)
+    cmd.launch()
+    run = cmd._run
+    for k in range(5):
+        t = 0.5 + k
+        cmd.set_param_by_name("t", t)
+        cmd.launch()
+        np.testing.assert_allclose(y.numpy(), np.arange(4) * t * t, rtol=1e-6)
+    if _prepares(where):  # written in place: the same packed launch
+        assert cmd._run is run
+    y2 = wp.zeros(4, dtype=float, device=dev)  # an array: packed afresh
+    cmd.set_param_at_index(2, y2)
+    cmd.launch()
+    np.testing.assert_allclose(y2.numpy(), np.arange(4) * 4.5**2, rtol=1e-6)
+    assert cmd._run is not run
+    with pytest.raises(wp.KdslLaunchError, match=r"argument 0 't'"):
+        cmd.set_param_at_index(0, "slow")
+    cmd.set_params([2.0, x, y2])
+    cmd.launch()
+    np.testing.assert_allclose(y2.numpy(), np.arange(4) * 4.0, rtol=1e-6)
