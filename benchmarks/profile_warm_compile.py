@@ -9,7 +9,9 @@ backend's support code once). The child runs bench_cuda's warm-compile script as
 (``suite.kdsl_impl.START_SCRIPT``: the n-body module, first launch to first result),
 or the spring-chain kernel of ``bench_warm_compile.py``, or the first step of every
 scene (``kdsl.scenes``: their kernels' first launches), with timers wrapped around
-the functions of the warm path (``time.perf_counter``, inclusive, summed over calls):
+the functions of the warm path (``time.perf_counter``, inclusive, summed over calls;
+``--clock thread``: ``time.thread_time``, the CPU time of the thread, which a loaded
+host does not inflate, though it leaves out waiting for the disk or the GPU):
 
 - ``launch (first)``: the first ``kdsl.launch`` of each kernel, everything included;
 - ``source parse``: reading and parsing kernels' and functions' sources (``inspect``,
@@ -24,7 +26,11 @@ the functions of the warm path (``time.perf_counter``, inclusive, summed over ca
   (``dlopen`` on cpu, ``cuModuleLoadData`` on cuda);
 - ``support``: the backend's support code (the cpu thread pool), once per process;
 - ``backend.launch``: the launch itself (packing the parameters, the kernel's run);
-- ``sync``: reading the result back (``array.numpy``).
+- ``sync``: reading the result back (``array.numpy``);
+- ``gc (gen N)``: the garbage collections that ran inside first launches (whichever
+  phase above they landed in): a generation-1 collection traverses the objects created
+  since the last one (most of ``import kdsl``'s), 2 to 5 ms here, and lands in the
+  first launch or after it depending on how many objects each phase allocated.
 
 On cuda the cubin is read in ``backend.load`` but loaded (``binary load``) at the first
 launch, inside ``backend.launch``. ``--no-bytecode`` runs a copy of kdsl without
@@ -61,13 +67,14 @@ REPO = Path(__file__).resolve().parents[1]
 #: Installed in the child before its kernels are defined: wraps the warm path's
 #: functions with inclusive timers and prints them (JSON, last line) at exit.
 TIMERS = r"""
-import atexit, json, time, sys
+import atexit, json, os, time, sys
 import kdsl
 from kdsl.compiler import cache as _cache, driver as _driver, source_index as _index
 from kdsl.frontend import kernel as _kernel
 from kdsl.runtime import launch as _launch, array as _array
 
 PHASES = {}
+CLOCK = time.thread_time if os.environ.get("KDSL_PHASE_CLOCK") == "thread" else time.perf_counter
 _DEPTH = {}
 
 def _wrap(owner, attr, name, pick=None):
@@ -79,11 +86,11 @@ def _wrap(owner, attr, name, pick=None):
         if label is None or _DEPTH.get(label):
             return fn(*a, **k)
         _DEPTH[label] = 1
-        t = time.perf_counter()
+        t = CLOCK()
         try:
             return fn(*a, **k)
         finally:
-            PHASES[label] = PHASES.get(label, 0.0) + time.perf_counter() - t
+            PHASES[label] = PHASES.get(label, 0.0) + CLOCK() - t
             _DEPTH[label] = 0
     setattr(owner, attr, timed)
 
@@ -126,16 +133,32 @@ def _plan_init(self, kernel, device, backend, *rest):
 _launch._Plan.__init__ = _plan_init
 
 _first = set()
+_in_first = [False]
 _real_launch = _launch.launch
 def _timed_launch(kernel, *a, **k):
     if id(kernel) in _first:
         return _real_launch(kernel, *a, **k)
     _first.add(id(kernel))
-    t = time.perf_counter()
+    t = CLOCK()
+    _in_first[0] = True
     try:
         return _real_launch(kernel, *a, **k)
     finally:
-        PHASES["launch (first)"] = PHASES.get("launch (first)", 0.0) + time.perf_counter() - t
+        _in_first[0] = False
+        PHASES["launch (first)"] = PHASES.get("launch (first)", 0.0) + CLOCK() - t
+kdsl.launch = _timed_launch
+
+import gc
+_gc_start = [0.0]
+def _gc_timer(phase, info):  # collections inside first launches, whichever phase pays
+    if not _in_first[0]:
+        return
+    if phase == "start":
+        _gc_start[0] = CLOCK()
+    else:
+        label = "gc (gen %d)" % min(info["generation"], 1) if info["generation"] < 2 else "gc (gen 2)"
+        PHASES[label] = PHASES.get(label, 0.0) + CLOCK() - _gc_start[0]
+gc.callbacks.append(_gc_timer)
 kdsl.launch = _timed_launch
 
 @atexit.register
@@ -189,7 +212,7 @@ ROWS = (
     "launch (first)", "source parse", "backend import", "compile_kernel", "source memo",
     "fingerprint", "source key", "code version", "index read", "unpickle", "backend.load",
     "target", "toolchain name", "kernel key", "binary read", "binary load", "launch facts",
-    "support", "backend.launch", "sync",
+    "support", "backend.launch", "sync", "gc (gen 0)", "gc (gen 1)", "gc (gen 2)",
 )  # fmt: skip
 INDENT = {
     "source memo": 1, "fingerprint": 1, "source key": 1, "code version": 2, "index read": 1,
@@ -245,6 +268,8 @@ def main() -> int:
         help="kdsl copied without __pycache__ and PYTHONDONTWRITEBYTECODE=1 (every "
         "module compiled from source in every process)",
     )  # fmt: skip
+    p.add_argument("--clock", choices=("wall", "thread"), default="wall",
+                   help="wall: time.perf_counter; thread: time.thread_time (CPU time)")  # fmt: skip
     p.add_argument("--repo", default="", help="the kdsl checkout to profile (default: this one)")
     p.add_argument("--against", default="",
                    help="another checkout (e.g. a worktree of an older commit), profiled "
@@ -259,6 +284,8 @@ def main() -> int:
         work = Path(tmp)
         envs = {label: _tree_env(work, label or "this", repo, args.no_bytecode)
                 for label, repo in trees}  # fmt: skip
+        for env in envs.values():
+            env["KDSL_PHASE_CLOCK"] = args.clock
         for kind in kinds:
             name = f"warm_{kind}.py"
             (work / name).write_text(_script(kind, args.device))
@@ -290,15 +317,16 @@ def main() -> int:
         cells = [f"{statistics.median(d['samples_s'][row]) * 1e3:.2f}" for d in data.values()]
         rows.append(["  " * INDENT.get(row, 0) + row, *cells])
     code = "no bytecode" if args.no_bytecode else "bytecode cached"
+    clock = "CPU" if args.clock == "thread" else "wall"
     print(f"warm compile phases on {args.device} ({code}): medians of {args.reps} fresh "
-          "processes, inclusive times [ms]")  # fmt: skip
+          f"processes, inclusive {clock} times [ms]")  # fmt: skip
     if args.against:
         print(f"before: {trees[0][1]}; after: {trees[1][1]}")
     print_table(headers, rows)
     for col, d in data.items():
         print(f"{col}: warm builds {d['warm_builds']} (must be 0), index hits {d['index_hits']}")
     meta = {**script_meta("profile_warm_compile.py"), "device": args.device,
-            "bytecode": not args.no_bytecode, "trees": {k: str(v) for k, v in trees},
+            "bytecode": not args.no_bytecode, "clock": args.clock, "trees": {k: str(v) for k, v in trees},
             "time": time.strftime("%Y-%m-%d %H:%M:%S")}  # fmt: skip
     save_json({"meta": meta, "results": data}, args.json)
     return 0
