@@ -6,10 +6,14 @@
 Each kernel runs over ``n`` float32 values in [-100, 100]; the time per element is the
 minimum over ``--reps`` launches (after one untimed launch: the compile). kdsl runs on
 ``--threads`` threads (default 1: Warp's cpu kernels run on one, and per-core speed is
-what the math lowering decides). Kernels: ``sin`` (``y = sin x``), ``sincos``
+what the math lowering decides). With one thread each, times are the calling thread's
+CPU time (``time.thread_time``: both run a one-thread launch on the calling thread),
+which other jobs on a shared host disturb less than the wall clock; with more, wall
+time. The last row is the ``ocean`` scene's step at the ``bench_scenes`` size (256^2
+points, 8 waves), in microseconds. Kernels: ``sin`` (``y = sin x``), ``sincos``
 (``y = sin x + cos x``), ``waves`` (eight ``sin``/``cos`` pairs of ``k_w x + p_w`` summed
 per element, the ocean scene's inner loop) and ``sin_f64`` (float64, for scale).
-Results go to benchmarks/results/trig_cpu.json.
+Results go to benchmarks/results/trig_cpu.json (``times``: ns per element, ``ocean_us``).
 """
 
 import importlib
@@ -60,7 +64,7 @@ def make_kernels(wp: ModuleType) -> SimpleNamespace:
     return SimpleNamespace(sin=sin, sincos=sincos, waves=waves, sin_f64=sin_f64)
 
 
-def ns_per_element(wp: ModuleType, kernel, n: int, reps: int, f64: bool, per: int) -> float:
+def ns_per_element(wp: ModuleType, kernel, n: int, reps: int, f64: bool, per: int, clock) -> float:
     """Minimum ns per element (``per`` sin/cos evaluations count as one element)."""
     rng = np.random.default_rng(0)
     dtype, npt = (wp.float64, np.float64) if f64 else (wp.float32, np.float32)
@@ -71,11 +75,30 @@ def ns_per_element(wp: ModuleType, kernel, n: int, reps: int, f64: bool, per: in
     wp.synchronize_device("cpu")
     best = float("inf")
     for _ in range(reps):
-        t = time.perf_counter()
+        t = clock()
         wp.launch(kernel, n, [x, k, y], device="cpu")
         wp.synchronize_device("cpu")
-        best = min(best, time.perf_counter() - t)
+        best = min(best, clock() - t)
     return 1e9 * best / (n * per)
+
+
+def ocean_step_us(binding: str, reps: int, clock) -> float:
+    """Minimum microseconds per ``ocean`` step (``bench_scenes.SIZES``), 5 steps a repetition."""
+    from bench_scenes import SIZES
+
+    from kdsl.scenes.measure import make_scene
+
+    integrator, params, dt, _ = SIZES["ocean"]
+    scene = make_scene("ocean", "f32", integrator, "cpu", binding=binding, **params)
+    scene.step(dt)
+    best = float("inf")
+    for _ in range(reps):
+        t = clock()
+        for _ in range(5):
+            scene.step(dt)
+        scene.wp.synchronize_device("cpu")
+        best = min(best, (clock() - t) / 5)
+    return 1e6 * best
 
 
 def main() -> int:
@@ -86,6 +109,7 @@ def main() -> int:
     parser.add_argument("--frameworks", default="kdsl,warp")
     args = parser.parse_args()
     os.environ["KDSL_CPU_THREADS"] = str(args.threads)  # read when kdsl's pool starts
+    clock = time.thread_time if args.threads == 1 else time.perf_counter
     frameworks = args.frameworks.split(",")
     found = {}
     for fw in frameworks:
@@ -96,17 +120,20 @@ def main() -> int:
         ks = make_kernels(wp)
         # waves: eight sin/cos pairs per element; report per pair.
         found[fw] = {name: ns_per_element(wp, getattr(ks, name), args.n, args.reps,
-                                          name == "sin_f64", 8 if name == "waves" else 1)
+                                          name == "sin_f64", 8 if name == "waves" else 1, clock)
                      for name in NAMES}  # fmt: skip
+        found[fw]["ocean_us"] = ocean_step_us(fw, args.reps, clock)
     print(f"{'kernel':10s}" + "".join(f"{fw + ' ns':>12s}" for fw in frameworks)
           + (f"{'warp/kdsl':>11s}" if {"kdsl", "warp"} <= set(frameworks) else ""))  # fmt: skip
-    for name in NAMES:
+    for name in (*NAMES, "ocean_us"):
         row = "".join(f"{found[fw][name]:>12.2f}" for fw in frameworks)
         if {"kdsl", "warp"} <= set(frameworks):
             row += f"{found['warp'][name] / found['kdsl'][name]:>11.2f}"
         print(f"{name:10s}{row}")
     result = {**harness.script_meta("bench_trig_cpu.py"), "n": args.n, "reps": args.reps,
-              "kdsl_cpu_threads": args.threads, "ns_per_element": found}  # fmt: skip
+              "kdsl_cpu_threads": args.threads,
+              "clock": "thread_time" if args.threads == 1 else "perf_counter",
+              "times": found}  # fmt: skip
     harness.save_json(result, args.json)
     return 0
 

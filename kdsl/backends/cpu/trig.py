@@ -21,9 +21,9 @@ integer arithmetic (``_reduce_large``); infinities and NaN give NaN there. Then
 ``sin r = r (1 + r^2 S(r^2))`` and ``cos r = 1 + r^2 C(r^2)`` on ``|r| <= pi/4``
 (``S``, ``C``: four coefficients each, near-minimax, ``tools/fit_sincos.py``;
 approximation error below 2^-32 relative) and the quadrant ``n mod 4`` picks and
-signs them. The float64 result is rounded once to float32: at most 0.503 ulp
-measured over every 1001st float32 (``tools/sincos_accuracy.py``), 0.56 for glibc's
-``sinf``. ``+-0`` and denormals come back exactly (``sin(-0) = -0``).
+signs them. The float64 result is rounded once to float32: at most 0.5032 ulp over
+every float32 with ``0.5 <= |x| < 2^20`` (``tools/sincos_accuracy.py``; glibc's
+``sinf``: 0.56). ``+-0`` and denormals come back exactly (``sin(-0) = -0``).
 
 No instruction of the function carries fast-math flags, in ``fast_math`` kernels too
 (``reassoc`` would undo the reduction); it only gets the kernel's fast-math function
