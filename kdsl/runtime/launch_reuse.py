@@ -281,16 +281,15 @@ class LaunchReuse:
         """``relaunch`` when an argument of an exact entry's launch is not the one held:
         run the patchable launch of the held arrays (found by their key) with ``args``'
         by-value arguments, if the arrays are the held ones, and remember it instead."""
-        patch = same[4]
-        if type(patch) is _Patch:  # a patchable launch's record: another array
-            return False
-        patch = self.patches.get(patch)
-        if patch is None or not patch.alive():  # dead: its key's ids may be reused
+        if type(same[4]) is _Patch or not self.patches:  # another array, or no patch yet
             return False
         held = same[2]
-        for i in self.array_at:
+        for i in self.array_at:  # before hashing the key: another array is the common case
             if held[i]() is not args[i]:
                 return False
+        patch = self.patches.get(same[4])
+        if patch is None or not patch.alive():  # dead: its key's ids may be reused
+            return False
         if not self._rewrite(args, patch):
             return False
         new = list(held)

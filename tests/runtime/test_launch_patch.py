@@ -395,3 +395,22 @@ def test_a_recorded_launch_takes_new_scalars_in_place(where):
     cmd.set_params([2.0, x, y2])
     cmd.launch()
     np.testing.assert_allclose(y2.numpy(), np.arange(4) * 4.0, rtol=1e-6)
+
+
+@pytest.mark.parametrize("where", DEVICES)
+def test_from_an_exact_entry_to_the_patchable_launch_and_back(where):
+    """A scalar changed after an exact entry's launch finds the arrays' patchable launch
+    (``relaunch``), and a recurring value finds its exact entry again (the general path:
+    the object-key table is emptied before each launch, as after an eviction)."""
+    dev = where[0]
+    a, b = wp.zeros(2, dtype=float, device=dev), wp.zeros(2, dtype=float, device=dev)
+    steps = [(a, 1.0), (a, 1.0), (a, 2.0), (b, 5.0), (a, 1.0), (a, 7.0), (a, 8.0), (a, 1.0)]
+    reuse = _reuse(set_first, where)
+    kinds = []
+    for k, (arr, t) in enumerate(steps):
+        reuse.known.clear()
+        _launch(set_first, 2, [t, arr], where)
+        assert arr.numpy().tolist()[0] == t, f"step {k}"
+        kinds.append(None if reuse.same is None else type(reuse.same[4]).__name__)
+    if _prepares(where):  # step 4 ran the exact entry of step 1, step 5 the patch
+        assert kinds[4] == "tuple" and kinds[5] == "_Patch" and kinds[7] == "_Patch"
