@@ -360,16 +360,6 @@ def test_cpu_packer_writer_matches_a_fresh_pack():
         packer.writer([1])(buf, [1000])
 
 
-def test_every_kind_compiles_for_cuda_without_a_gpu():
-    """The cuda variants above need a GPU; NVRTC alone checks their kernel compiles."""
-    pytest.importorskip("cupy_backends.cuda.libs.nvrtc")
-    from kdsl.backends.cuda import BACKEND
-    from kdsl.compiler import lower
-
-    for kernel in (every_kind, advance, pull, put_vec, narrow):
-        assert ".entry" in lower(BACKEND, kernel.build_module(), "ptx", {"arch": "sm_90"})
-
-
 @pytest.mark.parametrize("where", DEVICES)
 def test_a_recorded_launch_takes_new_scalars_in_place(where):
     dev, backend = where
@@ -414,3 +404,46 @@ def test_from_an_exact_entry_to_the_patchable_launch_and_back(where):
         kinds.append(None if reuse.same is None else type(reuse.same[4]).__name__)
     if _prepares(where):  # step 4 ran the exact entry of step 1, step 5 the patch
         assert kinds[4] == "tuple" and kinds[5] == "_Patch" and kinds[7] == "_Patch"
+
+
+@wp.struct
+class Gain:
+    k: float
+    data: wp.array(dtype=float)
+
+
+@wp.kernel
+def gained(g: Gain, t: float, out: wp.array(dtype=float)):
+    i = wp.tid()
+    out[i] = g.k * g.data[i] + t
+
+
+@pytest.mark.parametrize("where", DEVICES)
+def test_struct_parameters_with_changing_scalars(where):
+    """A struct parameter keeps plain launches off the reuse tables (its fields may be
+    reassigned in place); a recorded launch still takes a new scalar."""
+    dev = where[0]
+    g = Gain()
+    g.k = 2.0
+    g.data = wp.array(np.arange(3, dtype=np.float32), device=dev)
+    out = wp.zeros(3, dtype=float, device=dev)
+    for k in range(4):
+        g.k = float(k)  # in place: seen by every plain launch
+        _launch(gained, 3, [g, 0.5 * k, out], where)
+        np.testing.assert_allclose(out.numpy(), k * np.arange(3) + 0.5 * k)
+    assert not _reuse(gained, where).patches
+    cmd = wp.launch(gained, 3, inputs=[g, 0.0, out], device=dev, backend=where[1], record_cmd=True)
+    for k in range(3):
+        cmd.set_param_by_name("t", 10.0 + k)
+        cmd.launch()
+        np.testing.assert_allclose(out.numpy(), 3 * np.arange(3) + 10.0 + k)
+
+
+def test_every_kind_compiles_for_cuda_without_a_gpu():
+    """The cuda variants above need a GPU; NVRTC alone checks their kernel compiles."""
+    pytest.importorskip("cupy_backends.cuda.libs.nvrtc")
+    from kdsl.backends.cuda import BACKEND
+    from kdsl.compiler import lower
+
+    for kernel in (every_kind, advance, pull, put_vec, narrow, gained):
+        assert ".entry" in lower(BACKEND, kernel.build_module(), "ptx", {"arch": "sm_90"})
