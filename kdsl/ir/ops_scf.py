@@ -114,6 +114,10 @@ FOR = _define_structured(
     "  %y = arith.add %x, %x : f32\n  scf.yield %y\n}",
 )  # fmt: skip
 
+#: The ``scf.for`` attribute the ``block-cache`` pass sets (the tile length in elements);
+#: here so that a backend can read it without importing the pass.
+BLOCK_CACHE_ATTR = "block_cache"
+
 
 def _while_verify(op) -> None:
     carried = _types(op.operands)

@@ -46,12 +46,12 @@ from kdsl.ir import Module, Operation
 from kdsl.ir import types as T
 from kdsl.ir.core import BlockArgument, OpResult, Value
 from kdsl.ir.ops_mem import ARRAY_SHAPE, LOAD
-from kdsl.ir.ops_scf import FOR
+from kdsl.ir.ops_scf import BLOCK_CACHE_ATTR, FOR
 from kdsl.ir.rewrite import constant_of, may_write
 from kdsl.passes.manager import ModulePass
 
 #: The attribute that marks a loop; its value is the tile length in elements.
-ATTR = "block_cache"
+ATTR = BLOCK_CACHE_ATTR
 #: The default budget of shared memory for the tiles of one kernel, in bytes.
 MAX_BYTES = 16384
 

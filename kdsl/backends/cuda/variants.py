@@ -31,7 +31,7 @@ from dataclasses import dataclass
 from kdsl.ir import types as T
 from kdsl.ir.array_access import array_param_access, writes_only_params
 from kdsl.ir.core import Module
-from kdsl.passes.block_cache import ATTR as TILE_ATTR
+from kdsl.ir.ops_scf import BLOCK_CACHE_ATTR as TILE_ATTR
 
 #: Ops that reach an array parameter's elements (the fast entry narrows their offsets).
 _ACCESSES = frozenset({"kd.load", "kd.store", "kd.atomic_rmw", "kd.atomic_cas"})
