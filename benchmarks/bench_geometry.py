@@ -3,7 +3,7 @@
     python benchmarks/bench_geometry.py [--section bvh|mesh|marching_cubes|volume|hash_grid]
         [--boxes 200000] [--tris 200000] [--queries 1000000] [--mc-nodes 256]
         [--samples 10000000] [--stores 1000000] [--points 200000] [--neighbours 30]
-        [--grid-dim 128] [--reps 3] [--device cpu|cuda:0] [--json PATH]
+        [--grid-dim 128] [--reps 3] [--device cpu|cuda:0] [--cpu-seconds] [--json PATH]
 
 Each section is a function returning rows; ``main`` runs the sections asked for, prints
 one table per section and writes every row to benchmarks/results/geometry.json.
@@ -184,6 +184,8 @@ def main() -> None:
                    help="hash_grid: mean neighbours (sets the radius)")
     p.add_argument("--grid-dim", type=int, default=128, help="hash_grid: cells per axis")
     p.add_argument("--constructors", default="lbvh,median,sah")
+    p.add_argument("--cpu-seconds", action="store_true",
+                   help="mesh: time the CPU queries in process CPU seconds (per-core work)")  # fmt: skip
     p.add_argument("--reps", type=int, default=3)
     p.add_argument("--device", default="cpu")
     p.add_argument("--json", type=Path, default=RESULTS)

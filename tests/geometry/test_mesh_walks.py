@@ -1,0 +1,126 @@
+"""The mesh queries' leaf-to-leaf walks (each query walks to the next leaf it must
+test, then tests that leaf's faces) on trees deep enough to exercise them: a bumped
+icosphere of 1,280 faces (5,120 off the interpreter) with leaves of 1 and 4 faces,
+points inside (the centre, where every face is nearly as close as the closest),
+outside and on the shell, against a float64 brute force; rays on a group's subtree
+against the brute force over that group's faces."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import kdsl as wp
+from tests.geometry.mesh_reference import closest_distances, icosphere, ray_hits, winding_numbers
+
+BACKENDS = [
+    "interp",
+    "cpu",
+    pytest.param("cuda", marks=pytest.mark.skipif(not wp.is_cuda_available(), reason="no GPU")),
+]
+V3 = wp.vec3
+
+
+@wp.kernel
+def points_kernel(
+    mesh: wp.uint64, xs: wp.array(dtype=V3), near: wp.array(dtype=V3),
+    signed: wp.array(dtype=float), far: wp.array(dtype=V3),
+):  # fmt: skip
+    i = wp.tid()
+    q = wp.mesh_query_point_no_sign(mesh, xs[i], 1.0e6)
+    near[i] = wp.mesh_eval_position(mesh, q.face, q.u, q.v)
+    s = wp.mesh_query_point_sign_normal(mesh, xs[i], 1.0e6)
+    signed[i] = s.sign
+    f = wp.mesh_query_furthest_point_no_sign(mesh, xs[i], 0.0)
+    far[i] = wp.mesh_eval_position(mesh, f.face, f.u, f.v)
+
+
+@wp.kernel
+def rays_kernel(
+    mesh: wp.uint64, root: int, starts: wp.array(dtype=V3), dirs: wp.array(dtype=V3),
+    t: wp.array(dtype=float), face: wp.array(dtype=int), anyhit: wp.array(dtype=int),
+    count: wp.array(dtype=int),
+):  # fmt: skip
+    i = wp.tid()
+    h = wp.mesh_query_ray(mesh, starts[i], dirs[i], 1.0e6, root)
+    face[i] = -1
+    if h.result:
+        t[i] = h.t
+        face[i] = h.face
+    anyhit[i] = int(wp.mesh_query_ray_anyhit(mesh, starts[i], dirs[i], 1.0e6, root))
+    count[i] = wp.mesh_query_ray_count_intersections(mesh, starts[i], dirs[i], root)
+
+
+@wp.kernel
+def group_root_kernel(mesh: wp.uint64, group: int, out: wp.array(dtype=int)):
+    out[0] = wp.mesh_get_group_root(mesh, group)
+
+
+def _device(backend: str) -> str:
+    return "cuda" if backend == "cuda" else "cpu"
+
+
+def _shell(backend: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The mesh and the query points: the centre, then points inside, near the shell
+    and outside."""
+    pts, faces = icosphere(3 if backend == "interp" else 4, bumps=0.05, seed=4)
+    rng = np.random.default_rng(5)
+    n = 6 if backend == "interp" else 40
+    d = rng.normal(size=(n, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    radii = np.resize([0.3, 0.97, 1.02, 1.6], n)
+    xs = np.vstack([np.zeros((1, 3)), d * radii[:, None]]).astype(np.float32)
+    return pts, faces, xs
+
+
+@pytest.mark.parametrize("leaf_size", [1, 4])
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_point_walks_match_brute_force(backend, leaf_size):
+    pts, faces, xs = _shell(backend)
+    dev = _device(backend)
+    mesh = wp.Mesh(wp.array(pts, dtype=V3, device=dev), wp.array(faces, dtype=wp.int32, device=dev),
+                   bvh_leaf_size=leaf_size)  # fmt: skip
+    n = len(xs)
+    near, signed, far = (wp.zeros(n, dtype=t, device=dev) for t in (V3, float, V3))
+    wp.launch(points_kernel, dim=n, inputs=[mesh.id, wp.array(xs, dtype=V3, device=dev), near,
+                                            signed, far], backend=backend, device=dev)  # fmt: skip
+    np.testing.assert_allclose(
+        np.linalg.norm(near.numpy() - xs, axis=1), closest_distances(pts, faces, xs),
+        rtol=1e-5, atol=1e-6,
+    )  # fmt: skip
+    inside = winding_numbers(pts, faces, xs) > 0.5
+    np.testing.assert_array_equal(signed.numpy() < 0, inside)
+    furthest = np.linalg.norm(pts[None].astype(np.float64) - xs[:, None], axis=2).max(1)
+    np.testing.assert_allclose(np.linalg.norm(far.numpy() - xs, axis=1), furthest, rtol=1e-5)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_ray_walks_on_a_group_subtree_match_brute_force(backend):
+    pts, faces, xs = _shell(backend)
+    dev = _device(backend)
+    groups = (np.arange(len(faces)) % 3 == 0).astype(np.int32)  # group 1: every third face
+    mesh = wp.Mesh(wp.array(pts, dtype=V3, device=dev), wp.array(faces, dtype=wp.int32, device=dev),
+                   groups=wp.array(groups, dtype=wp.int32, device=dev), bvh_leaf_size=2)  # fmt: skip
+    rng = np.random.default_rng(6)
+    dirs = rng.normal(size=xs.shape).astype(np.float32)
+    n = len(xs)
+    for group in (0, 1):
+        root = wp.zeros(1, dtype=int, device=dev)
+        wp.launch(group_root_kernel, dim=1, inputs=[mesh.id, group, root], backend=backend,
+                  device=dev)  # fmt: skip
+        t, face, anyhit, count = (wp.full(n, v, dtype=int if v == -1 else float, device=dev)
+                                  for v in (np.inf, -1, -1, -1))  # fmt: skip
+        inputs = [mesh.id, int(root.numpy()[0]), wp.array(xs, dtype=V3, device=dev),
+                  wp.array(dirs, dtype=V3, device=dev), t, face, anyhit, count]  # fmt: skip
+        wp.launch(rays_kernel, dim=n, inputs=inputs, backend=backend, device=dev)
+        t, face, anyhit, count = (a.numpy() for a in (t, face, anyhit, count))
+        mine = np.flatnonzero(groups == group)
+        for i in range(n):
+            ref = ray_hits(pts, faces[mine], xs[i], dirs[i])
+            hit = np.isfinite(ref)
+            assert count[i] == hit.sum() and anyhit[i] == hit.any(), (group, i)
+            if hit.any():
+                assert face[i] in mine, (group, i, face[i])
+                np.testing.assert_allclose(t[i], ref.min(), rtol=1e-5)
+            else:
+                assert face[i] == -1
