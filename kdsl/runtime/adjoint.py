@@ -88,6 +88,7 @@ class DerivedKernel:
             "hidden": [(a.name_hint, a.type, bool(a.uses)) for a in args[2 * n :]],
             "tape_sites": func.attrs.get("tape_sites"),
             "tape_slots": func.attrs.get("tape_slots"),
+            "base": self.base.build_facts(),  # the kernel was built too: its tid_ndim
         }
         return module
 
@@ -99,6 +100,7 @@ class DerivedKernel:
         """Take ``build_facts`` of an earlier build of this same source (a cache hit)."""
         if self._facts is None and facts:
             self._facts = dict(facts)
+            self.base.restore_build_facts(facts["base"])  # an adjoint launched alone
 
     def _fact(self, name: str) -> Any:
         if self._facts is None:
