@@ -57,6 +57,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from bench_warm_compile import KERNEL
 from suite.harness import print_table, save_json, script_meta, script_parser
 from suite.kdsl_impl import START_SCRIPT
 from suite.workloads import START_BODIES
@@ -168,27 +169,11 @@ def _report():
                       "builds": cache.STATS.builds, "disk_hits": cache.STATS.disk_hits}))
 """
 
-SPRING = """
+#: bench_warm_compile's spring-chain kernel, launched once.
+SPRING = (
+    KERNEL
+    + """
 import numpy as np
-import kdsl as wp
-
-GRAVITY = wp.constant(9.8)
-
-
-@wp.func
-def spring(d: wp.vec3, stiffness: float):
-    n = wp.length(d)
-    return d * (stiffness * (n - 1.0) / wp.max(n, 1.0e-6))
-
-
-@wp.kernel
-def step(x: wp.array(dtype=wp.vec3), v: wp.array(dtype=wp.vec3), dt: float):
-    i = wp.tid()
-    f = wp.vec3(0.0, -GRAVITY, 0.0)
-    if i > 0:
-        f = f - spring(x[i] - x[i - 1], 50.0)
-    v[i] = v[i] + f * dt
-    x[i] = x[i] + v[i] * dt
 
 n = 256
 x = wp.from_numpy(np.arange(3 * n, dtype=np.float32).reshape(n, 3), dtype=wp.vec3,
@@ -197,6 +182,7 @@ v = wp.zeros(n, dtype=wp.vec3, device="{device}")
 wp.launch(step, dim=n, inputs=[x, v, 0.01], device="{device}")
 x.numpy()
 """
+)
 
 SCENES = """
 import kdsl
