@@ -666,7 +666,7 @@ def test_cuda_warm_start_on_a_gpu_skips_frontend_and_passes(project):
     assert cold["out"] == _expected() and cold["built"] == ["k"]
     warm = _run(project, "cuda:0")
     assert warm["out"] == _expected() and warm["built"] == [] and warm["index"]["hits"] == 1
-    assert warm["kernel_builds"] == 0
+    assert warm["kernel_builds"] == 0 and warm["parsed"] == []
     assert [m for m in warm["new_modules"] if m.startswith("kdsl.passes.")] == []
     # The compile and launch load no NVRTC (CuPy may have loaded it before, for its own
     # kernels: that is not the kernel cache's doing, and the message says so).
