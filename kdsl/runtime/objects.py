@@ -151,7 +151,7 @@ class ObjectRecord:
     def __init__(self, owner: Any, t: T.StructType, kind: str, device: Any) -> None:
         self.type, self.kind = t, kind
         self.device = get_device(device)
-        size = record_dtype(t).itemsize
+        size = len(_packer(t)[0])  # (record_dtype(t).itemsize, without hashing t)
         with _lock:
             self.id = _table(self.device).allocate(size)
             _owners[self.id] = (weakref.ref(owner), kind, self.device.alias)
