@@ -326,6 +326,12 @@ def aot_directory(directory: Path, build: bool) -> Iterator[None]:
         _aot.reset(token)
 
 
+def loading_aot_directory() -> bool:
+    """True inside ``aot_directory(..., build=False)``: the directory is only read."""
+    aot = _aot.get()
+    return aot is not None and not aot.build
+
+
 @contextlib.contextmanager
 def outside_aot_directory() -> Iterator[None]:
     """Inside the block the disk layer is the kernel cache again, even within

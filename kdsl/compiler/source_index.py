@@ -205,9 +205,10 @@ def load_memo(fn: Any) -> SourceMemo:
 
 
 def store_memo(fn: Any, memo: SourceMemo) -> None:
-    """Write ``memo`` as the source memo of the kernel function ``fn`` (best effort)."""
+    """Write ``memo`` as the source memo of the kernel function ``fn`` (best effort; not
+    into an ahead-of-time directory being loaded, which is only read)."""
     disk = _index_cache(kernel_cache.MEMO_SUFFIX)
-    if disk is not None:
+    if disk is not None and not kernel_cache.loading_aot_directory():
         disk.store(memo_key(fn), json.dumps(memo.as_json()).encode())
 
 

@@ -48,12 +48,18 @@ def test_compile_then_load_in_a_fresh_process(tmp_path):
                               f"module_dir={str(out)!r})))", tmp_path / "cache1")  # fmt: skip
     assert compiled.returncode == 0, compiled.stderr
     assert int(compiled.stdout) == 1 and len(list(out.glob("*.kobj"))) == 1
-    # A fresh process with an empty kernel cache: everything comes from the directory.
+    # A fresh process with an empty kernel cache: everything comes from the directory,
+    # which loading only reads (the edit below makes the source memo stale: it is not
+    # rewritten there).
+    with open(tmp_path / "aot_kernels.py", "a") as f:
+        f.write("# a comment added after compiling\n")
+    files = {p.name: p.stat().st_mtime_ns for p in out.iterdir()}
     loaded = _run(tmp_path, LOAD.replace("DIR", repr(str(out))), tmp_path / "cache2")
     assert loaded.returncode == 0, loaded.stderr
     result = json.loads(loaded.stdout)
     assert result == {"y": [3.0, 3.0, 3.0], "builds": 0, "disk_hits": 1}
     assert not (tmp_path / "cache2").exists() or not list((tmp_path / "cache2").glob("*.kobj"))
+    assert {p.name: p.stat().st_mtime_ns for p in out.iterdir()} == files
 
 
 @wp.kernel
