@@ -690,7 +690,7 @@ def k(x: wp.array(dtype=float), loss: wp.array(dtype=float)):
 """
 
 GRADIENT_RUN = """\
-import json
+import json, sys
 import kdsl as wp
 from kdsl.compiler import cache, source_index
 from kdsl.frontend.kernel import Kernel
@@ -708,11 +708,12 @@ def counting_parse(self, fn):
 Kernel._build, ParsedSource.__init__ = counting_build, counting_parse
 from kern import k
 
-x = wp.array([1.0, 2.0, 3.0], dtype=float, requires_grad=True)
-loss = wp.zeros(1, dtype=float, requires_grad=True)
+device = sys.argv[1]
+x = wp.array([1.0, 2.0, 3.0], dtype=float, requires_grad=True, device=device)
+loss = wp.zeros(1, dtype=float, requires_grad=True, device=device)
 tape = wp.Tape()
 with tape:
-    wp.launch(k, 3, inputs=[x], outputs=[loss])
+    wp.launch(k, 3, inputs=[x], outputs=[loss], device=device)
 tape.backward(loss=loss)
 print(json.dumps({"grad": x.grad.numpy().tolist(), "built": built, "parsed": parsed,
                   "index": vars(source_index.STATS), "kernel_builds": cache.STATS.builds}))
@@ -727,20 +728,24 @@ def _gradient(x: float, scale: float = 2.0, n: int = 3) -> float:
     return g
 
 
-def test_cpu_a_kernels_adjoint_is_found_by_its_source_too(tmp_path):
+@pytest.mark.parametrize(
+    "device",
+    ["cpu", pytest.param("cuda:0", marks=pytest.mark.skipif(not _has_gpu(), reason="no GPU"))],
+)
+def test_a_kernels_adjoint_is_found_by_its_source_too(tmp_path, device):
     (tmp_path / "kern.py").write_text(GRADIENT_KERNEL)
     (tmp_path / "run.py").write_text(GRADIENT_RUN)
     expected = [_gradient(x) for x in (1.0, 2.0, 3.0)]
-    cold = _run(tmp_path)
+    cold = _run(tmp_path, device)
     np.testing.assert_allclose(cold["grad"], expected, rtol=1e-5)
     assert cold["built"] == ["k", "k", "k"]  # the kernel, its adjoint and its tape counter
     assert cold["index"]["stored"] == 3
-    warm = _run(tmp_path)
+    warm = _run(tmp_path, device)
     np.testing.assert_allclose(warm["grad"], expected, rtol=1e-5)
     assert warm["built"] == [] and warm["parsed"] == [] and warm["kernel_builds"] == 0
     assert warm["index"]["hits"] == 3
     _edit(tmp_path / "kern.py", "SCALE = 2.0", "SCALE = 5.0")
-    edited = _run(tmp_path)
+    edited = _run(tmp_path, device)
     np.testing.assert_allclose(edited["grad"], [_gradient(x, 5.0) for x in (1.0, 2.0, 3.0)],
                                rtol=1e-5)  # fmt: skip
     assert edited["built"] == ["k", "k", "k"] and edited["index"]["misses"] == 3
