@@ -56,6 +56,7 @@ from kdsl.runtime.array import array
 from kdsl.runtime.launch import Launch, launch
 from kdsl.stdlib.hash_grid import hash_grid_cell, hash_grid_cell_coord
 from kdsl.types import float32, int32, uint64, vec3
+from kdsl.utils.merge_sort import MergeSortKeys
 from kdsl.utils.sort import SortKeys
 
 #: The index of the inverse cell width among each build's first kernel's parameters.
@@ -322,17 +323,21 @@ class SortBuild(_Build):
         super().__init__(device, dims)
         self.cell_starts = zeros(self.num_cells, dtype=int32, device=device)
         self.cell_ends = zeros(self.num_cells, dtype=int32, device=device)
-        self.keys = empty(0, dtype=uint64, device=device)
+        #: Sorted by the kdsl merge sort (then, on a GPU, one graph from a rebuild on),
+        #: with scratch keys after the keys, or by ``SortKeys``.
+        self.kernel_sort = kernel_sort_on(device)
+        self.keys = self._scratch = empty(0, dtype=uint64, device=device)
 
     def _clear(self) -> None:
         self.cell_starts.zero_()
         self.cell_ends.zero_()
 
     def _grow(self, n: int) -> None:
-        keys = empty(n, dtype=uint64, device=self.device)
+        block = empty(2 * n if self.kernel_sort else n, dtype=uint64, device=self.device)
+        keys = block[:n]
         if self.built:  # the next build empties the buckets they name
             copy(keys, self.keys, count=self.built)
-        self.keys = keys
+        self.keys, self._scratch = keys, block[n:]
 
     def _prepare(self, points: array, n: int, inv: np.float32) -> _Steps:
         tables = [self.cell_starts, self.cell_ends]
@@ -342,8 +347,11 @@ class SortBuild(_Build):
         steps: list[Callable[[], None]] = [first.launch]
         if n:
             ranges = self._launch(_bucket_ranges, n, [keys, n, self.point_ids, *tables])
-            steps += [SortKeys(keys[:n]), ranges.launch]
-        return _Steps(points, n, emptied, inv, first, steps)
+            sort = (MergeSortKeys(keys[:n], self._scratch[:n]).steps if self.kernel_sort
+                    else [SortKeys(keys[:n])])  # fmt: skip
+            steps += [*sort, ranges.launch]
+        graphed = self.kernel_sort and graphs_on(self.device)
+        return _Steps(points, n, emptied, inv, first, steps, graphed)
 
 
 class CountBuild(_Build):
@@ -386,6 +394,12 @@ def builder(device: Any, dims: tuple[int, int, int]) -> _Build:
     """The build a grid on ``device`` uses: the counting sort on a GPU, the sort of keys
     on the CPU (measured there: ``docs/performance.md``)."""
     return CountBuild(device, dims) if counting_sort_on(device) else SortBuild(device, dims)
+
+
+def kernel_sort_on(device: Any) -> bool:
+    """Whether the sort build on ``device`` sorts with the kdsl merge sort (a GPU's:
+    no host synchronization, one graph) rather than ``SortKeys`` (NumPy's on the CPU)."""
+    return bool(device.is_cuda)
 
 
 def counting_sort_on(device: Any) -> bool:

@@ -578,7 +578,7 @@ class LbvhBuild:
         """Build the tree (again) from the boxes' current values.
 
         With the kdsl sort (``device_sort_on``), the first run still sorts with
-        ``SortKeys`` (CuPy's sort on a GPU: one call, where the kdsl sort's fifteen
+        ``SortKeys`` (CuPy's sort on a GPU: one call, where the kdsl sort's sixteen
         launches for 200k boxes would each cost a preparation and a first packing, which
         a build made once never earns back); the second prepares the kdsl sort and runs
         every step as one captured graph from then on (``graph_steps``). Both sorts

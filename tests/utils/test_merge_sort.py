@@ -54,6 +54,7 @@ def test_kernels_sort_on_the_interpreter():
 
 def test_launch_count_is_one_chunk_sort_and_the_merges():
     assert [merge_passes(n, 16) for n in (1, 16, 17, 32, 33, 200_000)] == [0, 0, 1, 1, 2, 14]
+    assert merge_passes(200_000, 8) == 15
     n = 200_000
     sort = MergeSortKeys(wp.empty(n, dtype=wp.uint64), wp.empty(n, dtype=wp.uint64))
     assert len(sort.steps) == 1 + merge_passes(n)
