@@ -541,6 +541,7 @@ def nvrtc_mapped():
     maps = open("/proc/self/maps").read() if os.path.exists("/proc/self/maps") else ""
     return "libnvrtc" in maps
 
+CODEGEN = ("kdsl.backends.cpu.lower", "kdsl.backends.cuda.lower", "kdsl.backends.cuda.ops")
 steps = {}
 if device == "cuda-compile":  # no GPU needed: compiled for sm_90, never launched
     from kdsl.backends.cuda import BACKEND
@@ -558,6 +559,7 @@ print(json.dumps({
     "out": out, "built": built, "parsed": parsed, "index": vars(source_index.STATS),
     "kernel_builds": cache.STATS.builds, "new_modules": new,
     "nvrtc_mapped": nvrtc_mapped(), "nvrtc_steps": steps,
+    "codegen_imported": sorted(m for m in sys.modules if m in CODEGEN),
 }))
 """
 
@@ -606,6 +608,7 @@ def test_cpu_warm_start_skips_frontend_passes_and_llvmlite(project):
     assert _lowering_modules(warm["new_modules"]) == []
     assert sorted(cold["parsed"]) == ["k", "weigh"]
     assert warm["parsed"] == []  # the source memo: no source read or parsed
+    assert warm["codegen_imported"] == []  # nor the code generator imported
 
 
 @pytest.mark.parametrize(
@@ -646,6 +649,7 @@ def test_cuda_warm_compile_skips_frontend_passes_and_nvrtc(project):
     assert warm["out"] == [True] and warm["built"] == [] and warm["index"]["hits"] == 1
     assert warm["kernel_builds"] == 0 and not warm["nvrtc_mapped"]
     assert _lowering_modules(warm["new_modules"]) == [] and warm["parsed"] == []
+    assert warm["codegen_imported"] == []  # the cuda backend names its entry without it
     _edit(project / "helpers.py", "SCALE = 2.0", "SCALE = 5.0")
     edited = _run(project, "cuda-compile")
     assert edited["built"] == ["k"] and edited["index"]["misses"] == 1

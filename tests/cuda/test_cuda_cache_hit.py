@@ -11,8 +11,7 @@ import pytest
 
 pytest.importorskip("cupy_backends.cuda.libs.nvrtc")
 
-from kdsl.backends.cuda import BACKEND, nvrtc
-from kdsl.backends.cuda import backend as cuda_backend
+from kdsl.backends.cuda import BACKEND, lower, nvrtc
 from kdsl.backends.cuda.lower import entry_name, generate
 from kdsl.compiler import cache, compile_kernel
 from kdsl.passes import DEFAULT_PIPELINE, run_pipeline
@@ -33,7 +32,7 @@ def test_a_cache_hit_neither_lowers_nor_compiles(tmp_path, monkeypatch):
     cold.payload.cubin("sm_90")
     assert cache.STATS.builds >= 1
     cache.MEMORY.clear()  # a fresh process: only the disk layer has the cubin
-    monkeypatch.setattr(cuda_backend, "generate", _refuse)
+    monkeypatch.setattr(lower, "generate", _refuse)
     monkeypatch.setattr(nvrtc, "compile_source", _refuse)
     hits = cache.STATS.disk_hits
     warm = compile_kernel(BACKEND, scale_add, options=options)

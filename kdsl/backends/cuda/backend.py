@@ -26,7 +26,7 @@ from kdsl.backends.base import (
 from kdsl.backends.cuda import nvrtc
 from kdsl.backends.cuda.devices import device_count
 from kdsl.backends.cuda.geometry import Geometry, fast_geometry, linear_geometry
-from kdsl.backends.cuda.lower import entry_name, fast_entry_name, generate, kernel_names, tid_ndims
+from kdsl.backends.cuda.names import entry_name, fast_entry_name, kernel_names, tid_ndims
 from kdsl.backends.cuda.params import Packer
 from kdsl.backends.cuda.variants import FastPlan, fast_plan
 from kdsl.errors import KdslError
@@ -142,6 +142,8 @@ class CudaBackend(Backend):
 
     def emit(self, module: Module, stage: str, options: dict[str, Any], checked: bool) -> str:
         """The module at ``stage``. "cuda-c" needs no GPU; "ptx" needs NVRTC only."""
+        from kdsl.backends.cuda.lower import generate
+
         src = generate(module, kernel_names(module), debug=checked).text
         if stage == "cuda-c":
             return src
@@ -279,7 +281,9 @@ def _ignore(*_: Any) -> None:
 def _source(job: Job) -> Any:
     """The CUDA C of ``job``'s kernel, generated once per job."""
     gen = job.notes.get("cuda-c")
-    if gen is None:
+    if gen is None:  # the code generator is imported here: a cache hit never needs it
+        from kdsl.backends.cuda.lower import generate
+
         gen = job.notes["cuda-c"] = generate(job.module, [job.symbol], debug=job.checked)
     return gen
 

@@ -11,7 +11,7 @@ import functools
 from collections.abc import Sequence
 from typing import Any
 
-from kdsl.backends.cuda.lower import BLOCK
+from kdsl.backends.cuda.names import BLOCK
 from kdsl.backends.cuda.variants import FastPlan
 
 #: The largest byte offset (and span) a 32-bit offset holds.

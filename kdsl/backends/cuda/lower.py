@@ -29,16 +29,16 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from kdsl.backends.cuda import ctypes_ as CT
 from kdsl.backends.cuda.emitter import FuncEmitter, Source
+from kdsl.backends.cuda.names import BLOCK as BLOCK  # re-exported: the names a hit needs
+from kdsl.backends.cuda.names import UNIT_NAME as UNIT_NAME
+from kdsl.backends.cuda.names import entry_name as entry_name
+from kdsl.backends.cuda.names import fast_entry_name as fast_entry_name
+from kdsl.backends.cuda.names import kernel_names as kernel_names
+from kdsl.backends.cuda.names import tid_ndims as tid_ndims
 from kdsl.backends.cuda.variants import FastPlan, fast_plan
 from kdsl.errors import KdslCapabilityError
 from kdsl.ir.core import Loc, Module, Operation
-
-#: Threads per block.
-BLOCK = 256
-#: The name NVRTC gives the generated unit (and the ``#line`` directives use for it).
-UNIT_NAME = "kdsl_module.cu"
 
 _GRID = "struct kd_grid { unsigned int n; unsigned int dim[4]; };"
 
@@ -52,27 +52,6 @@ class CudaSource:
     entries: dict[str, str]
     uses_f16: bool = False
     fast_entries: dict[str, str] = field(default_factory=dict)
-
-
-def tid_ndims(func: Operation) -> set[int]:
-    """The ``ndim`` of every ``kd.tid`` in ``func``."""
-    return {op.attrs["ndim"] for op in func.walk() if op.name == "kd.tid"}
-
-
-def kernel_names(module: Module) -> list[str]:
-    """Symbols of the kernels of ``module``."""
-    return [f.attrs["sym_name"] for f in module.funcs if f.attrs.get("kind") == "kernel"]
-
-
-def entry_name(symbol: str) -> str:
-    """The C name ``generate(module, [symbol])`` gives kernel ``symbol``: known without
-    generating, so a kernel whose cubin comes from the cache is never lowered."""
-    return f"k_{CT.sanitize(symbol)}_0"
-
-
-def fast_entry_name(symbol: str) -> str:
-    """The C name of kernel ``symbol``'s fast entry (``variants``), where it has one."""
-    return entry_name(symbol) + "_fast"
 
 
 def generate(module: Module, kernels: list[str], debug: bool = False) -> CudaSource:
