@@ -1,8 +1,8 @@
 """``kdsl.HashGrid``: points bucketed into a wrapped grid of cells, queried from kernels.
 
 The grid's tables are built on its device by ``kdsl.geometry.hash_grid_build`` (a sort
-of unique keys on the CPU, a counting sort on a GPU; both kdsl kernels, no read back to
-the host, buffers kept between builds); the queries are kernel code in
+of unique keys: NumPy's sort on the CPU, the kdsl merge sort on a GPU; kdsl kernels, no
+read back to the host, buffers kept between builds); the queries are kernel code in
 ``kdsl.stdlib.hash_grid``.
 """
 

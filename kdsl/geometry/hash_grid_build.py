@@ -2,13 +2,15 @@
 with no read back to the host, both giving the same point order (points sorted by
 bucket, stably: a bucket's points in their original order) and bucket ranges.
 
-``SortBuild`` (the CPU's): two kernels around one sort.
+``SortBuild`` (every device's): two kernels around one sort.
 
 1. ``_bucket_keys``: each point's key, its bucket in the high 32 bits and its index in
    the low 32 (unique keys, so any sort is stable), and, first, the bucket of the
    previous build's ``i``-th key emptied in the cell tables (those buckets are the
    tables' only nonzero entries);
-2. a sort of the keys in place (``kdsl.utils.sort.SortKeys``: NumPy's sort on the CPU);
+2. a sort of the keys in place (``kdsl.utils.sort.SortKeys``: NumPy's sort on the CPU;
+   on a GPU the kdsl merge sort, ``kdsl.utils.merge_sort``: launches only, no host
+   synchronization, so from a rebuild on the build replays as one CUDA graph);
 3. ``_bucket_ranges``: the point order (the keys' low halves) and each bucket's range of
    it, found by comparing sorted neighbours (empty buckets: ``[0, 0)``).
 
@@ -16,10 +18,10 @@ Its work grows with the point count only, never with the cell count (a 128^3 gri
 2M cells, ten times a 200k-point build's points): the tables are zeroed once, when
 allocated, and then only the previous build's buckets are emptied.
 
-``CountBuild`` (a GPU's): a counting sort by bucket, all kdsl launches (ten, prepared),
-where the sort of keys needs CuPy's radix sort (86 of a rebuild's 112 us of host time
-on an H200: CuPy's calls cost far more host time than a prepared launch's 6 us) and
-CuPy's scan would cost as much (114 us for 2M counts).
+``CountBuild`` (a GPU's until the kdsl merge sort; tests try it everywhere): a counting
+sort by bucket, all kdsl launches (ten, prepared), written when the sort of keys needed
+CuPy's radix sort (86 of a rebuild's 112 us of host time on an H200) and CuPy's scan
+would cost as much (114 us for 2M counts). Its work grows with the cell count.
 
 1. ``_count_points``: each point's bucket, and its slot in it from an atomic count;
 2. an inclusive scan of the counts into ``offsets[1:]`` (``offsets[0]`` stays 0;
@@ -35,9 +37,9 @@ CuPy's scan would cost as much (114 us for 2M counts).
 
 Both keep their buffers between builds, grow them only when the point count exceeds
 what they hold, and prepare their launches once per points array and count. On a GPU
-the counting sort's ten launches are captured as one CUDA graph at the second build of
-the same points array, count and radius, and replayed from then on (one graph launch
-of host time instead of ten kernel launches: ``_Steps``, ``graph_steps``).
+their launches are captured as one CUDA graph at the second build of the same points
+array, count and radius, and replayed from then on (one graph launch of host time
+instead of one per kernel: ``_Steps``, ``graph_steps``).
 """
 
 from __future__ import annotations
@@ -391,8 +393,9 @@ class CountBuild(_Build):
 
 
 def builder(device: Any, dims: tuple[int, int, int]) -> _Build:
-    """The build a grid on ``device`` uses: the counting sort on a GPU, the sort of keys
-    on the CPU (measured there: ``docs/performance.md``)."""
+    """The build a grid on ``device`` uses: the sort of keys (on a GPU with the kdsl
+    merge sort), or the counting sort where ``counting_sort_on`` says so (measured:
+    ``docs/performance.md``)."""
     return CountBuild(device, dims) if counting_sort_on(device) else SortBuild(device, dims)
 
 
@@ -403,5 +406,7 @@ def kernel_sort_on(device: Any) -> bool:
 
 
 def counting_sort_on(device: Any) -> bool:
-    """Whether grids on ``device`` build by the counting sort (tests try both anywhere)."""
-    return bool(device.is_cuda)
+    """Whether grids on ``device`` build by the counting sort (tests try both anywhere):
+    nowhere by default. On an H200 its scan of every cell's count (2M for a 128^3 grid,
+    seven launches) took more GPU time than the sort build's merge sort of 200k keys."""
+    return False
