@@ -56,6 +56,29 @@ sin_cos_fast = wp.kernel(fast_math=True)(_sin_cos)
 
 
 @wp.kernel
+def sincos_f32(x: wp.array(dtype=float), s: wp.array(dtype=float), c: wp.array(dtype=float)):
+    i = wp.tid()
+    s[i] = wp.sin(x[i])
+    c[i] = wp.cos(x[i])
+
+
+@wp.kernel
+def sincos_in_loop(x: wp.array(dtype=float), reps: int, s: wp.array(dtype=float),
+                   c: wp.array(dtype=float)):  # fmt: skip
+    # A float sum over a loop (as in the ocean): neither loop vectorizes, the code is
+    # scalar. -0.0 is the sum's identity and x - 0.0 is x, so reps = 1 gives sin x, cos x.
+    i = wp.tid()
+    acc_s = wp.float32(-0.0)
+    acc_c = wp.float32(-0.0)
+    for j in range(reps):
+        a = x[i] - float(j)
+        acc_s = acc_s + wp.sin(a)
+        acc_c = acc_c + wp.cos(a)
+    s[i] = acc_s
+    c[i] = acc_c
+
+
+@wp.kernel
 def sin_f64(x: wp.array(dtype=wp.float64), out: wp.array(dtype=wp.float64)):
     i = wp.tid()
     out[i] = wp.sin(x[i]) + wp.cos(x[i])
@@ -97,8 +120,9 @@ def _host_has(feature: str) -> bool:
 
 
 @pytest.mark.skipif(not _host_has("avx2"), reason="the vectorizer's choice depends on the host")
-def test_elementwise_loop_vectorizes(cpu_backend):
-    text = _ir(sin_only)
+@pytest.mark.parametrize("kernel", [sin_only, sincos_f32], ids=["sin", "sincos"])
+def test_elementwise_loop_vectorizes(cpu_backend, kernel):
+    text = _ir(kernel)
     body = text.split("vector.body:")[1].split("\n\n")[0]
     assert "x double> @llvm.fmuladd" in body  # the reduction and polynomials, on lanes
     for libm in ("@sinf", "@cosf", "llvm.sin."):
@@ -173,3 +197,29 @@ def test_vectors_and_float16(cpu_backend, kernel, dtype, x, max_ulp):
     d = x.astype(np.float64)
     assert ulp_distance(s.numpy(), np.sin(d)).max() <= max_ulp
     assert ulp_distance(c.numpy(), np.cos(d)).max() <= max_ulp
+
+
+def test_scalar_path_matches_the_vectorized_one(cpu_backend):
+    # The accuracy tests run an elementwise kernel, which LLVM vectorizes; this one keeps
+    # the scalar code (branch to the table reduction) and must give the same bits.
+    text = _ir(sincos_in_loop)
+    # One copy of the reduction, in no vectorized loop (reps <= 0 stores -0.0 vectorized).
+    assert text.count(_llvm_hex(trig.TWO_OVER_PI)) == 1
+    vector_loops = text.split("vector.body:")[1:]
+    assert not any(_llvm_hex(trig.TWO_OVER_PI) in v.split("\n\n")[0] for v in vector_loops)
+    big = np.array([1048576.0, -3e6, 1e10, -3.4028235e38, np.inf, -np.inf, np.nan], np.float32)
+    tiny = np.array([0.0, -0.0, 1e-45, -1e-40], np.float32)
+    x = np.concatenate([_dense(1 << 15), big, tiny, _dense(64, seed=4) * 1e4])
+    xs = wp.array(x, dtype=float, device="cpu")
+    got = []
+    for kernel, extra in ((sincos_in_loop, [1]), (sincos_f32, [])):
+        out = [wp.zeros(len(x), dtype=float, device="cpu") for _ in range(2)]
+        wp.launch(kernel, len(x), [xs, *extra, *out], device="cpu", backend="cpu")
+        got.append([a.numpy() for a in out])
+    for scalar, vector in zip(*got):
+        np.testing.assert_array_equal(scalar, vector)
+        np.testing.assert_array_equal(np.signbit(scalar), np.signbit(vector))  # -0.0 too
+    d = x.astype(np.float64)
+    with np.errstate(invalid="ignore"):
+        assert ulp_distance(got[0][0], np.sin(d)).max() <= 0.51
+        assert ulp_distance(got[0][1], np.cos(d)).max() <= 0.51
