@@ -164,6 +164,8 @@ def test_streams_key_by_identity_cuda():
     stream); launches on either give the right results."""
     dev = "cuda:0"
     xs = _arrays(dev, count=2)
+    # The arrays are filled on the device's current stream; the launches go to others.
+    wp.synchronize_device(dev)
     g = wp.vec3(0.0, 0.0, 0.0)
     streams = [wp.Stream(dev), wp.Stream(dev)]
     reuse = launch_plan(step, dev, None).reuse
