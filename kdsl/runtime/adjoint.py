@@ -88,7 +88,8 @@ class DerivedKernel:
             "hidden": [(a.name_hint, a.type, bool(a.uses)) for a in args[2 * n :]],
             "tape_sites": func.attrs.get("tape_sites"),
             "tape_slots": func.attrs.get("tape_slots"),
-            "base": self.base.build_facts(),  # the kernel was built too: its tid_ndim
+            # The kernel was built too: its own facts (tid_ndim), where it keeps any.
+            "base": getattr(self.base, "build_facts", dict)(),
         }
         return module
 
@@ -100,7 +101,9 @@ class DerivedKernel:
         """Take ``build_facts`` of an earlier build of this same source (a cache hit)."""
         if self._facts is None and facts:
             self._facts = dict(facts)
-            self.base.restore_build_facts(facts["base"])  # an adjoint launched alone
+            restore = getattr(self.base, "restore_build_facts", None)
+            if restore is not None:  # an adjoint launched before its kernel
+                restore(facts.get("base") or {})
 
     def _fact(self, name: str) -> Any:
         if self._facts is None:
