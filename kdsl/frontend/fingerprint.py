@@ -84,26 +84,35 @@ class SourceMemo:
         self.facts = dict(facts or {})
         self.changed = False
         self._digests: dict[str, str | None] = {}  # file -> sha256 now, once per memo
+        self._used: set[tuple[str, int, str]] = set()
 
     def get(self, fn: Any) -> SourceFacts | None:
         """The facts of ``fn`` when recorded and its file's bytes are unchanged since."""
-        got = self.facts.get(_where(fn))
+        where = _where(fn)
+        got = self.facts.get(where)
         if got is None:
             return None
         if got.file not in self._digests:
             data = _read(got.file)
             self._digests[got.file] = None if data is None else hashlib.sha256(data).hexdigest()
-        return got if self._digests[got.file] == got.file_digest else None
+        if self._digests[got.file] != got.file_digest:
+            return None
+        self._used.add(where)
+        return got
 
     def record(self, fn: Any, facts: SourceFacts) -> None:
         """Remember the facts of ``fn``."""
-        if self.facts.get(_where(fn)) != facts:
-            self.facts[_where(fn)] = facts
+        where = _where(fn)
+        self._used.add(where)
+        if self.facts.get(where) != facts:
+            self.facts[where] = facts
             self.changed = True
 
     def as_json(self) -> list:
-        """Every recorded fact, as JSON-able data."""
-        return [[list(w), f.as_json()] for w, f in sorted(self.facts.items())]
+        """The facts recorded or used since this memo was made (all of them when none
+        were: stale facts of functions that moved are not kept), as JSON-able data."""
+        keep = self._used or self.facts.keys()
+        return [[list(w), self.facts[w].as_json()] for w in sorted(keep) if w in self.facts]
 
     @classmethod
     def from_json(cls, data: list) -> SourceMemo:

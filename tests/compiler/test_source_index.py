@@ -156,6 +156,17 @@ def test_a_memo_gives_the_fingerprint_without_reading_the_source(tmp_path, monke
     assert sorted(parsed) == ["inner", "k", "outer"]
 
 
+def test_a_memo_keeps_only_the_facts_it_used(tmp_path):
+    memo = SourceMemo()
+    source_fingerprint(_load(tmp_path / "kern.py", BASE).k, memo)
+    moved = _round_trip(memo)  # every function one line down: new places, new facts
+    source_fingerprint(_load(tmp_path / "kern.py", "\n" + BASE).k, moved)
+    assert moved.changed and len(moved.facts) == 6
+    assert sorted(w[1] for w, _ in _round_trip(moved).facts.items()) == sorted(
+        w[1] + 1 for w in memo.facts
+    )
+
+
 def test_facts_of_a_source_parsed_before_are_not_recorded(tmp_path):
     mod = _load(tmp_path / "kern.py", BASE)
     assert mod.k.src.text  # parsed by someone else first: maybe from an older file
