@@ -5,11 +5,13 @@ points, velocities (empty when it has none) and flat triangle indices, and the i
 the ``kdsl.Bvh`` over its triangles' boxes, whose layout ``kdsl.stdlib.bvh`` documents.
 The queries walk that BVH's packed nodes (``BvhNode``) stacklessly (a box the query
 cannot use is jumped over with ``skip``), so their state is a few integers and floats,
-with two exceptions where the visiting order pays: the closest point starts with a
-bound from a descent into the nearer child at each level (``_closest_face``), and the
-closest ray hit visits the nearer child first, the other waiting on a stack of
-``RAY_STACK`` entries (a thread-local array; deeper trees fall back to a stackless
-pass). Neither order changes an answer.
+with two exceptions where the visiting order pays: the closest point and the closest
+ray hit visit the nearer child first (by box distance, by entry ``t``), the other
+waiting on a stack of ``WALK_STACK`` entries (a thread-local array; deeper trees fall
+back to a stackless pass). Neither order changes an answer. The stackless walks
+alternate two loops ("while-while", Aila and Laine 2009): nodes up to the next leaf to
+test (``_next_near_leaf``), then that leaf's faces; the ordered ones descend to a leaf
+in an inner loop. On a GPU the threads of a warp then test faces together.
 
 Semantics are Warp 1.19's (signs, barycentric ``(u, v)`` weighing a face's first and
 second vertices, strict ``max_dist``/``max_t`` bounds). Where Warp's answer depends on
@@ -70,10 +72,11 @@ __all__ = [
 AABB, SPHERE = 0, 1
 #: The largest finite float32 (Warp's FLT_MAX), the bound of an unbounded ray.
 FLT_MAX = 3.402823466e38
-#: Nodes a ray's front-to-back walk keeps waiting (``_ray_closest``): at most one per
-#: level of the tree below the root (a 200k-face mesh's tree is 24 deep); deeper trees
-#: fall back to a stackless pass. Warp's stack holds 32 too; each query zero-fills it.
-RAY_STACK = 32
+#: Nodes the ordered walks (closest point, closest ray hit) keep waiting: at most one
+#: per level of the tree below the root (a 200k-face mesh's tree is 24 deep); deeper
+#: trees fall back to a stackless pass. Warp's stack holds 32 too; each query
+#: zero-fills it.
+WALK_STACK = 32
 #: 1 / (4 pi): solid angle to winding number.
 INV_4PI = 0.07957747154594767
 
@@ -195,12 +198,13 @@ class _Closest:
 
 @func
 def _closest_in_leaf(
-    rec: MeshRecord, bvh: BvhRecord, leaf: BvhNode, point: wp.vec3, best: _Closest
+    rec: MeshRecord, bvh: BvhRecord, first: int, count: int, point: wp.vec3, best: _Closest
 ) -> _Closest:
-    """``best`` updated with the faces of ``leaf``: a face replaces it when strictly
-    closer, or as close with a lower index; slivers are left out."""
+    """``best`` updated with the ``count`` faces of a leaf from ``items[first]``: a face
+    replaces it when strictly closer, or as close with a lower index; slivers are left
+    out."""
     out = best
-    for k in range(leaf.first, leaf.first + leaf.next):
+    for k in range(first, first + count):
         f = bvh.items[k]
         a = _vertex(rec, f, 0)
         b = _vertex(rec, f, 1)
@@ -221,45 +225,104 @@ def _closest_face(id: wp.uint64, point: wp.vec3, max_dist: float) -> int:
     """The face closest to ``point`` at a distance strictly below ``max_dist`` (lowest
     index among ties; slivers left out), or -1.
 
-    A stackless walk cannot visit the nearer child first, so the walk starts with a
-    bound: a descent from the root into the nearer child at each level reaches a leaf
-    near ``point`` and its faces give a distance that prunes most of the tree. The
-    answer is the same as without it (every face below the bound is still tested), the
-    leaf is not tested twice."""
+    Nearer child first (Warp's order): at an inner node both children's boxes are
+    tested, the walk goes on into the nearer one (its node, loaded to order the two, is
+    not loaded again) and the other waits on a stack of ``WALK_STACK`` entries with its
+    box distance, dropped when it comes off the stack beyond the closest distance found
+    meanwhile. Each step of the outer loop takes a node off the stack and descends from
+    it to a leaf, then tests that leaf's faces (on a GPU the descent's inner loop keeps
+    a warp's threads in step; visiting one node per step measured 25% slower on an
+    H200). A tree deeper than the stack finishes with a stackless pass bounded by the
+    distance found: the answer never depends on the order."""
     rec = wp.object_record(id, MeshRecord)
     bvh = wp.object_record(rec.bvh, BvhRecord)
     best = _Closest()
     best.dist_sq = max_dist * max_dist
     best.face = -1
     span = _root_range(bvh, -1)
-    seed = -1
+    nodes = wp.zeros(WALK_STACK, dtype=wp.int32)
+    dists = wp.zeros(WALK_STACK, dtype=wp.float32)
+    count = 0
+    overflow = False
     if span[0] < span[1]:
-        nd = bvh.nodes[span[0]]
-        if box_distance_sq(nd.lower, nd.upper, point) <= best.dist_sq:
-            seed = span[0]
-            while nd.first < 0:
-                left = seed + 1
-                ln = bvh.nodes[left]
-                right = _skip(ln, left)
-                rn = bvh.nodes[right]
-                seed = left
-                nd = ln
-                if box_distance_sq(rn.lower, rn.upper, point) < box_distance_sq(
-                    ln.lower, ln.upper, point
-                ):
-                    seed = right
-                    nd = rn
-            best = _closest_in_leaf(rec, bvh, nd, point, best)
-    node = span[0]
-    while node < span[1]:
+        nodes[0] = span[0]  # (at distance 0: its children are tested against the bound)
+        count = 1
+    while count > 0:
+        count = count - 1
+        node = nodes[count]
+        if dists[count] <= best.dist_sq:
+            nd = bvh.nodes[node]
+            inner = nd.first < 0
+            while inner:  # down the nearer child, the other onto the stack
+                near = node + 1
+                near_nd = bvh.nodes[near]
+                far = _skip(near_nd, near)
+                far_nd = bvh.nodes[far]
+                d_near = box_distance_sq(near_nd.lower, near_nd.upper, point)
+                d_far = box_distance_sq(far_nd.lower, far_nd.upper, point)
+                if d_far < d_near:
+                    tmp = near
+                    near = far
+                    far = tmp
+                    near_nd = far_nd
+                    tmp_d = d_near
+                    d_near = d_far
+                    d_far = tmp_d
+                if d_far <= best.dist_sq:  # (false for NaN: a NaN point prunes every box)
+                    if count < WALK_STACK:
+                        nodes[count] = far
+                        dists[count] = d_far
+                        count = count + 1
+                    else:
+                        overflow = True
+                inner = False
+                if d_near <= best.dist_sq:
+                    node = near
+                    nd = near_nd
+                    inner = nd.first < 0
+            if nd.first >= 0:  # a leaf reached (an inner node here: both children pruned)
+                best = _closest_in_leaf(rec, bvh, nd.first, nd.next, point, best)
+    if overflow:
+        node = span[0]
+        while node < span[1]:
+            step = _next_near_leaf(bvh, node, span[1], point, best.dist_sq)
+            node = step[2]
+            best = _closest_in_leaf(rec, bvh, step[0], step[1], point, best)
+    return best.face
+
+
+@wp.func_grad(_closest_face)
+def _adj_closest_face(id: wp.uint64, point: wp.vec3, max_dist: float, adj_ret: int):
+    """No gradient: the face found is piecewise constant in the point (the barycentrics,
+    computed outside the search, carry the gradient). The backward pass replays the
+    search whole rather than differentiating its loop, which reads a thread-local
+    stack."""
+    pass
+
+
+@func
+def _next_near_leaf(
+    bvh: BvhRecord, node: int, stop: int, point: wp.vec3, bound_sq: float
+) -> wp.vec3i:
+    """The walk from ``node`` to the next leaf before ``stop`` whose box lies within
+    ``sqrt(bound_sq)`` of ``point``, jumping over the subtrees whose box does not:
+    that leaf's ``(first, count, node after it)``, or ``(0, 0, stop)`` when there is
+    none.
+
+    A closest-point walk alternates this loop with the test of the leaf's faces
+    ("while-while", Aila and Laine 2009) instead of visiting one node per iteration
+    and testing faces in the iterations that reach a leaf ("if-if"): on a GPU the
+    threads of a warp, each at its own node, then test faces together, not in every
+    iteration where any one of them is at a leaf. The nodes visited are the same."""
+    while node < stop:
         nd = bvh.nodes[node]
-        if box_distance_sq(nd.lower, nd.upper, point) <= best.dist_sq:
-            if nd.first >= 0 and node != seed:
-                best = _closest_in_leaf(rec, bvh, nd, point, best)
+        if box_distance_sq(nd.lower, nd.upper, point) <= bound_sq:
+            if nd.first >= 0:
+                return wp.vec3i(nd.first, nd.next, node + 1)
             node = node + 1
         else:
             node = _skip(nd, node)
-    return best.face
+    return wp.vec3i(0, 0, stop)
 
 
 @func
@@ -275,26 +338,38 @@ def _furthest_face(id: wp.uint64, point: wp.vec3, min_dist: float) -> int:
     span = _root_range(bvh, -1)
     node = span[0]
     while node < span[1]:
-        nd = bvh.nodes[node]  # bounds and links in one 32-byte load
-        if box_furthest_distance_sq(nd.lower, nd.upper, point) >= best:
-            first = nd.first
-            if first >= 0:
-                for k in range(first, first + nd.next):
-                    f = bvh.items[k]
-                    a = _vertex(rec, f, 0)
-                    b = _vertex(rec, f, 1)
-                    c = _vertex(rec, f, 2)
-                    if not is_sliver(a, b, c):
-                        uv = furthest_point_to_triangle(a, b, c, point)
-                        q = a * uv[0] + b * uv[1] + c * (1.0 - uv[0] - uv[1])
-                        d = wp.length_sq(q - point)
-                        if d > best or (d == best and best_face >= 0 and f < best_face):
-                            best = d
-                            best_face = f
+        step = _next_far_leaf(bvh, node, span[1], point, best)
+        node = step[2]
+        for k in range(step[0], step[0] + step[1]):
+            f = bvh.items[k]
+            a = _vertex(rec, f, 0)
+            b = _vertex(rec, f, 1)
+            c = _vertex(rec, f, 2)
+            if not is_sliver(a, b, c):
+                uv = furthest_point_to_triangle(a, b, c, point)
+                q = a * uv[0] + b * uv[1] + c * (1.0 - uv[0] - uv[1])
+                d = wp.length_sq(q - point)
+                if d > best or (d == best and best_face >= 0 and f < best_face):
+                    best = d
+                    best_face = f
+    return best_face
+
+
+@func
+def _next_far_leaf(
+    bvh: BvhRecord, node: int, stop: int, point: wp.vec3, bound_sq: float
+) -> wp.vec3i:
+    """``_next_near_leaf`` for the furthest point: the next leaf whose box reaches at
+    least ``sqrt(bound_sq)`` from ``point``."""
+    while node < stop:
+        nd = bvh.nodes[node]
+        if box_furthest_distance_sq(nd.lower, nd.upper, point) >= bound_sq:
+            if nd.first >= 0:
+                return wp.vec3i(nd.first, nd.next, node + 1)
             node = node + 1
         else:
             node = _skip(nd, node)
-    return best_face
+    return wp.vec3i(0, 0, stop)
 
 
 @func
@@ -431,7 +506,7 @@ def _ray_closest_face(id: wp.uint64, start: wp.vec3, dir: wp.vec3, max_t: float,
     Front to back: at an inner node the child the ray enters first is visited next
     (its node, loaded for its entry ``t``, is not loaded again) and the other waits on
     a small stack with its entry ``t``, dropped when a hit nearer than that is found
-    meanwhile. A tree deeper than the stack (``RAY_STACK``)
+    meanwhile. A tree deeper than the stack (``WALK_STACK``)
     overflows into a stackless pass over the whole range, bounded by the hit found so
     far: the answer never depends on the order."""
     rec = wp.object_record(id, MeshRecord)
@@ -447,8 +522,8 @@ def _ray_closest_face(id: wp.uint64, start: wp.vec3, dir: wp.vec3, max_t: float,
     hit.v = 0.0
     hit.normal = wp.vec3(0.0)
     span = _root_range(bvh, root)
-    nodes = wp.zeros(RAY_STACK, dtype=wp.int32)
-    enters = wp.zeros(RAY_STACK, dtype=wp.float32)
+    nodes = wp.zeros(WALK_STACK, dtype=wp.int32)
+    enters = wp.zeros(WALK_STACK, dtype=wp.float32)
     count = 0
     overflow = False
     node = span[0]
@@ -458,10 +533,11 @@ def _ray_closest_face(id: wp.uint64, start: wp.vec3, dir: wp.vec3, max_t: float,
         nd = bvh.nodes[node]
         active = ray_box_enter(nd.lower, nd.upper, start, inv) <= hit.t
     while active:
-        go_on = False  # a child of ``node`` is visited next, without the stack
-        if nd.first >= 0:
-            hit = _ray_leaf(rec, bvh, nd, shear, start, hit)
-        else:
+        # Down the nearer children to a leaf (or to where both children are missed),
+        # then the leaf's faces: "while-while", as the closest-point walk.
+        at_leaf = nd.first >= 0
+        inner = not at_leaf
+        while inner:
             near = node + 1
             near_nd = bvh.nodes[near]
             far = _skip(near_nd, near)
@@ -482,9 +558,10 @@ def _ray_closest_face(id: wp.uint64, start: wp.vec3, dir: wp.vec3, max_t: float,
                 tmp_t = t_near
                 t_near = t_far
                 t_far = tmp_t
+            inner = False
             if near_in:  # visit it now (its node is loaded); the other waits
                 if far_in:
-                    if count < RAY_STACK:
+                    if count < WALK_STACK:
                         nodes[count] = far
                         enters[count] = t_far
                         count = count + 1
@@ -492,15 +569,18 @@ def _ray_closest_face(id: wp.uint64, start: wp.vec3, dir: wp.vec3, max_t: float,
                         overflow = True
                 node = near
                 nd = near_nd
-                go_on = True
-        if not go_on:  # the nearest waiting node not beyond the hit found so far
-            active = False
-            while count > 0 and not active:
-                count = count - 1
-                if enters[count] <= hit.t:
-                    node = nodes[count]
-                    nd = bvh.nodes[node]
-                    active = True
+                at_leaf = nd.first >= 0
+                inner = not at_leaf
+        if at_leaf:
+            hit = _ray_leaf(rec, bvh, nd, shear, start, hit)
+        # the nearest waiting node not beyond the hit found so far
+        active = False
+        while count > 0 and not active:
+            count = count - 1
+            if enters[count] <= hit.t:
+                node = nodes[count]
+                nd = bvh.nodes[node]
+                active = True
     if overflow:
         node = span[0]
         while node < span[1]:
@@ -609,20 +689,33 @@ def mesh_query_ray_anyhit(
     span = _root_range(bvh, root)
     node = span[0]
     while node < span[1] and not found:
+        step = _next_ray_leaf(bvh, node, span[1], start, inv, max_t)
+        node = step[2]
+        for k in range(step[0], step[0] + step[1]):
+            f = bvh.items[k]
+            h = intersect_ray_triangle(
+                shear, start, _vertex(rec, f, 0), _vertex(rec, f, 1), _vertex(rec, f, 2)
+            )
+            if h[0] >= 0.0 and h[0] < max_t:
+                found = True
+    return found
+
+
+@func
+def _next_ray_leaf(
+    bvh: BvhRecord, node: int, stop: int, start: wp.vec3, inv: wp.vec3, max_t: float
+) -> wp.vec3i:
+    """``_next_near_leaf`` for a ray (``inv``: its direction's componentwise inverse):
+    the next leaf whose box the ray meets at some ``0 <= t <= max_t``."""
+    while node < stop:
         nd = bvh.nodes[node]
         if ray_box_entry(nd.lower, nd.upper, start, inv, max_t):
             if nd.first >= 0:
-                for k in range(nd.first, nd.first + nd.next):
-                    f = bvh.items[k]
-                    h = intersect_ray_triangle(
-                        shear, start, _vertex(rec, f, 0), _vertex(rec, f, 1), _vertex(rec, f, 2)
-                    )
-                    if h[0] >= 0.0 and h[0] < max_t:
-                        found = True
+                return wp.vec3i(nd.first, nd.next, node + 1)
             node = node + 1
         else:
             node = _skip(nd, node)
-    return found
+    return wp.vec3i(0, 0, stop)
 
 
 @func
@@ -638,19 +731,15 @@ def mesh_query_ray_count_intersections(
     span = _root_range(bvh, root)
     node = span[0]
     while node < span[1]:
-        nd = bvh.nodes[node]
-        if ray_box_entry(nd.lower, nd.upper, start, inv, FLT_MAX):
-            if nd.first >= 0:
-                for k in range(nd.first, nd.first + nd.next):
-                    f = bvh.items[k]
-                    h = intersect_ray_triangle(
-                        shear, start, _vertex(rec, f, 0), _vertex(rec, f, 1), _vertex(rec, f, 2)
-                    )
-                    if h[0] >= 0.0:
-                        n = n + 1
-            node = node + 1
-        else:
-            node = _skip(nd, node)
+        step = _next_ray_leaf(bvh, node, span[1], start, inv, FLT_MAX)
+        node = step[2]
+        for k in range(step[0], step[0] + step[1]):
+            f = bvh.items[k]
+            h = intersect_ray_triangle(
+                shear, start, _vertex(rec, f, 0), _vertex(rec, f, 1), _vertex(rec, f, 2)
+            )
+            if h[0] >= 0.0:
+                n = n + 1
     return n
 
 
@@ -867,34 +956,29 @@ def mesh_query_point_sign_normal(
     node = span[0]
     while node < span[1]:
         reach = best + eps
-        nd = bvh.nodes[node]  # bounds and links in one 32-byte load
-        if box_distance_sq(nd.lower, nd.upper, point) <= reach * reach:
-            first = nd.first
-            if first >= 0:
-                for k in range(first, first + nd.next):
-                    f = bvh.items[k]
-                    a = _vertex(rec, f, 0)
-                    b = _vertex(rec, f, 1)
-                    c = _vertex(rec, f, 2)
-                    if not is_sliver(a, b, c):
-                        uv = closest_point_to_triangle(a, b, c, point)
-                        q = a * uv[0] + b * uv[1] + c * (1.0 - uv[0] - uv[1])
-                        d = wp.length(q - point)
-                        if d < best + eps:
-                            n = wp.normalize(wp.cross(b - a, c - a))
-                            w = _feature_weight(a, b, c, q, eps * eps)
-                            if d > best - eps:  # as close as the best: add its normal
-                                normal = normal + w * n
-                                if d < best or (d == best and best_face >= 0 and f < best_face):
-                                    best = d
-                                    best_face = f
-                            else:  # clearly closer: start again from this face
-                                best = d
-                                best_face = f
-                                normal = w * n
-            node = node + 1
-        else:
-            node = _skip(nd, node)
+        step = _next_near_leaf(bvh, node, span[1], point, reach * reach)
+        node = step[2]
+        for k in range(step[0], step[0] + step[1]):
+            f = bvh.items[k]
+            a = _vertex(rec, f, 0)
+            b = _vertex(rec, f, 1)
+            c = _vertex(rec, f, 2)
+            if not is_sliver(a, b, c):
+                uv = closest_point_to_triangle(a, b, c, point)
+                q = a * uv[0] + b * uv[1] + c * (1.0 - uv[0] - uv[1])
+                d = wp.length(q - point)
+                if d < best + eps:
+                    n = wp.normalize(wp.cross(b - a, c - a))
+                    w = _feature_weight(a, b, c, q, eps * eps)
+                    if d > best - eps:  # as close as the best: add its normal
+                        normal = normal + w * n
+                        if d < best or (d == best and best_face >= 0 and f < best_face):
+                            best = d
+                            best_face = f
+                    else:  # clearly closer: start again from this face
+                        best = d
+                        best_face = f
+                        normal = w * n
     if not (best < max_dist):
         best_face = -1
     sign = 0.0

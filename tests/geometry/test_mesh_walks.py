@@ -3,7 +3,8 @@ test, then tests that leaf's faces) on trees deep enough to exercise them: a bum
 icosphere of 1,280 faces (5,120 off the interpreter) with leaves of 1 and 4 faces,
 points inside (the centre, where every face is nearly as close as the closest),
 outside and on the shell, against a float64 brute force; rays on a group's subtree
-against the brute force over that group's faces."""
+against the brute force over that group's faces; and a tree deeper than the ordered
+walks' stack (``WALK_STACK``), where they finish with a stackless pass."""
 
 from __future__ import annotations
 
@@ -11,6 +12,8 @@ import numpy as np
 import pytest
 
 import kdsl as wp
+from kdsl.stdlib.bvh import BvhRecord
+from kdsl.stdlib.mesh import WALK_STACK
 from tests.geometry.mesh_reference import closest_distances, icosphere, ray_hits, winding_numbers
 
 BACKENDS = [
@@ -124,3 +127,84 @@ def test_ray_walks_on_a_group_subtree_match_brute_force(backend):
                 np.testing.assert_allclose(t[i], ref.min(), rtol=1e-5)
             else:
                 assert face[i] == -1
+
+
+@wp.kernel
+def depth_kernel(bvh: wp.uint64, out: wp.array(dtype=int)):
+    """The depth of the BVH's deepest node (the root at 0), from its preorder links."""
+    rec = wp.object_record(bvh, BvhRecord)
+    ends = wp.zeros(128, dtype=wp.int32)  # the subtree ends of the node's ancestors
+    top = 0
+    deepest = 0
+    n = rec.root
+    stop = rec.skip[n]
+    while n < stop:
+        while top > 0 and ends[top - 1] <= n:
+            top -= 1
+        deepest = wp.max(deepest, top)
+        nd = rec.nodes[n]
+        if nd.first < 0:
+            ends[top] = nd.next
+            top += 1
+        n += 1
+    out[0] = deepest
+
+
+def _deep_chain() -> tuple[np.ndarray, np.ndarray]:
+    """Tiny triangles whose Morton codes are one bit each (a chain of 30 levels in an
+    lbvh tree), then 40 in one Morton cell at the origin (split further by index),
+    each tilted so that every one of their boxes holds the points just above the
+    origin: the closest-point walk meets those boxes at distance 0 and goes left first,
+    leaving the right siblings for the stack after it is full; the plane under those
+    points lies lowest for the cluster's fourth face, one of them."""
+    pts = []
+    for j in range(30):
+        c = np.zeros(3)
+        c[j % 3] = 2.0 ** (j // 3) / 1024.0
+        pts += [c, c + [1e-4, 0, 0], c + [0, 1e-4, 0]]
+    for k in range(40):
+        h = 1e-6 * (1 + (k - 3) % 40)  # the lowest: the cluster's fourth face
+        pts += [[0.0, 0.0, 0.0], [4e-4, 0.0, h], [0.0, 4e-4, 2 * h]]
+    pts += [[1.0, 1.0, 1.0], [1.0001, 1.0, 1.0], [1.0, 1.0001, 1.0]]
+    pts = np.array(pts)
+    return pts.astype(np.float32), np.arange(len(pts), dtype=np.int32).reshape(-1, 3)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_walks_deeper_than_the_stack_match_brute_force(backend):
+    pts, faces = _deep_chain()
+    dev = _device(backend)
+    mesh = wp.Mesh(wp.array(pts, dtype=V3, device=dev), wp.array(faces, dtype=wp.int32, device=dev),
+                   bvh_constructor="lbvh", bvh_leaf_size=1)  # fmt: skip
+    depth = wp.zeros(1, dtype=int, device=dev)
+    wp.launch(depth_kernel, dim=1, inputs=[mesh.bvh.id, depth], backend=backend, device=dev)
+    assert depth.numpy()[0] > WALK_STACK + 1  # more nodes wait than the stack holds
+    rng = np.random.default_rng(7)
+    above = np.column_stack([rng.uniform(1e-5, 1e-4, (8, 2)), rng.uniform(0.0, 2e-7, 8)])
+    xs = np.vstack([above, rng.uniform(-0.1, 1.1, (4, 3))])
+    xs = xs.astype(np.float32)
+    n = len(xs)
+    near, signed, far = (wp.zeros(n, dtype=t, device=dev) for t in (V3, float, V3))
+    wp.launch(points_kernel, dim=n, inputs=[mesh.id, wp.array(xs, dtype=V3, device=dev), near,
+                                            signed, far], backend=backend, device=dev)  # fmt: skip
+    np.testing.assert_allclose(
+        np.linalg.norm(near.numpy() - xs, axis=1), closest_distances(pts, faces, xs),
+        rtol=1e-5, atol=1e-9,
+    )  # fmt: skip
+    # rays down onto the cluster at the origin, from above
+    starts = xs.copy()
+    starts[:, 2] = 1.0
+    dirs = np.tile(np.array([[0.0, 0.0, -1.0]], np.float32), (n, 1))
+    t, face, anyhit, count = (wp.full(n, v, dtype=int if v == -1 else float, device=dev)
+                              for v in (np.inf, -1, -1, -1))  # fmt: skip
+    inputs = [mesh.id, -1, wp.array(starts, dtype=V3, device=dev),
+              wp.array(dirs, dtype=V3, device=dev), t, face, anyhit, count]  # fmt: skip
+    wp.launch(rays_kernel, dim=n, inputs=inputs, backend=backend, device=dev)
+    t, face, count = t.numpy(), face.numpy(), count.numpy()
+    for i in range(n):
+        ref = ray_hits(pts, faces, starts[i], dirs[i])
+        assert count[i] == np.isfinite(ref).sum()
+        if np.isfinite(ref).any():
+            np.testing.assert_allclose(t[i], ref.min(), rtol=1e-6)
+        else:
+            assert face[i] == -1
