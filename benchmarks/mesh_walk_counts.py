@@ -9,11 +9,13 @@ cube-sphere, points uniform in the box 1.2 times the mesh's), a kdsl ``Mesh``'s 
 read back (its packed nodes, through the record a kernel sees) and three walks are
 replayed here in NumPy, in float64, each finding the same closest distance:
 
-- ``kdsl``: kdsl's walk: a descent into the nearer child at each level gives a first
-  bound, then a preorder walk jumping over the subtrees whose box lies beyond it;
-- ``warp``: Warp's order (``mesh_query_point_no_sign`` in warp/native/mesh.h): a stack,
-  both children's boxes tested at an inner node, the nearer pushed last, a popped node
-  tested again against the bound;
+- ``stackless``: kdsl's walk until ``bc12c0e``: a descent into the nearer child at each
+  level gives a first bound, then a preorder walk jumping over the subtrees whose box
+  lies beyond it;
+- ``ordered``: Warp's order (``mesh_query_point_no_sign`` in warp/native/mesh.h, and
+  kdsl's since ``bc12c0e``): a stack, both children's boxes tested at an inner node, the
+  nearer visited first, a popped node tested again against the bound (kdsl's walk
+  descends into the nearer child without the stack; the model counts Warp's loop);
 - ``oracle``: the preorder walk given the final distance from the start: the fewest
   nodes and triangles any walk over this tree can test.
 
@@ -125,7 +127,7 @@ class Tree:
         trace.append(cnt)
         return best
 
-    def walk_kdsl(self, p: np.ndarray, best: float = np.inf) -> tuple[float, list]:
+    def walk_stackless(self, p: np.ndarray, best: float = np.inf) -> tuple[float, list]:
         trace: list[int] = []
         n = self.root
         while self.first[n] < 0:
@@ -133,13 +135,18 @@ class Tree:
             right = self.skip(left)
             trace += [0, 0]
             n = right if self.box(right, p) < self.box(left, p) else left
-        seed = n
-        best = self.leaf(seed, p, best, trace)
+        return self.preorder(p, self.leaf(n, p, best, trace), trace, n, tighten=True)
+
+    def preorder(self, p: np.ndarray, best: float, trace: list, seen: int,
+                 tighten: bool) -> tuple[float, list]:  # fmt: skip
+        """The stackless walk from the root, bounded by ``best`` (lowered by the faces
+        it tests when ``tighten``), leaf ``seen`` left out."""
         n = self.root
         while n < self.stop:
             if self.box(n, p) <= best:
-                if self.first[n] >= 0 and n != seed:
-                    best = self.leaf(n, p, best, trace)
+                if self.first[n] >= 0 and n != seen:
+                    found = self.leaf(n, p, best, trace)
+                    best = found if tighten else best
                 else:
                     trace.append(0)
                 n += 1
@@ -148,7 +155,7 @@ class Tree:
                 n = self.skip(n)
         return best, trace
 
-    def walk_warp(self, p: np.ndarray) -> tuple[float, list]:
+    def walk_ordered(self, p: np.ndarray) -> tuple[float, list]:
         trace: list[int] = []
         best, stack = np.inf, [self.root]
         while stack:
@@ -170,19 +177,7 @@ class Tree:
         return best, trace
 
     def walk_oracle(self, p: np.ndarray, final: float) -> tuple[float, list]:
-        trace: list[int] = []
-        n = self.root
-        while n < self.stop:
-            if self.box(n, p) <= final:
-                if self.first[n] >= 0:
-                    self.leaf(n, p, final, trace)
-                else:
-                    trace.append(0)
-                n += 1
-            else:
-                trace.append(0)
-                n = self.skip(n)
-        return final, trace
+        return self.preorder(p, final, [], -1, tighten=False)
 
 
 def if_if(traces: list[list[int]], tri_cost: float) -> float:
@@ -229,18 +224,18 @@ def main() -> None:
     tree = Tree(mesh, pts, faces)
     qs = data["points_q"].astype(np.float64)
     radius = np.linalg.norm(qs, axis=1)
-    traces: dict[str, list[list[int]]] = {"kdsl": [], "warp": [], "oracle": []}
+    traces: dict[str, list[list[int]]] = {"stackless": [], "ordered": [], "oracle": []}
     for q in qs:
-        best, t = tree.walk_kdsl(q)
-        best_w, tw = tree.walk_warp(q)
+        best, t = tree.walk_stackless(q)
+        best_w, tw = tree.walk_ordered(q)
         if best_w != best:
             sys.exit(f"the walks disagree at {q}: {best} and {best_w}")
-        traces["kdsl"].append(t)
-        traces["warp"].append(tw)
+        traces["stackless"].append(t)
+        traces["ordered"].append(tw)
         traces["oracle"].append(tree.walk_oracle(q, best)[1])
     print(f"{len(faces):,} faces, {args.constructor} tree, leaves of up to {args.leaf_size}, "
           f"{len(qs)} queries; per query:")  # fmt: skip
-    print(f"{'walk':<7}{'steps':>8}{'tris':>8}{'tris in':>9}{'tris out':>10}"
+    print(f"{'walk':<10}{'steps':>8}{'tris':>8}{'tris in':>9}{'tris out':>10}"
           f"{'if-if/warp':>12}{'while-while/warp':>18}")  # fmt: skip
     for name, tr in traces.items():
         nodes = np.array([len(t) for t in tr])
@@ -248,7 +243,7 @@ def main() -> None:
         warps = range(0, len(tr) - len(tr) % 32, 32)
         ii = np.mean([if_if(tr[w : w + 32], args.tri_cost) for w in warps])
         ww = np.mean([while_while(tr[w : w + 32], args.tri_cost) for w in warps])
-        print(f"{name:<7}{nodes.mean():8.1f}{tris.mean():8.1f}{tris[radius < 0.9].mean():9.1f}"
+        print(f"{name:<10}{nodes.mean():8.1f}{tris.mean():8.1f}{tris[radius < 0.9].mean():9.1f}"
               f"{tris[radius > 1.1].mean():10.1f}{ii:12.0f}{ww:18.0f}")  # fmt: skip
 
 

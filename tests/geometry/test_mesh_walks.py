@@ -63,6 +63,21 @@ def _device(backend: str) -> str:
     return "cuda" if backend == "cuda" else "cpu"
 
 
+def _points(mesh, pts, faces, xs, backend, atol):
+    """Runs ``points_kernel``, checks the closest points' distances against the brute
+    force and returns the sign-normal signs and the furthest points (NumPy)."""
+    dev = _device(backend)
+    n = len(xs)
+    near, signed, far = (wp.zeros(n, dtype=t, device=dev) for t in (V3, float, V3))
+    wp.launch(points_kernel, dim=n, inputs=[mesh.id, wp.array(xs, dtype=V3, device=dev), near,
+                                            signed, far], backend=backend, device=dev)  # fmt: skip
+    np.testing.assert_allclose(
+        np.linalg.norm(near.numpy() - xs, axis=1), closest_distances(pts, faces, xs),
+        rtol=1e-5, atol=atol,
+    )  # fmt: skip
+    return signed.numpy(), far.numpy()
+
+
 def _shell(backend: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The mesh and the query points: the centre, then points inside, near the shell
     and outside."""
@@ -83,18 +98,11 @@ def test_point_walks_match_brute_force(backend, leaf_size):
     dev = _device(backend)
     mesh = wp.Mesh(wp.array(pts, dtype=V3, device=dev), wp.array(faces, dtype=wp.int32, device=dev),
                    bvh_leaf_size=leaf_size)  # fmt: skip
-    n = len(xs)
-    near, signed, far = (wp.zeros(n, dtype=t, device=dev) for t in (V3, float, V3))
-    wp.launch(points_kernel, dim=n, inputs=[mesh.id, wp.array(xs, dtype=V3, device=dev), near,
-                                            signed, far], backend=backend, device=dev)  # fmt: skip
-    np.testing.assert_allclose(
-        np.linalg.norm(near.numpy() - xs, axis=1), closest_distances(pts, faces, xs),
-        rtol=1e-5, atol=1e-6,
-    )  # fmt: skip
+    signed, far = _points(mesh, pts, faces, xs, backend, atol=1e-6)
     inside = winding_numbers(pts, faces, xs) > 0.5
-    np.testing.assert_array_equal(signed.numpy() < 0, inside)
+    np.testing.assert_array_equal(signed < 0, inside)
     furthest = np.linalg.norm(pts[None].astype(np.float64) - xs[:, None], axis=2).max(1)
-    np.testing.assert_allclose(np.linalg.norm(far.numpy() - xs, axis=1), furthest, rtol=1e-5)
+    np.testing.assert_allclose(np.linalg.norm(far - xs, axis=1), furthest, rtol=1e-5)
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
@@ -183,14 +191,8 @@ def test_walks_deeper_than_the_stack_match_brute_force(backend):
     above = np.column_stack([rng.uniform(1e-5, 1e-4, (8, 2)), rng.uniform(0.0, 2e-7, 8)])
     xs = np.vstack([above, rng.uniform(-0.1, 1.1, (4, 3))])
     xs = xs.astype(np.float32)
+    _points(mesh, pts, faces, xs, backend, atol=1e-9)
     n = len(xs)
-    near, signed, far = (wp.zeros(n, dtype=t, device=dev) for t in (V3, float, V3))
-    wp.launch(points_kernel, dim=n, inputs=[mesh.id, wp.array(xs, dtype=V3, device=dev), near,
-                                            signed, far], backend=backend, device=dev)  # fmt: skip
-    np.testing.assert_allclose(
-        np.linalg.norm(near.numpy() - xs, axis=1), closest_distances(pts, faces, xs),
-        rtol=1e-5, atol=1e-9,
-    )  # fmt: skip
     # rays down onto the cluster at the origin, from above
     starts = xs.copy()
     starts[:, 2] = 1.0
