@@ -35,7 +35,6 @@ import argparse
 import importlib.util
 import json
 import platform
-import statistics
 import sys
 import time
 from pathlib import Path
@@ -128,17 +127,8 @@ def _kernels(m):
 
 
 def median_cpu_seconds(fn, reps: int, sync) -> float:
-    """``median_seconds`` in the process's CPU seconds (all its threads) instead of wall
-    seconds."""
-    fn()
-    sync()
-    times = []
-    for _ in range(reps):
-        t = time.process_time()
-        fn()
-        sync()
-        times.append(time.process_time() - t)
-    return statistics.median(times)
+    """``median_seconds`` in the process's CPU seconds (all its threads)."""
+    return median_seconds(fn, reps, sync, clock=time.process_time)
 
 
 def _run_side(m, name: str, data: dict, device: str, reps: int, sync,
