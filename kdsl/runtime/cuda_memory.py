@@ -149,23 +149,26 @@ def wrap_cuda(obj: Any) -> tuple[Any, Device]:
     from kdsl.runtime.device import get_device
 
     cp = cupy()
-    arr = cp.asarray(obj)
-    return arr, get_device(f"cuda:{_owning_device(cp, arr)}")
+    owner = _owning_device(cp, obj.__cuda_array_interface__["data"][0])
+    if owner < 0:  # memory the driver does not know (or a null pointer): CuPy's label
+        arr = cp.asarray(obj)
+        return arr, get_device(f"cuda:{arr.device.id}")
+    # Made with the owner current: CuPy copies an interface object of another device
+    # to the current one (on 4 GPUs a torch tensor of cuda:1, with cuda:3 current,
+    # came back as a copy on cuda:3, so a launch's writes never reached the tensor).
+    with cp.cuda.Device(owner):
+        arr = cp.asarray(obj)
+    return arr, get_device(f"cuda:{owner}")
 
 
-def _owning_device(cp: Any, arr: Any) -> int:
-    # The GPU that holds the memory, asked of the driver: CuPy may label memory it did
-    # not allocate with the current device (on 4 GPUs a torch tensor of cuda:1 came
-    # back as cuda:3, the device an earlier launch left current).
-    ptr = arr.data.ptr
-    if ptr:
-        try:
-            device = cp.cuda.runtime.pointerGetAttributes(ptr).device
-        except cp.cuda.runtime.CUDARuntimeError:  # not device memory CUDA knows: keep CuPy's
-            device = -1
-        if device >= 0:
-            return int(device)
-    return int(arr.device.id)
+def _owning_device(cp: Any, ptr: int) -> int:
+    # The GPU that holds the memory, asked of the driver; -1 if it does not know.
+    if not ptr:
+        return -1
+    try:
+        return int(cp.cuda.runtime.pointerGetAttributes(ptr).device)
+    except cp.cuda.runtime.CUDARuntimeError:
+        return -1
 
 
 def _flat_view(buf: Any, inner: tuple[int, ...]) -> Any:
