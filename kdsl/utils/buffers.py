@@ -48,7 +48,13 @@ def device_buffer(a: array) -> tuple[Any, Any]:
     """``(xp, buffer)``: the array module of ``a``'s device (NumPy or CuPy) and a zero-copy,
     writable view of ``a`` with the element dims appended."""
     xp = cuda_memory.xp(a.device)
-    return xp, (np.asarray(a) if a.device.is_cpu else xp.asarray(a))
+    if a.device.is_cpu:
+        return xp, np.asarray(a)
+    # With the array's device current: CuPy copies an interface object of another
+    # device onto the current one, so with cuda:1 current a sort of a cuda:0 array
+    # sorted a copy and left the array as it was.
+    with xp.cuda.Device(a.device.ordinal):
+        return xp, xp.asarray(a)
 
 
 def flat_view(a: array, name: str) -> tuple[Any, Any]:
