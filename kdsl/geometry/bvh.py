@@ -114,6 +114,13 @@ class Bvh:
         """The BVH's id (a ``uint64``) for kernels."""
         return self._record.id
 
+    @property
+    def item_order(self) -> array:
+        """The items in tree order (int32, one per item): a leaf holds those at positions
+        ``first .. first + count - 1`` (``kdsl.stdlib.bvh``). A ``rebuild()`` may reorder
+        them (and replace the array)."""
+        return self._tree.items
+
     def rebuild(self, constructor: str | None = None) -> None:
         """Build the tree again from the current boxes (optionally with another constructor)."""
         if constructor is not None:
