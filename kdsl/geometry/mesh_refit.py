@@ -5,20 +5,30 @@ faces' boxes (the items of its BVH), the sum of the edge lengths (for Warp's
 the mesh's record points at it) and the checks that every index is in range and every
 point finite: one kernel does all three, and its two answers are the one read back of a
 construction or a refit. The arrays it writes are allocated once per mesh
-(``FaceBoxes``), so a refit allocates and fills nothing: one launch, one read back and
-one sum."""
+(``FaceBoxes``), so a refit allocates and fills nothing.
+
+``FaceBoxes.start`` issues the checking kernel, the read back of its answers (into
+pinned memory, behind an event: ``host_read``) and the edge sum (``ChunkSum``: kdsl
+kernels, skipped on the device when the check found something, so the sum is left as
+it was); ``finish`` waits for the read only. A construction issues its BVH build
+between the two, so the host never waits for the build; a refit waits before it
+refits the BVH, which keeps its bounds when the points are bad.
+"""
 
 from __future__ import annotations
 
 from kdsl.frontend.api import atomic_max, isfinite, kernel, length, tid
 from kdsl.frontend.api import max as vmax
 from kdsl.frontend.api import min as vmin
+from kdsl.geometry.graph_steps import StepGraph, graphs_on
+from kdsl.geometry.host_read import IntsReader
 from kdsl.geometry.recycle import RecycleBin
 from kdsl.runtime.alloc import zeros
 from kdsl.runtime.array import array
 from kdsl.runtime.launch import launch
+from kdsl.runtime.stream import current_stream
 from kdsl.types import float32, int32, vec3
-from kdsl.utils.reduce import SumInto
+from kdsl.utils.chunk_sum import ChunkSum
 
 #: The check's two counters keep the maximum of ``_TOP - position`` of the bad values
 #: found: zero (where they start) is "nothing found", larger values earlier positions.
@@ -62,13 +72,14 @@ def _checked_face_boxes(
 
 class FaceBoxes:
     """What a mesh's checking kernel writes, allocated once per mesh (one zeroed float32
-    block, viewed) and rewritten by every ``write`` (construction and each refit):
+    block, viewed) and rewritten by every ``start`` (construction and each refit):
     ``lowers``/``uppers``, the faces' boxes; ``edges``, each face's three edge lengths
     summed, and ``edge_sum``, their sum (the mean edge length is ``edge_sum[0] / (3 *
     faces)``; 0.0 with no faces); ``none``, an empty vec3 array (a mesh's missing
     velocities); and the check's two counters, which hold "nothing found" (zero)
     between calls (a call that finds something zeroes them again), so a call fills
-    nothing."""
+    nothing. The check's launch is prepared per points and indices arrays (and stream),
+    the sum's once (and replayed as a graph on a GPU from its second run)."""
 
     def __init__(self, num_tris: int, device) -> None:
         floats = 7 * num_tris + 1  # boxes (six per face), edges, their sum
@@ -77,36 +88,65 @@ class FaceBoxes:
         self.lowers, self.uppers, self.none = boxes[:num_tris], boxes[num_tris:], boxes[:0]
         self.edges, self.edge_sum = block[6 * num_tris : floats - 1], block[floats - 1 : floats]
         self._first_bad = block[floats:].view(int32)
-        self._sum = SumInto(self.edges, self.edge_sum) if num_tris else None
-        #: Whether the last ``write`` completed (one cut short may leave a counter set).
+        self._read = IntsReader(self._first_bad)
+        #: The edge sum's prepared launches and the stream they run on.
+        self._sum: StepGraph | None = None
+        #: (points, indices, stream) of the prepared check, and the check.
+        self._check: tuple | None = None
+        self._pending = False
+        #: Whether the last ``start`` was finished (one cut short may leave a counter set).
         self.clean = True
 
-    def write(self, points: array, indices: array) -> tuple[int, int]:
-        """Check the mesh and write its faces' boxes and edge lengths, in one launch and
-        one read back (and, when all is good, the edge sum: one reduction).
-
-        Returns (the position of the first index outside ``[0, points)``, the index of
-        the first point with a NaN or infinite coordinate), each -1 when there is none;
-        with one, the boxes are not meaningful and ``edge_sum`` is left as it was."""
+    def start(self, points: array, indices: array) -> None:
+        """Issue the check of the mesh, the writes of its faces' boxes and edge lengths,
+        the read back of the check's answers and the edge sum; ``finish`` waits for the
+        answers. Nothing waits here."""
         num_points, num_tris = points.shape[0], self.lowers.shape[0]
         if max(num_points, num_tris) == 0:
-            return -1, -1
-        first_bad = self._first_bad
+            return
         self.clean = False
-        launch(
-            _checked_face_boxes, dim=max(num_points, num_tris), device=points.device,
-            inputs=[points, indices, num_points, num_tris, self.lowers, self.uppers,
-                    self.edges, first_bad],
-        )  # fmt: skip
-        bad_index, bad_point = (int(x) for x in first_bad.numpy())  # the one read back
-        if bad_index == 0 and bad_point == 0:
-            if self._sum is not None:
-                self._sum()
-            self.clean = True
+        device = points.device
+        stream = None if device.is_cpu else current_stream(device)
+        held = self._check
+        if held is None or held[0] is not points or held[1] is not indices or held[2] is not stream:
+            check = launch(
+                _checked_face_boxes, dim=max(num_points, num_tris), device=device,
+                inputs=[points, indices, num_points, num_tris, self.lowers, self.uppers,
+                        self.edges, self._first_bad], record_cmd=True,
+            ).launch  # fmt: skip
+            held = self._check = (points, indices, stream, check)
+        held[3]()
+        self._read.start()  # the answers only: not behind the sum
+        if num_tris:
+            total = self._sum
+            if total is None or total.stream is not stream:
+                steps = ChunkSum(self.edges, self.edge_sum, guard=self._first_bad).steps
+                total = self._sum = StepGraph(steps, stream, graphs_on(device))
+            total()  # (writes nothing when the check found something)
+        self._pending = True
+
+    def finish(self) -> tuple[int, int]:
+        """Wait for the answers of the last ``start``: (the position of the first index
+        outside ``[0, points)``, the index of the first point with a NaN or infinite
+        coordinate), each -1 when there is none; with one, the boxes are not meaningful
+        and ``edge_sum`` is left as it was."""
+        if not self._pending:
             return -1, -1
-        first_bad.zero_()  # "nothing found" again, for the next call
+        self._pending = False
+        bad_index, bad_point = self._read.values()
+        if bad_index or bad_point:
+            self._first_bad.zero_()  # "nothing found" again, for the next call
         self.clean = True
-        return (-1 if bad_index == 0 else _TOP - bad_index, -1 if bad_point == 0 else _TOP - bad_point)
+        return (
+            -1 if bad_index == 0 else _TOP - bad_index,
+            -1 if bad_point == 0 else _TOP - bad_point,
+        )
+
+    def write(self, points: array, indices: array) -> tuple[int, int]:
+        """``start`` then ``finish``: check the mesh and write its faces' boxes, edge
+        lengths and edge sum; returns ``finish``'s answer."""
+        self.start(points, indices)
+        return self.finish()
 
 
 #: The face boxes of collected meshes, for the next mesh of as many faces (``recycle``:

@@ -1,0 +1,77 @@
+"""``IntsReader``: a few int32 of a device array read back without waiting for later work.
+
+A mesh's construction checks its indices and points on the device and must raise
+there, before it returns, when they are bad. Reading the check's answer with
+``array.numpy()`` waits for the whole stream and, placed before the BVH build, keeps
+the host from issuing that build until the check is done. ``start`` instead enqueues a
+copy of the values into pinned host memory and an event behind it on the stream; the
+caller issues more work (the BVH build), and ``values`` then waits for the event only:
+the check and the copy, long done by then, not the build. On the CPU the launches
+have run when they return, so ``start`` reads the values at once.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from kdsl.runtime.array import array
+from kdsl.runtime.device import cuda_device_count, cupy
+from kdsl.runtime.graphs import state as graphs
+from kdsl.runtime.stream import current_stream
+
+
+class IntsReader:
+    """Reads ``source`` (a contiguous 1-d int32 array, a few elements) back to the host:
+    ``start()`` enqueues the read on the device's current stream, ``values()`` waits
+    for it and returns the values as a tuple of ints. A pinned buffer and an event are
+    made once per reader."""
+
+    __slots__ = ("_device", "_event", "_host", "_nbytes", "_pinned", "_ptr", "_source", "_values")
+
+    def __init__(self, source: array) -> None:
+        self._device = source.device
+        self._source = source
+        self._values: tuple[int, ...] = ()
+        self._nbytes = 4 * source.shape[0]
+        if self._device.is_cpu:
+            return
+        cp = cupy()
+        self._ptr = source.ptr
+        self._pinned = cp.cuda.alloc_pinned_memory(max(self._nbytes, 4))
+        self._host = np.frombuffer(self._pinned, np.int32, source.shape[0])
+        with cp.cuda.Device(self._device.ordinal):
+            self._event = cp.cuda.Event(block=False, disable_timing=True)
+
+    def start(self) -> None:
+        """Enqueue the read behind the work issued so far on the device's stream (refused
+        while a graph capture is open there: the values do not exist before replay)."""
+        if graphs.ACTIVE:
+            graphs.refuse_host_read(self._device, "a check's read back")
+        if self._device.is_cpu:
+            self._values = tuple(int(x) for x in self._source.numpy())
+            return
+        rt = cupy().cuda.runtime
+        raw = current_stream(self._device).cuda_stream
+        if cuda_device_count() == 1:
+            _enqueue(rt, self._host.ctypes.data, self._ptr, self._nbytes, raw, self._event.ptr)
+            return
+        current = rt.getDevice()
+        rt.setDevice(self._device.ordinal)
+        try:
+            _enqueue(rt, self._host.ctypes.data, self._ptr, self._nbytes, raw, self._event.ptr)
+        finally:
+            rt.setDevice(current)
+
+    def values(self) -> tuple[int, ...]:
+        """The values as of ``start`` (waiting for the read on a GPU)."""
+        if self._device.is_cpu:
+            return self._values
+        cupy().cuda.runtime.eventSynchronize(self._event.ptr)
+        return tuple(int(x) for x in self._host)
+
+
+def _enqueue(rt: Any, host: int, ptr: int, nbytes: int, stream: int, event: int) -> None:
+    rt.memcpyAsync(host, ptr, nbytes, rt.memcpyDeviceToHost, stream)
+    rt.eventRecord(event, stream)
