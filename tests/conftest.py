@@ -25,3 +25,18 @@ kdsl.config.verify_passes = "each"
 settings.register_profile("ci", derandomize=True, deadline=None, print_blob=True)
 settings.register_profile("dev", deadline=None)
 settings.load_profile("ci" if os.environ.get("CI") else "dev")
+
+
+def pytest_collection_finish(session) -> None:
+    """Make CUDA device 0 current again once the test modules are imported.
+
+    Collecting the JAX interop tests initializes JAX, whose client leaves the last GPU
+    current; tests that make CuPy arrays with CuPy's defaults expect device 0. kdsl's own
+    work must not depend on it: tests/runtime/test_other_device_current.py checks that.
+    """
+    import kdsl
+
+    if kdsl.get_cuda_device_count() > 1:
+        import cupy
+
+        cupy.cuda.runtime.setDevice(0)

@@ -227,7 +227,10 @@ def _struct(t: T.StructType, value: Any, device: Device) -> tuple:
     out = []
     for (name, ft), v in zip(t.fields, parts):
         if v is None and isinstance(ft, T.ArrayType):  # an unset array field: empty, as in Warp
-            v = _empty_array(ft, device)
+            # Made on the launch's device, so no device check: its null pointer has no
+            # owner to ask, and CuPy would label (and copy) it to the current GPU.
+            out.append(_empty_array(ft, device))
+            continue
         try:
             out.append(convert(ft, v, device))
         except ArgError as e:

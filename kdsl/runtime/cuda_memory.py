@@ -151,6 +151,8 @@ def wrap_cuda(obj: Any) -> tuple[Any, Device]:
     cp = cupy()
     owner = _owning_device(cp, obj.__cuda_array_interface__["data"][0])
     if owner < 0:  # memory the driver does not know (or a null pointer): CuPy's label
+        if isinstance(obj, cp.ndarray):  # as it is: asarray would copy it to the current GPU
+            return obj, get_device(f"cuda:{obj.device.id}")
         arr = cp.asarray(obj)
         return arr, get_device(f"cuda:{arr.device.id}")
     # Made with the owner current: CuPy copies an interface object of another device

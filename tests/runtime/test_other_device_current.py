@@ -35,6 +35,18 @@ def _query_boxes(bvh: wp.uint64, lo: wp.array(dtype=wp.vec3), hi: wp.array(dtype
     hits[i] = n
 
 
+@wp.struct
+class _Maybe:
+    values: wp.array(dtype=wp.float32)
+    unset: wp.array(dtype=wp.float32)
+
+
+@wp.kernel
+def _sample_and_read(tex: wp.Texture2D, m: _Maybe, out: wp.array(dtype=wp.float32)):
+    out[0] = wp.texture_sample(tex, wp.vec2(1.5, 0.5), dtype=float)
+    out[1] = m.values[0] + wp.float32(m.unset.shape[0])
+
+
 @pytest.fixture(autouse=True)
 def _another_device_current():
     if wp.get_cuda_device_count() < 2:
@@ -91,3 +103,17 @@ def test_arrays_launches_and_a_bvh_on_cuda0():
     lo, hi = centres - 0.01, centres + 0.01
     want = ((lo[:, None, :] <= hi[None, :, :]) & (hi[:, None, :] >= lo[None, :, :])).all(-1)
     np.testing.assert_array_equal(hits.numpy(), want.sum(1))
+
+
+@two_gpus
+def test_textures_and_unset_struct_arrays_on_cuda0():
+    # An unset array field is launched as an empty buffer: made on the launch's device,
+    # not labelled with the current one (it was refused as "an ndarray on 'cuda:1'").
+    tex = wp.Texture2D(np.array([[0.0, 1.0], [2.0, 3.0]], np.float32),
+                       filter_mode=wp.TextureFilterMode.CLOSEST, normalized_coords=False,
+                       device="cuda:0")  # fmt: skip
+    m = _Maybe()
+    m.values = wp.full(1, 5.0, dtype=wp.float32, device="cuda:0")
+    out = wp.zeros(2, dtype=wp.float32, device="cuda:0")
+    wp.launch(_sample_and_read, dim=1, inputs=[tex, m, out], device="cuda:0")
+    np.testing.assert_array_equal(out.numpy(), [1.0, 5.0])
