@@ -13,6 +13,7 @@ for the frontend.
 from __future__ import annotations
 
 import builtins
+import math
 from typing import Any
 
 import numpy as np
@@ -191,7 +192,7 @@ class array:
 
     @property
     def size(self) -> int:
-        return int(np.prod(self.shape, dtype=np.int64))
+        return math.prod(self.shape)  # (Python ints: several times cheaper than np.prod)
 
     @property
     def strides(self) -> tuple[int, ...]:
@@ -711,7 +712,7 @@ def _from_ptr(
     dtype, inner = np_dtype(t), inner_shape(t)
     size = _type_bytes(t)
     if strides is None:
-        outer = tuple(int(size * np.prod(dims[k + 1 :], dtype=np.int64)) for k in range(len(dims)))
+        outer = tuple(size * math.prod(dims[k + 1 :]) for k in range(len(dims)))
     else:
         outer = tuple(builtins.int(x) for x in strides)
         if len(outer) != len(dims):
@@ -779,13 +780,13 @@ def _reshape_dims(shape: Any, old: tuple[int, ...], size: int) -> tuple[int, ...
 
 
 def _type_bytes(t: T.Type) -> int:
-    return int(np_dtype(t).itemsize * np.prod(inner_shape(t), dtype=np.int64))
+    return np_dtype(t).itemsize * math.prod(inner_shape(t))
 
 
 def _inner_strides(t: T.Type) -> tuple[int, ...]:
     """Byte strides of a contiguous element's component dims (() for scalars and structs)."""
     inner, item = inner_shape(t), np_dtype(t).itemsize
-    return tuple(int(item * np.prod(inner[k + 1 :], dtype=np.int64)) for k in range(len(inner)))
+    return tuple(item * math.prod(inner[k + 1 :]) for k in range(len(inner)))
 
 
 class _Interface:

@@ -176,6 +176,7 @@ class _Plan:
 
 _PLAN_ATTR = "_kdsl_plans"
 _LAST_ATTR = "_kdsl_last_plan"
+_VALUE_AT_ATTR = "_kdsl_value_at"
 
 
 def launch_plan(kernel: Any, device: Any, backend: Any) -> _Plan:
@@ -216,7 +217,7 @@ def launch_plan(kernel: Any, device: Any, backend: Any) -> _Plan:
 
 def forget(kernel: Any) -> None:
     """Drop the compiled code and launch plans cached on ``kernel``."""
-    for attr in (_CACHE_ATTR, _PLAN_ATTR, _LAST_ATTR):
+    for attr in (_CACHE_ATTR, _PLAN_ATTR, _LAST_ATTR, _VALUE_AT_ATTR):
         if hasattr(kernel, attr):
             delattr(kernel, attr)
 
@@ -403,7 +404,7 @@ class Launch:
     _value_at: list = field(default_factory=list, init=False, repr=False)
 
     def __post_init__(self) -> None:
-        self._value_at = by_value_indices(self.kernel.arg_types)
+        self._value_at = _value_indices(self.kernel)
 
     def set_param_at_index(self, index: int, value: Any) -> None:
         """Replace argument ``index`` (checked like ``launch`` checks it)."""
@@ -472,6 +473,17 @@ class Launch:
             self._run, self._write = made
             self._held = list(self.params)  # ``params`` is public: it may be reassigned
         return self._run
+
+
+def _value_indices(kernel: Any) -> list[int]:
+    """``by_value_indices`` of ``kernel``'s parameters, worked out once per kernel (a
+    build prepares several launches of each of its kernels); a copy, so a caller may
+    keep it."""
+    held = getattr(kernel, _VALUE_AT_ATTR, None)
+    if held is None or held[0] is not kernel.arg_types:
+        held = (kernel.arg_types, by_value_indices(kernel.arg_types))
+        setattr(kernel, _VALUE_AT_ATTR, held)
+    return list(held[1])
 
 
 def _convert_one(kernel: Any, index: int, name: str, t: Any, value: Any, device: Device) -> Any:

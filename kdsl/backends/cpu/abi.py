@@ -159,6 +159,7 @@ class ArgPacker:
         self.struct = struct.Struct("".join(fmt))
         self.size = self.start + self.struct.size
         self._local = threading.local()
+        self._writers: dict[tuple, Callable[[Any, Sequence[Any]], None]] = {}
 
     def new_buffer(self) -> Any:
         """A fresh argument buffer with its pointer table filled in."""
@@ -200,7 +201,15 @@ class ArgPacker:
     def writer(self, indices: Sequence[int]) -> Callable[[Any, Sequence[Any]], None]:
         """A function writing new values of the by-value parameters ``indices`` (scalars,
         vectors, matrices, handles; ascending) into a buffer ``pack_into`` filled, in
-        place: ``write(buf, values)``, one value per index (``param_writer.make_writer``)."""
+        place: ``write(buf, values)``, one value per index (``param_writer.make_writer``).
+        Made once per set of indices (every patchable launch of the kernel asks)."""
+        key = tuple(indices)
+        made = self._writers.get(key)
+        if made is None:
+            made = self._writers[key] = self._make_writer(key)
+        return made
+
+    def _make_writer(self, indices: Sequence[int]) -> Callable[[Any, Sequence[Any]], None]:
         if not self.supported:
             raise TypeError("a signature with struct parameters is packed by Packed")
         fields: list = [None] * len(self.types)

@@ -139,6 +139,7 @@ class Packer:
         self.size = max(self.struct.size, 1)
         self.flatteners = [_flattener(t, i, n) for i, (t, n) in enumerate(zip(types, names))]
         self.ptr_array = ctypes.c_void_p * len(self.offsets)
+        self._writers: dict[tuple, Callable[[Any, Sequence[Any]], None]] = {}
 
     def pack(
         self, args: Sequence[Any], device: int, grid: Sequence[int], record: int | None = None
@@ -161,7 +162,15 @@ class Packer:
     def writer(self, indices: Sequence[int]) -> Callable[[Any, Sequence[Any]], None]:
         """A function writing new values of the by-value parameters ``indices`` (scalars,
         vectors, matrices, handles; ascending) into a buffer ``pack`` filled, in place:
-        ``write(buf, values)``, one value per index (``param_writer.make_writer``)."""
+        ``write(buf, values)``, one value per index (``param_writer.make_writer``). Made
+        once per set of indices (every patchable launch of the kernel asks)."""
+        key = tuple(indices)
+        made = self._writers.get(key)
+        if made is None:
+            made = self._writers[key] = self._make_writer(key)
+        return made
+
+    def _make_writer(self, indices: Sequence[int]) -> Callable[[Any, Sequence[Any]], None]:
         flatten: list = [None] * len(self.types)
         for i in indices:
             t = self.types[i]
