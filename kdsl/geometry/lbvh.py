@@ -36,10 +36,11 @@ arrays have ``2n - 1`` slots, those after the last node marked ``first = -2``
 (``UNUSED``). Its buffers are views of one allocation (which the tree's
 ``rebuild`` keeps alive); the launches are prepared once
 (``record_cmd``) and ``rebuild`` runs them again over the same buffers, which every
-build leaves as it found them (the zeroed counters zero again). On a GPU a build's
-second run sorts with the kdsl merge sort instead of CuPy's (which synchronizes the
-stream) and runs as one captured CUDA graph from then on (``LbvhBuild.run``). A fresh
-tree over the same boxes as a collected one takes its build (``recycle``, ``BUILDS``).
+build leaves as it found them (the zeroed counters zero again). On a GPU a build sorts
+with the kdsl merge sort (CuPy's synchronizes the stream), so the host never waits for
+a build, and runs as one captured CUDA graph from its second run (``LbvhBuild.run``). A
+fresh tree over the same boxes as a collected one takes its build (``recycle``,
+``BUILDS``).
 """
 
 from __future__ import annotations
@@ -482,10 +483,10 @@ def key_layout(n: int, num_groups: int) -> tuple[int, int, int]:
 
 
 def device_sort_on(device) -> bool:
-    """Whether lbvh builds on ``device`` sort their keys with the kdsl merge sort from
-    their second run (``kdsl.utils.merge_sort``: kernel launches only, so the build can
-    be one graph) rather than always with ``SortKeys`` (CuPy's sort on a GPU, NumPy's
-    on the CPU, which stays faster there). Tests try both anywhere."""
+    """Whether lbvh builds on ``device`` sort their keys with the kdsl merge sort
+    (``kdsl.utils.merge_sort``: kernel launches only, so nothing waits for the device
+    and the build can be one graph) rather than with ``SortKeys`` (CuPy's sort on a
+    GPU, NumPy's on the CPU, which stays faster there). Tests try both anywhere."""
     return bool(device.is_cuda)
 
 
@@ -560,11 +561,14 @@ class LbvhBuild:
                 hi, packed_first, packed_next, with_parents, ints["pre_parent"],
                 ints["group_roots"], zero["starts"], zero["bounds"]]).launch,
         ]  # fmt: skip
-        # The first run sorts with ``SortKeys``; with the kdsl sort, later runs sort with
-        # it (see ``run``) and, all launches then when there is no scan, as one graph.
-        self._keys, self._scratch = keys, (all_keys[n:] if sorted_by_kernels else None)
-        self._stream, self._graphed = bounds.stream, not use_scan and graphs_on(device)
-        self._steps = StepGraph([*self._before, SortKeys(keys), *self._after], None, False)
+        # With the kdsl sort, every step is a launch: without the scan, one graph from
+        # the second run.
+        if sorted_by_kernels:
+            sort = MergeSortKeys(keys, all_keys[n:]).steps
+            graphed = not use_scan and graphs_on(device)
+        else:
+            sort, graphed = [SortKeys(keys)], False
+        self._steps = StepGraph([*self._before, *sort, *self._after], bounds.stream, graphed)
         self.runs = 0
         self._tree_fields = (
             ints["skip"], ints["first"], ints["count"], ints["items"],
@@ -577,18 +581,11 @@ class LbvhBuild:
     def run(self) -> None:
         """Build the tree (again) from the boxes' current values.
 
-        With the kdsl sort (``device_sort_on``), the first run still sorts with
-        ``SortKeys`` (CuPy's sort on a GPU: one call, where the kdsl sort's sixteen
-        launches for 200k boxes would each cost a preparation and a first packing, which
-        a build made once never earns back); the second prepares the kdsl sort and runs
-        every step as one captured graph from then on (``graph_steps``). Both sorts
-        order the distinct keys alike: the same tree."""
+        With the kdsl sort (``device_sort_on``; its merges are two prepared launches
+        whatever the count, so a build made once prepares five), a GPU build runs its
+        steps one by one the first time and as one captured graph from then on
+        (``graph_steps``). Both sorts order the distinct keys alike: the same tree."""
         self.clean = False
-        if self._scratch is not None and self.runs == 1:
-            sort = MergeSortKeys(self._keys, self._scratch)
-            steps = [*self._before, *sort.steps, *self._after]
-            self._steps = StepGraph(steps, self._stream, self._graphed)
-            self._steps.runs = 1  # captured at once: this is the build's second run
         self._steps()
         self.runs += 1
         self.clean = True

@@ -16,16 +16,22 @@ build that uses it can be captured as one CUDA graph. The sort:
 
 ``ceil(log2(n / chunk))`` merges: 16 launches in all for 200k keys in chunks of 8 (on an
 H200, chunks of 8, 16 and 32 sorted 200k keys in about 60, 85 and 140 us as a graph).
+The merges are two prepared launches, one per direction of the ping-pong, whose run
+length is written into their packed arguments before each launch (``Launch``'s
+patchable form): a sort made once (a first build) prepares three launches, not one per
+merge. (A CUDA launch copies its arguments when it is issued, and a captured one when
+it is captured, so a later write never reaches an issued merge.)
 """
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 
 from kdsl.frontend.api import kernel, tid
 from kdsl.frontend.api import min as vmin
 from kdsl.runtime.array import array
-from kdsl.runtime.launch import launch
+from kdsl.runtime.launch import Launch, launch
 from kdsl.types import int32, uint64
 from kdsl.utils.buffers import UtilsError, check_array
 
@@ -124,13 +130,25 @@ class MergeSortKeys:
         if n < 2:
             return
         self.steps.append(prepared(_sort_chunks, -(-n // chunk), [keys, src, n, chunk]))
+        merges: dict[bool, Launch] = {}  # by direction: from the keys or from the scratch
         run = chunk
         for _ in range(passes):
             dst = scratch if src is keys else keys
-            self.steps.append(prepared(_merge_runs, n, [src, dst, n, run]))
+            merge = merges.get(src is keys)
+            if merge is None:
+                merge = merges[src is keys] = launch(
+                    _merge_runs, dim=n, device=device, inputs=[src, dst, n, run], record_cmd=True
+                )  # fmt: skip
+            self.steps.append(functools.partial(_merge_pass, merge, run))
             src, run = dst, 2 * run
 
     def __call__(self) -> None:
         """Sort the keys in place."""
         for step in self.steps:
             step()
+
+
+def _merge_pass(merge: Launch, run: int) -> None:
+    """One merge of runs of ``run`` keys: ``merge`` with its run length set, launched."""
+    merge.set_param_at_index(3, run)
+    merge.launch()

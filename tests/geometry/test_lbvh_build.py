@@ -220,8 +220,9 @@ def tree_arrays(t) -> list[bytes]:
 @pytest.mark.parametrize("leaf_size", [1, 4])
 @pytest.mark.parametrize("num_groups", [0, 3])
 def test_kernel_sort_builds_the_same_tree(monkeypatch, leaf_size, num_groups):
-    """The kdsl merge sort (a GPU's, from a build's second run) and ``SortKeys`` sort the
-    distinct keys alike: one tree bit for bit, duplicates and NaN boxes included."""
+    """The kdsl merge sort (a GPU's, from a build's first run: its merges two prepared
+    launches) and ``SortKeys`` sort the distinct keys alike: one tree bit for bit,
+    duplicates and NaN boxes included, at the first run and at a rebuild."""
     rng = np.random.default_rng(leaf_size + 10 * num_groups)
     n = 2500
     c = rng.random((n, 3)).astype(np.float32)
@@ -233,8 +234,8 @@ def test_kernel_sort_builds_the_same_tree(monkeypatch, leaf_size, num_groups):
     for kernels in (False, True):
         monkeypatch.setattr(lbvh, "device_sort_on", lambda device, k=kernels: k)
         trees.append(gpu_config_tree(lo, hi, leaf_size, groups, num_groups))
-    assert tree_arrays(trees[0]) == tree_arrays(trees[1])  # (both sorted by SortKeys)
-    trees[1].rebuild()  # the second run sorts with the kdsl merge sort
+    assert tree_arrays(trees[0]) == tree_arrays(trees[1])  # SortKeys, the merge sort
+    trees[1].rebuild()  # the merge sort again, its merges' run lengths rewritten
     steps = trees[1].rebuild.args[0]._steps.steps
     assert len(steps) == 4 + 1 + merge_passes(n)  # its chunk sort and merges
     assert trees[0].num_nodes == trees[1].num_nodes
