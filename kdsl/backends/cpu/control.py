@@ -13,12 +13,13 @@ from typing import Any
 
 from llvmlite import ir
 
-from kdsl.backends.cpu import checks, versioning
+from kdsl.backends.cpu import checks, loop_md, versioning
 from kdsl.backends.cpu.composite import leaf_types, leaves, rebuild_all
 from kdsl.backends.cpu.emitter import Emitter
 from kdsl.ir import types as T
 from kdsl.ir.core import Operation
 from kdsl.ir.lowering import LOWERINGS
+from kdsl.ir.rewrite import constant_of
 
 CPU = LOWERINGS.for_backend("cpu")
 
@@ -65,6 +66,9 @@ def _if(em: Emitter, op: Operation) -> list[Any]:
 
 
 def _for(em: Emitter, op: Operation) -> list[Any]:
+    trips = loop_md.short_trips(op) if em.unroll_inside else None
+    if trips is not None:
+        return _unrolled_for(em, op, trips)
     arrays = versioning.arrays_to_version(op)
     if not arrays:
         return _emit_for(em, op)
@@ -101,6 +105,16 @@ def _emit_for(em: Emitter, op: Operation) -> list[Any]:
     _add_incoming(phis, nxt, latch)
     B.branch(head)
     B.position_at_end(done)
+    return carried
+
+
+def _unrolled_for(em: Emitter, op: Operation, trips: int) -> list[Any]:
+    """``scf.for`` with constant bounds, its body emitted once per trip (``loop_md``)."""
+    lb, _, _, *carried = em.args(op)
+    lo, step = constant_of(op.operands[0])[1], constant_of(op.operands[2])[1]
+    for k in range(trips):
+        iv = ir.Constant(lb.type, lo + k * step)
+        carried = em.lower_block(op.regions[0].block, [iv, *carried])
     return carried
 
 

@@ -174,6 +174,14 @@ class Emitter:
         #: ends the current thread after a failed check (see ``checks``).
         self.error_record: ir.Value | None = None
         self.abort_block: ir.Block | None = None
+        #: A kernel's access group (``loop_md``): its thread body's array loads and
+        #: stores join it; None in functions and debug builds.
+        self.access_group: Any = None
+        #: The kernel's parameters (``loop_md.kernel_arrays``): only their accesses join.
+        self.kernel_arrays: frozenset[Value] = frozenset()
+        #: Whether constant loops of at most ``loop_md.UNROLL_INSIDE`` trips are emitted
+        #: unrolled (a kernel whose thread loop can be vectorized, ``loop_md``).
+        self.unroll_inside = False
 
     # -- values ---------------------------------------------------------------
     def get(self, v: Value) -> Any:

@@ -20,6 +20,7 @@ from typing import Any
 
 from llvmlite import ir
 
+from kdsl.backends.cpu import loop_md
 from kdsl.backends.cpu import types as LT
 from kdsl.backends.cpu.composite import Parts, leaf_types, leaves, rebuild_all
 from kdsl.backends.cpu.emitter import Emitter, ModuleState
@@ -64,6 +65,10 @@ def emit_kernel(state: ModuleState, func: Operation, llname: str) -> ir.Function
     fn.attributes.add("nounwind")
     start, end, args, dims = fn.args
     em = Emitter(state, fn, func.attrs["sym_name"])
+    if not state.debug:  # the thread loop's array accesses are independent (loop_md)
+        em.access_group = loop_md.access_group(state.llmod)
+        em.kernel_arrays = loop_md.kernel_arrays(func)
+        em.unroll_inside = loop_md.thread_parallel(func)
     B = em.b
     entry = fn.append_basic_block("entry")
     B.position_at_end(entry)
@@ -103,7 +108,9 @@ def emit_kernel(state: ModuleState, func: Operation, llname: str) -> ir.Function
 
     # Threads over arrays of vectors vectorize only with constant strides: see
     # ``versioning``. A body with loops of its own is not copied (they are versioned).
-    has_loops = any(op.name in ("scf.for", "scf.while") for op in func.walk())
+    has_loops = any(op.name in ("scf.for", "scf.while")
+                    and not (em.unroll_inside and loop_md.short_trips(op))
+                    for op in func.walk())  # fmt: skip
     arrays = [] if has_loops else vector_arrays(body_block.args)
     if arrays:
         versioned(em, arrays, emit, [])
@@ -297,7 +304,9 @@ def _thread_body(
         em.abort_block = fn.append_basic_block("thread.abort")
     em.lower_block(body, params)
     counter.add_incoming(step(), B.block)
-    B.branch(head)
+    latch = B.branch(head)
+    if em.access_group is not None:  # its threads' array accesses are independent
+        latch.set_metadata("llvm.loop", loop_md.parallel_loop(em.state.llmod, em.access_group))
     if em.abort_block is not None:
         B.position_at_end(em.abort_block)
         counter.add_incoming(step(), em.abort_block)

@@ -15,6 +15,7 @@ from llvmlite import ir
 from kdsl.backends.cpu import types as LT
 from kdsl.backends.cpu.composite import Parts, components
 from kdsl.backends.cpu.emitter import Emitter
+from kdsl.backends.cpu.loop_md import mark_access
 from kdsl.errors import KdslCapabilityError
 from kdsl.ir import types as T
 from kdsl.ir.core import Operation, Value
@@ -150,7 +151,10 @@ def store_value(em: Emitter, value: Any, ptr: ir.Value, t: T.Type) -> None:
 def _load(em: Emitter, op: Operation) -> ir.Value:
     at = op.operands[0].type
     ptr = element_ptr(em, em.get(op.operands[0]), at, op.operands[1:])
-    return load_value(em, ptr, at.dtype)
+    first = len(em.b.block.instructions)
+    out = load_value(em, ptr, at.dtype)
+    _mark(em, op.operands[0], first)
+    return out
 
 
 def _array_view(em: Emitter, op: Operation) -> ir.Value:
@@ -170,7 +174,16 @@ def _array_view(em: Emitter, op: Operation) -> ir.Value:
 def _store(em: Emitter, op: Operation) -> None:
     at = op.operands[1].type
     ptr = element_ptr(em, em.get(op.operands[1]), at, op.operands[2:])
+    first = len(em.b.block.instructions)
     store_value(em, em.get(op.operands[0]), ptr, at.dtype)
+    _mark(em, op.operands[1], first)
+
+
+def _mark(em: Emitter, array: Value, first: int) -> None:
+    """Put the accesses emitted since instruction ``first`` of the current block into the
+    kernel's access group when ``array`` is a kernel parameter (``loop_md``)."""
+    if array in em.kernel_arrays:
+        mark_access(em.b.block.instructions[first:], em.access_group)
 
 
 def _rmw_op(kind: str, et: T.ScalarType) -> str:
