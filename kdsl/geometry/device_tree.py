@@ -31,6 +31,7 @@ from kdsl.frontend.api import min as vmin
 from kdsl.geometry.median import Tree
 from kdsl.runtime.alloc import empty, zeros
 from kdsl.runtime.array import array
+from kdsl.runtime.carve import carve
 from kdsl.runtime.launch import launch
 from kdsl.types import int32, vec3
 
@@ -82,15 +83,20 @@ class DeviceTree:
         self._num_nodes = None
 
 
+#: The fields of a packed node (``BvhNode``): (byte offset, dtype).
+_NODE_FIELDS = ((0, vec3), (12, int32), (16, vec3), (28, int32))
+
+
+def node_fields(slots: int, at: int = 0) -> list[tuple]:
+    """The ``carve`` parts of ``node_views`` over ``slots`` packed nodes starting ``at``
+    bytes into a block."""
+    return [(at + offset, t, slots, (32,)) for offset, t in _NODE_FIELDS]
+
+
 def node_views(nodes: array) -> tuple[array, array, array, array]:
-    """Strided views of the fields of every packed node (``BvhNode``): ``lower`` (vec3),
-    ``first`` (int32), ``upper`` (vec3), ``next`` (int32)."""
-    fields = ((0, vec3), (12, int32), (16, vec3), (28, int32))
-    if nodes.shape[0] == 0:
-        return tuple(empty(0, dtype=t, device=nodes.device) for _, t in fields)
-    base, shape, strides, device = nodes.ptr, nodes.shape, nodes.strides, nodes.device
-    return tuple(array(ptr=base + offset, dtype=t, shape=shape, strides=strides, device=device)
-                 for offset, t in fields)  # fmt: skip
+    """Strided views of the fields of every packed node (``BvhNode``, a contiguous
+    array): ``lower`` (vec3), ``first`` (int32), ``upper`` (vec3), ``next`` (int32)."""
+    return tuple(carve(nodes, node_fields(nodes.shape[0])))
 
 
 def _device_ints(a: np.ndarray, device) -> array:

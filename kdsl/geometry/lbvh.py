@@ -46,17 +46,19 @@ fresh tree over the same boxes as a collected one takes its build (``recycle``,
 from __future__ import annotations
 
 import functools
+import itertools
 import weakref
 
 from kdsl.errors import KdslError
 from kdsl.frontend.api import atomic_add, atomic_max, cast, func, inf, kernel, thread_fence, tid
 from kdsl.frontend.api import max as vmax
 from kdsl.frontend.api import min as vmin
-from kdsl.geometry.device_tree import UNUSED, DeviceTree, node_views
+from kdsl.geometry.device_tree import UNUSED, DeviceTree, node_fields
 from kdsl.geometry.graph_steps import StepGraph, graphs_on
 from kdsl.geometry.recycle import RecycleBin
 from kdsl.runtime.alloc import empty
 from kdsl.runtime.array import array
+from kdsl.runtime.carve import carve
 from kdsl.runtime.launch import Launch, launch
 from kdsl.runtime.stream import current_stream
 from kdsl.stdlib.bvh import BvhNode
@@ -521,19 +523,26 @@ class LbvhBuild:
         # (an uninitialized struct allocation, then one fill of the int32 arrays that
         # must start at zero: a zero-filled struct array is slow to make on the CPU)
         self._block = empty(slots + -(-tail // 32), dtype=BvhNode, device=device)
-        nodes = self._block[:slots]
-        views = node_views(nodes)
-        lo, packed_first, hi, packed_next = views
-        base = self._block.ptr + 32 * slots
-        inner = array(ptr=base, dtype=vec3, shape=(2 * (n - 1),), device=device)
-        node_lo, node_hi = inner[: n - 1], inner[n - 1 :]
-        all_keys = array(ptr=base + 24 * (n - 1), dtype=uint64, shape=(num_keys,), device=device)
-        keys = all_keys[:n]
-        int_view = array(ptr=base + 24 * (n - 1) + 8 * num_keys, dtype=int32, shape=(num_ints,),
-                         device=device)  # fmt: skip
-        ints = _carve(int_view, {**layout, **zero_sizes})
+        at_keys = 32 * slots + 24 * (n - 1)
+        at_ints = at_keys + 8 * num_keys
+        sizes = {**layout, **zero_sizes}
+        offsets = [at_ints + 4 * k for k in itertools.accumulate([0, *sizes.values()])]
+        # Every view in one call (``carve``): the nodes and their fields' strided views,
+        # the inner nodes' bounds, the keys and their scratch, the int32 arrays, and
+        # the zeroed ones as one array (for the fill).
+        made = carve(self._block, [
+            (0, BvhNode, slots), *node_fields(slots),
+            (32 * slots, vec3, n - 1), (32 * slots + 12 * (n - 1), vec3, n - 1),
+            (at_keys, uint64, n), (at_keys + 8 * n, uint64, num_keys - n),
+            (offsets[len(layout)], int32, sum(zero_sizes.values())),
+            *((at, int32, size) for at, size in zip(offsets, sizes.values())),
+        ])  # fmt: skip
+        nodes, lo, packed_first, hi, packed_next = made[:5]
+        node_lo, node_hi, keys, scratch, zero_block = made[5:10]
+        ints = dict(zip(sizes, made[10:]))
+        views = (lo, packed_first, hi, packed_next)
         zero = {name: ints[name] for name in zero_sizes}
-        int_view[sum(layout.values()) :].zero_()  # ``zero``: the last arrays of the block
+        zero_block.zero_()  # ``zero``: the last arrays of the block
         node_a, node_b = ints["node_a"], ints["node_b"]
         group_arg = groups if groups is not None else zero["bounds"]
         with_parents = int(bottom_up)
@@ -564,7 +573,7 @@ class LbvhBuild:
         # With the kdsl sort, every step is a launch: without the scan, one graph from
         # the second run.
         if sorted_by_kernels:
-            sort = MergeSortKeys(keys, all_keys[n:]).steps
+            sort = MergeSortKeys(keys, scratch).steps
             graphed = not use_scan and graphs_on(device)
         else:
             sort, graphed = [SortKeys(keys)], False
@@ -640,12 +649,3 @@ def build_lbvh(lowers: array, uppers: array, leaf_size: int, groups: array | Non
     tree.rebuild = functools.partial(_rebuild, build, weakref.ref(tree))
     BUILDS.keep_when_collected(tree, inputs, shape, build, lambda b: b.clean)
     return tree
-
-
-def _carve(block: array, sizes: dict[str, int]) -> dict[str, array]:
-    """Consecutive views of the 1-d ``block``, one per entry of ``sizes``."""
-    views, at = {}, 0
-    for name, size in sizes.items():
-        views[name] = block[at : at + size]
-        at += size
-    return views
