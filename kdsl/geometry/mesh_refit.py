@@ -25,10 +25,11 @@ from kdsl.geometry.host_read import IntsReader
 from kdsl.geometry.recycle import RecycleBin
 from kdsl.runtime.alloc import zeros
 from kdsl.runtime.array import array
+from kdsl.runtime.carve import carve
 from kdsl.runtime.launch import launch
 from kdsl.runtime.stream import current_stream
 from kdsl.types import float32, int32, vec3
-from kdsl.utils.chunk_sum import ChunkSum
+from kdsl.utils.chunk_sum import ChunkSum, scratch_size
 
 #: The check's two counters keep the maximum of ``_TOP - position`` of the bad values
 #: found: zero (where they start) is "nothing found", larger values earlier positions.
@@ -83,11 +84,14 @@ class FaceBoxes:
 
     def __init__(self, num_tris: int, device) -> None:
         floats = 7 * num_tris + 1  # boxes (six per face), edges, their sum
-        block = zeros(floats + 2, dtype=float32, device=device)  # and the two counters
-        boxes = block[: 6 * num_tris].reshape((2 * num_tris, 3)).view(vec3)
-        self.lowers, self.uppers, self.none = boxes[:num_tris], boxes[num_tris:], boxes[:0]
-        self.edges, self.edge_sum = block[6 * num_tris : floats - 1], block[floats - 1 : floats]
-        self._first_bad = block[floats:].view(int32)
+        m, scratch = num_tris, scratch_size(num_tris)
+        # (and the two counters, then the sum's scratch)
+        block = zeros(floats + 2 + scratch, dtype=float32, device=device)
+        (self.lowers, self.uppers, self.none, self.edges, self.edge_sum, self._first_bad,
+         self._scratch) = carve(block, [
+            (0, vec3, m), (12 * m, vec3, m), (0, vec3, 0), (24 * m, float32, m),
+            (28 * m, float32, 1), (4 * floats, int32, 2), (4 * floats + 8, float32, scratch),
+        ])  # fmt: skip
         self._read = IntsReader(self._first_bad)
         #: The edge sum's prepared launches and the stream they run on.
         self._sum: StepGraph | None = None
@@ -120,7 +124,8 @@ class FaceBoxes:
         if num_tris:
             total = self._sum
             if total is None or total.stream is not stream:
-                steps = ChunkSum(self.edges, self.edge_sum, guard=self._first_bad).steps
+                steps = ChunkSum(self.edges, self.edge_sum, guard=self._first_bad,
+                                 scratch=self._scratch).steps  # fmt: skip
                 total = self._sum = StepGraph(steps, stream, graphs_on(device))
             total()  # (writes nothing when the check found something)
         self._pending = True

@@ -56,17 +56,23 @@ def sum_levels(n: int, chunk: int = CHUNK) -> list[int]:
     return sizes[1:]
 
 
+def scratch_size(n: int, chunk: int = CHUNK) -> int:
+    """The float32 values of scratch a ``ChunkSum`` of ``n`` values needs."""
+    return sum(sum_levels(n, chunk)[:-1])
+
+
 class ChunkSum:
     """A prepared ``out[0] = sum(values)`` (see the module docstring): ``values`` a
     contiguous 1-d float32 array, ``out`` a float32 array of at least one element on its
     device, ``guard`` None or an int32 array there. The launches are prepared once, on
     the stream current when it is made; ``steps`` lists them (for a caller that captures
-    them as a graph). An empty ``values`` sums to 0.0."""
+    them as a graph). An empty ``values`` sums to 0.0. ``scratch``: float32 values on the
+    device for the levels before the last (``scratch_size``; allocated when None)."""
 
     __slots__ = ("steps", "_scratch")
 
     def __init__(self, values: array, out: array, guard: array | None = None,
-                 chunk: int = CHUNK) -> None:  # fmt: skip
+                 chunk: int = CHUNK, scratch: array | None = None) -> None:  # fmt: skip
         v, o = check_array("values", values), check_array("out", out)
         g = None if guard is None else check_array("guard", guard)
         same_device(values=v, out=o, guard=g)
@@ -83,8 +89,14 @@ class ChunkSum:
             raise UtilsError(f"ChunkSum chunk must be an int of at least 2, not {chunk!r}")
         device = v.device
         sizes = sum_levels(v.shape[0], chunk)
-        # One scratch block for the levels before the last.
-        self._scratch = empty(max(sum(sizes[:-1]), 1), dtype=float32, device=device)
+        if scratch is None:  # one block for the levels before the last
+            scratch = empty(max(sum(sizes[:-1]), 1), dtype=float32, device=device)
+        s = check_array("scratch", scratch)
+        same_device(values=v, scratch=s)
+        if s.ndim != 1 or s.dtype is not float32 or s.shape[0] < sum(sizes[:-1]):
+            raise UtilsError(f"ChunkSum's scratch is {sum(sizes[:-1])} float32 at least, not "
+                             f"{s.dtype} of shape {s.shape}")  # fmt: skip
+        self._scratch = s
         none = empty(0, dtype=int32, device=device) if g is None else g[:0]
         self.steps: list[Callable[[], None]] = []
         src, n, at = v, v.shape[0], 0

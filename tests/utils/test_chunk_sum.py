@@ -9,7 +9,7 @@ import pytest
 
 import kdsl as wp
 from kdsl.utils import UtilsError
-from kdsl.utils.chunk_sum import CHUNK, ChunkSum, sum_levels
+from kdsl.utils.chunk_sum import CHUNK, ChunkSum, scratch_size, sum_levels
 
 DEVICES = [
     "cpu",
@@ -32,6 +32,7 @@ def test_levels():
     assert sum_levels(0) == [1] and sum_levels(1) == [1] and sum_levels(64) == [1]
     assert sum_levels(65) == [2, 1]
     assert sum_levels(200_000) == [3125, 49, 1]
+    assert scratch_size(200_000) == 3174 and scratch_size(64) == 0
 
 
 @pytest.mark.parametrize("device", DEVICES)
@@ -83,3 +84,15 @@ def test_refuses_what_it_cannot_sum():
         ChunkSum(wp.zeros(4, dtype=wp.float32), f, chunk=1)
     with pytest.raises(UtilsError, match="must be a kdsl array"):
         ChunkSum(np.zeros(4, np.float32), f)
+    with pytest.raises(UtilsError, match="scratch is 2 float32 at least"):
+        ChunkSum(wp.zeros(100, dtype=wp.float32), f, scratch=wp.zeros(1, dtype=wp.float32))
+
+
+@pytest.mark.parametrize("device", DEVICES)
+def test_scratch_given(device):
+    """The scratch may be a view of the caller's block (a mesh keeps it with its boxes)."""
+    block = wp.zeros(5000 + 1 + scratch_size(5000), dtype=wp.float32, device=device)
+    host = np.random.default_rng(1).random(5000).astype(np.float32)
+    block[:5000].assign(wp.array(host, device=device))
+    ChunkSum(block[:5000], block[5000:5001], scratch=block[5001:])()
+    assert block.numpy()[5000] == emulated(host)
