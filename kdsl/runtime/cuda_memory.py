@@ -9,6 +9,7 @@ only when a CUDA device is used.
 
 from __future__ import annotations
 
+import ctypes
 from typing import Any
 
 import numpy as np
@@ -205,9 +206,13 @@ def upload_bytes(address: int, data: bytes, device: Device) -> None:
         return
     s = get_stream(device)
     rt = cupy().cuda.runtime
-    src = np.frombuffer(data, dtype=np.uint8)
+    keep = bytes(data)  # (immutable: its address is read without NumPy)
+    src = ctypes.cast(ctypes.c_char_p(keep), ctypes.c_void_p).value
+    if cuda_device_count() == 1:  # the only device is the current one: no device scope
+        rt.memcpyAsync(address, src, len(keep), rt.memcpyHostToDevice, s.cuda_stream)
+        return
     with scope(device, s):
-        rt.memcpyAsync(address, src.ctypes.data, len(data), rt.memcpyHostToDevice, s.cuda_stream)
+        rt.memcpyAsync(address, src, len(keep), rt.memcpyHostToDevice, s.cuda_stream)
 
 
 def copy_elements(
