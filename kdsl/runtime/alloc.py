@@ -48,8 +48,10 @@ def _make(
             host[...] = np.asarray(host_value(t, init), dtype=host.dtype)
         return array._wrap(mem.from_host(host, dev), t, dev, requires_grad)
     buf = mem.empty(dims + inner_shape(t), np_dtype(t), dev)
-    if dev.is_cuda and isinstance(t, T.StructType) and init is not None:
-        with mem.scope(dev):  # zeros: a memset on the device's stream, no upload
+    if dev.is_cuda and init is not None and _zero_or_unset(init) and not graphs.ACTIVE:
+        mem.zero_async(buf, dev)  # zeros: one memset on the device's stream, no upload
+    elif dev.is_cuda and isinstance(t, T.StructType) and init is not None:
+        with mem.scope(dev):  # zeros (in a capture): a memset on the device's stream
             buf.data.memset_async(0, buf.nbytes)
     elif init is not None:
         if isinstance(t, T.StructType):  # padding too: the same bytes as on cuda
