@@ -395,6 +395,9 @@ class Launch:
     params: list
     device: Device
     stream: Any
+    #: Per parameter, the launch plan's converter (its fast path for the common
+    #: arguments, ``convert`` for the rest); None: ``convert`` for every argument.
+    converters: Any = field(default=None, repr=False)
     _run: Any = field(default=None, init=False, repr=False)
     #: Writes the by-value arguments into ``_run``'s packed form (None: repack instead).
     _write: Any = field(default=None, init=False, repr=False)
@@ -415,9 +418,13 @@ class Launch:
                 f"there is no index {index}"
             )
         try:
-            self.params[index] = _convert_one(
-                self.kernel, index, names[index], types[index], value, self.device
-            )
+            convs = self.converters
+            if convs is not None:  # (a changed scalar: a merge's run length, a time step)
+                self.params[index] = convs[index](value)
+            else:
+                self.params[index] = _convert_one(
+                    self.kernel, index, names[index], types[index], value, self.device
+                )
         except KdslLaunchError as e:
             raise locate_launch_error(e, self.kernel) from None
         write = self._write
@@ -620,7 +627,8 @@ def launch(
             check_tid(kernel, dims)
         stream = resolve_stream(dev, stream)
         if record_cmd:
-            return Launch(kernel, plan.backend, plan.compiled, dims, converted, dev, stream)
+            return Launch(kernel, plan.backend, plan.compiled, dims, converted, dev, stream,
+                          plan.converters)  # fmt: skip
         if rec is not None:
             rec.record_launch(plan, dims, converted, stream)
         elif _timing.RECORDING is None:
