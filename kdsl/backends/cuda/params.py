@@ -72,6 +72,19 @@ def _flattener(t: T.Type, index: int, name: str) -> Callable[[Any, list, int], N
         item, inner = dt.base.itemsize, dt.shape
         want = tuple(int(np.prod(inner[k + 1 :], dtype=np.int64)) * item for k in range(len(inner)))
 
+        if nd == 1 and not want:  # the common case, inline: a 1-d array of scalars
+
+            def array_1d(a: Any, out: list, device: int) -> None:
+                data = a.data
+                if data.device_id != device:
+                    raise KdslLaunchError(
+                        f"argument {index} ('{name}') is an array on cuda:{data.device_id}, "
+                        f"but the launch runs on cuda:{device}"
+                    )
+                out += (data.ptr, a.shape[0], a.strides[0])
+
+            return array_1d
+
         def array(a: Any, out: list, device: int) -> None:
             if a.data.device_id != device:
                 raise KdslLaunchError(
@@ -139,6 +152,8 @@ class Packer:
         self.size = max(self.struct.size, 1)
         self.flatteners = [_flattener(t, i, n) for i, (t, n) in enumerate(zip(types, names))]
         self.ptr_array = ctypes.c_void_p * len(self.offsets)
+        #: Writes the pointer table (cheaper than ``ptr_array(*pointers)``).
+        self._table = struct.Struct(f"<{len(self.offsets)}Q")
         self._writers: dict[tuple, Callable[[Any, Sequence[Any]], None]] = {}
 
     def pack(
@@ -157,7 +172,9 @@ class Packer:
         except struct.error as e:
             raise KdslLaunchError(f"cannot pass the launch arguments to the kernel: {e}") from None
         base = ctypes.addressof(buf)
-        return buf, self.ptr_array(*[base + o for o in self.offsets])
+        table = self.ptr_array()
+        self._table.pack_into(table, 0, *[base + o for o in self.offsets])
+        return buf, table
 
     def writer(self, indices: Sequence[int]) -> Callable[[Any, Sequence[Any]], None]:
         """A function writing new values of the by-value parameters ``indices`` (scalars,
