@@ -88,16 +88,7 @@ def _emit_for(em: Emitter, op: Operation) -> list[Any]:
     (iv,) = _phis(em, [lb], entry, "for.iv")
     phis = _phis(em, _flat(init), entry, "for.val")
     carried = rebuild_all(types, phis)
-    zero = em.const(step.type, 0)
-    lt = B.icmp_signed("<", iv, ub) if it.is_signed else B.icmp_unsigned("<", iv, ub)
-    if it.is_signed:  # a negative step counts down, a zero step runs nothing
-        gt = B.icmp_signed(">", iv, ub)
-        up = B.icmp_signed(">", step, zero)
-        down = B.icmp_signed("<", step, zero)
-        go = B.or_(B.and_(up, lt), B.and_(down, gt))
-    else:
-        go = B.and_(B.icmp_unsigned("!=", step, zero), lt)
-    B.cbranch(go, body, done)
+    B.cbranch(loop_test(em, iv, ub, step, it.is_signed), body, done)
     B.position_at_end(body)
     nxt = em.lower_block(op.regions[0].block, [iv, *carried])
     latch = B.block
@@ -106,6 +97,19 @@ def _emit_for(em: Emitter, op: Operation) -> list[Any]:
     B.branch(head)
     B.position_at_end(done)
     return carried
+
+
+def loop_test(em: Emitter, iv: ir.Value, ub: ir.Value, step: ir.Value, signed: bool) -> ir.Value:
+    """Whether ``scf.for`` runs its body at ``iv``: before ``ub`` in ``step``'s direction
+    (a negative step counts down when signed; a zero step runs nothing)."""
+    B = em.b
+    zero = em.const(step.type, 0)
+    lt = B.icmp_signed("<", iv, ub) if signed else B.icmp_unsigned("<", iv, ub)
+    if not signed:
+        return B.and_(B.icmp_unsigned("!=", step, zero), lt)
+    up = B.and_(B.icmp_signed(">", step, zero), lt)
+    down = B.and_(B.icmp_signed("<", step, zero), B.icmp_signed(">", iv, ub))
+    return B.or_(up, down)
 
 
 def _unrolled_for(em: Emitter, op: Operation, trips: int) -> list[Any]:

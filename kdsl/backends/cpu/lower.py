@@ -20,7 +20,7 @@ from typing import Any
 
 from llvmlite import ir
 
-from kdsl.backends.cpu import loop_md
+from kdsl.backends.cpu import lane_blocks, loop_md
 from kdsl.backends.cpu import types as LT
 from kdsl.backends.cpu.composite import Parts, leaf_types, leaves, rebuild_all
 from kdsl.backends.cpu.emitter import Emitter, ModuleState
@@ -97,13 +97,16 @@ def emit_kernel(state: ModuleState, func: Operation, llname: str) -> ir.Function
             sites += find_sites(plan.interior.regions[0].block)
         em.local_sums = LocalSums(B, sites) if sites else None
 
+    # A thread loop around one uniform loop runs in blocks of threads (``lane_blocks``).
+    lanes = None if state.debug or extents or plan else lane_blocks.lane_plan(func)
+
     def emit() -> list:
         # Parameters are read back from the value map: ``versioned`` rebinds dense arrays.
         now = [em.get(a) for a in body_block.args]
         if extents:
             _row_loops(em, body_block, now, start, end, extents, plan)
         else:
-            _flat_loop(em, body_block, now, start, end, plan)
+            _flat_loop(em, body_block, now, start, end, plan, lanes)
         return []
 
     # Threads over arrays of vectors vectorize only with constant strides: see
@@ -153,10 +156,12 @@ def _flat_loop(
     start: ir.Value,
     end: ir.Value,
     plan: InteriorPlan | None = None,
+    lanes: lane_blocks.LanePlan | None = None,
 ) -> None:
     """The thread loop of a kernel with a 1-d index: counted loops over ``[start, end)``.
 
-    With a ``plan`` the range is split into edges and interior (see ``_peeled``).
+    With a ``plan`` the range is split into edges and interior (see ``_peeled``); with
+    ``lanes`` it runs in blocks of threads (``lane_blocks``), the rest in the plain loop.
     Like ``_row_loops`` it leaves the builder in its exit block.
     """
     B = em.b
@@ -165,10 +170,17 @@ def _flat_loop(
         em.linear = i
         em.index = []
 
+    def span(lo: ir.Value, hi: ir.Value) -> None:
+        _span(em, body, params, lo, hi, at, "thread")
+
     # The loops count in i32 (tid is i32) with no-wrap adds, so LLVM sees a simple
     # induction variable; launches are limited to 2**31 threads.
     if plan is None:
-        _span(em, body, params, B.trunc(start, LT.I32), B.trunc(end, LT.I32), at, "thread")
+        lo, hi = B.trunc(start, LT.I32), B.trunc(end, LT.I32)
+        if lanes is None:
+            span(lo, hi)
+        else:
+            lane_blocks.emit(em, lanes, lo, hi, span)
         return
     lo, hi = interior_box(em, plan, [end])
     a, b = split_range(em, start, end, lo[0], hi[0])
