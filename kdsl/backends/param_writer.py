@@ -64,3 +64,26 @@ def make_writer(
             raise KdslLaunchError(f"cannot pass the launch arguments to the kernel: {e}") from None
 
     return write
+
+
+#: A writer: ``write(buf, values)`` (see ``make_writer``).
+Writer = Callable[[Any, Sequence[Any]], None]
+
+
+class Writers:
+    """A packer's writers, one per set of by-value parameter indices, each made once by
+    ``make(indices)`` (every patchable launch of a kernel asks for one)."""
+
+    __slots__ = ("_made", "_make")
+
+    def __init__(self, make: Callable[[tuple[int, ...]], Writer]) -> None:
+        self._make = make
+        self._made: dict[tuple[int, ...], Writer] = {}
+
+    def get(self, indices: Sequence[int]) -> Writer:
+        """The writer of ``indices`` (made now if it is the first time)."""
+        key = tuple(indices)
+        made = self._made.get(key)
+        if made is None:
+            made = self._made[key] = self._make(key)
+        return made

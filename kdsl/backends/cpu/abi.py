@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from kdsl.backends.param_writer import make_writer
+from kdsl.backends.param_writer import Writers, make_writer
 from kdsl.errors import KdslLaunchError
 from kdsl.ir import types as T
 
@@ -159,7 +159,7 @@ class ArgPacker:
         self.struct = struct.Struct("".join(fmt))
         self.size = self.start + self.struct.size
         self._local = threading.local()
-        self._writers: dict[tuple, Callable[[Any, Sequence[Any]], None]] = {}
+        self._writers = Writers(self._make_writer)
 
     def new_buffer(self) -> Any:
         """A fresh argument buffer with its pointer table filled in."""
@@ -203,11 +203,7 @@ class ArgPacker:
         vectors, matrices, handles; ascending) into a buffer ``pack_into`` filled, in
         place: ``write(buf, values)``, one value per index (``param_writer.make_writer``).
         Made once per set of indices (every patchable launch of the kernel asks)."""
-        key = tuple(indices)
-        made = self._writers.get(key)
-        if made is None:
-            made = self._writers[key] = self._make_writer(key)
-        return made
+        return self._writers.get(indices)
 
     def _make_writer(self, indices: Sequence[int]) -> Callable[[Any, Sequence[Any]], None]:
         if not self.supported:

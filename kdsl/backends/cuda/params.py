@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from kdsl.backends.cuda import ctypes_ as CT
-from kdsl.backends.param_writer import make_writer
+from kdsl.backends.param_writer import Writers, make_writer
 from kdsl.errors import KdslLaunchError
 from kdsl.ir import types as T
 
@@ -154,7 +154,7 @@ class Packer:
         self.ptr_array = ctypes.c_void_p * len(self.offsets)
         #: Writes the pointer table (cheaper than ``ptr_array(*pointers)``).
         self._table = struct.Struct(f"<{len(self.offsets)}Q")
-        self._writers: dict[tuple, Callable[[Any, Sequence[Any]], None]] = {}
+        self._writers = Writers(self._make_writer)
 
     def pack(
         self, args: Sequence[Any], device: int, grid: Sequence[int], record: int | None = None
@@ -181,11 +181,7 @@ class Packer:
         vectors, matrices, handles; ascending) into a buffer ``pack`` filled, in place:
         ``write(buf, values)``, one value per index (``param_writer.make_writer``). Made
         once per set of indices (every patchable launch of the kernel asks)."""
-        key = tuple(indices)
-        made = self._writers.get(key)
-        if made is None:
-            made = self._writers[key] = self._make_writer(key)
-        return made
+        return self._writers.get(indices)
 
     def _make_writer(self, indices: Sequence[int]) -> Callable[[Any, Sequence[Any]], None]:
         flatten: list = [None] * len(self.types)
