@@ -13,8 +13,8 @@ from __future__ import annotations
 from typing import Any
 
 from kdsl.errors import KdslTypeError
-from kdsl.geometry.bvh import Bvh
 from kdsl.geometry.mesh_refit import face_boxes, keep_face_boxes
+from kdsl.geometry.mesh_tree_points import MeshBvh, TreePoints
 from kdsl.ir import types as T
 from kdsl.runtime.array import array
 from kdsl.runtime.objects import ObjectRecord
@@ -108,11 +108,16 @@ class Mesh:
         self._num_tris = num_tris
         self._faces = face_boxes(num_tris, self.device)  # the checks write them
         self._recorded: tuple | None = None
-        self._write_boxes()
-        self.bvh = Bvh(
+        self._faces.start(pts, idx)  # the check, the boxes, the edge sum: answers below
+        self.bvh = MeshBvh(
             self._faces.lowers, self._faces.uppers, constructor=bvh_constructor, groups=groups,
             leaf_size=bvh_leaf_size,
         )  # fmt: skip
+        self._raise_if_bad()  # (waits for the check, not for the BVH's build)
+        self._tree_points = TreePoints(pts, idx, num_tris)  # the vertices in item order
+        self.bvh.tree_points = self._tree_points  # (its rebuild() writes them again)
+        self._tree_points.items = self.bvh.item_order
+        self._tree_points.write()
         keep_face_boxes(self.bvh, self._faces)  # for a later mesh, once the BVH is collected
         self._record = ObjectRecord(self, MeshRecord.__kdsl_type__, "mesh", self.device)
         self._write_record()
@@ -136,6 +141,7 @@ class Mesh:
                 f"{pts.shape[0]} on {pts.device}"
             )
         self._points = pts
+        self._tree_points.points = pts
         self.refit()
 
     def refit(self) -> None:
@@ -144,12 +150,19 @@ class Mesh:
         non-finite point is an error, raised before the BVH changes."""
         self._write_boxes()
         self.bvh.refit()
+        self._tree_points.write()
         self._write_record()
 
     def _write_boxes(self) -> None:
         """The faces' boxes (the BVH's items) and the average edge length, by one checking
         kernel on the mesh's device: an index out of range or a non-finite point raises."""
-        bad_index, bad_point = self._faces.write(self._points, self.indices)
+        self._faces.start(self._points, self.indices)
+        self._raise_if_bad()
+
+    def _raise_if_bad(self) -> None:
+        """Wait for the answers of the check ``FaceBoxes.start`` issued; raise for a bad
+        index or point."""
+        bad_index, bad_point = self._faces.finish()
         if bad_index >= 0:
             value = int(self.indices[bad_index : bad_index + 1].numpy()[0])
             raise KdslTypeError(
@@ -169,7 +182,7 @@ class Mesh:
                 "points": self._points,
                 "velocities": self.velocities if self.velocities is not None
                 else self._faces.none,
-                "indices": self.indices, "bvh": self.bvh.id,
+                "indices": self.indices, "bvh": self.bvh.id, "tri": self._tree_points.tri,
                 "num_points": self._points.shape[0], "num_tris": self._num_tris,
                 "edge_length_sum": self._faces.edge_sum,
                 "support_winding_number": int(self.support_winding_number),

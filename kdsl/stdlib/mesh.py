@@ -85,12 +85,15 @@ INV_4PI = 0.07957747154594767
 class MeshRecord:
     """The record of a ``kdsl.Mesh`` (``mesh_get`` returns it): ``points``,
     ``velocities`` (empty without velocities), ``indices`` (three per face), ``bvh``
-    (the id of the BVH over the faces' boxes) and per-mesh constants."""
+    (the id of the BVH over the faces' boxes), ``tri`` (each face's corners in the
+    BVH's item order: ``tri[3 k + j]`` is corner ``j`` of face ``items[k]``,
+    ``kdsl.geometry.mesh_tree_points``) and per-mesh constants."""
 
     tag: wp.uint64
     points: wp.array(dtype=wp.vec3)
     velocities: wp.array(dtype=wp.vec3)
     indices: wp.array(dtype=wp.int32)
+    tri: wp.array(dtype=wp.vec3)
     bvh: wp.uint64
     num_points: wp.int32
     num_tris: wp.int32
@@ -151,6 +154,25 @@ def _vertex(rec: MeshRecord, face: int, corner: int) -> wp.vec3:
 
 
 @func
+def _corner(rec: MeshRecord, k: int, corner: int) -> wp.vec3:
+    """Corner ``corner`` of the face at position ``k`` of the BVH's items (the leaves'
+    copy, ``rec.tri``: no index loads)."""
+    return rec.tri[k * 3 + corner]
+
+
+@func
+def _face_point(a: wp.vec3, b: wp.vec3, c: wp.vec3, point: wp.vec3, far: bool) -> wp.vec3:
+    """The point of triangle ``(a, b, c)`` closest to ``point`` (``far``: furthest from
+    it, a vertex)."""
+    uv = wp.vec2(0.0)
+    if far:
+        uv = furthest_point_to_triangle(a, b, c, point)
+    else:
+        uv = closest_point_to_triangle(a, b, c, point)
+    return a * uv[0] + b * uv[1] + c * (1.0 - uv[0] - uv[1])
+
+
+@func
 def _point_on_face(rec: MeshRecord, face: int, u: float, v: float) -> wp.vec3:
     a = _vertex(rec, face, 0)
     b = _vertex(rec, face, 1)
@@ -205,19 +227,34 @@ def _closest_in_leaf(
     out."""
     out = best
     for k in range(first, first + count):
-        f = bvh.items[k]
-        a = _vertex(rec, f, 0)
-        b = _vertex(rec, f, 1)
-        c = _vertex(rec, f, 2)
+        a = _corner(rec, k, 0)
+        b = _corner(rec, k, 1)
+        c = _corner(rec, k, 2)
         uv = closest_point_to_triangle(a, b, c, point)
         q = a * uv[0] + b * uv[1] + c * (1.0 - uv[0] - uv[1])
         d = wp.length_sq(q - point)
-        if d < out.dist_sq or (d == out.dist_sq and out.face >= 0 and f < out.face):  # noqa: SIM102
-            # The sliver test (a square root and a division) only for a face that wins.
-            if not is_sliver(a, b, c):
-                out.dist_sq = d
-                out.face = f
+        if d <= out.dist_sq:  # the face's number is loaded only here
+            f = bvh.items[k]
+            if d < out.dist_sq or (out.face >= 0 and f < out.face):  # noqa: SIM102
+                # The sliver test (a square root and a division) only for a face that wins.
+                if not is_sliver(a, b, c):
+                    out.dist_sq = d
+                    out.face = f
     return out
+
+
+@func
+def _wait(
+    nodes: wp.array(dtype=wp.int32), keys: wp.array(dtype=wp.float32), count: int, node: int,
+    key: float,
+) -> int:  # fmt: skip
+    """Puts ``node`` with its ``key`` (box distance, entry ``t``) on an ordered walk's
+    stack of ``count`` entries: the new count, ``WALK_STACK + 1`` when the stack was
+    full (the node is dropped; the walk then owes a stackless pass)."""
+    if count < WALK_STACK:
+        nodes[count] = node
+        keys[count] = key
+    return count + 1
 
 
 @func
@@ -233,7 +270,8 @@ def _closest_face(id: wp.uint64, point: wp.vec3, max_dist: float) -> int:
     it to a leaf, then tests that leaf's faces (on a GPU the descent's inner loop keeps
     a warp's threads in step; visiting one node per step measured 25% slower on an
     H200). A tree deeper than the stack finishes with a stackless pass bounded by the
-    distance found: the answer never depends on the order."""
+    distance found (``sweep``: its next node), in the same loop, so that the leaf test
+    is inlined once: the answer never depends on the order."""
     rec = wp.object_record(id, MeshRecord)
     bvh = wp.object_record(rec.bvh, BvhRecord)
     best = _Closest()
@@ -243,51 +281,53 @@ def _closest_face(id: wp.uint64, point: wp.vec3, max_dist: float) -> int:
     nodes = wp.zeros(WALK_STACK, dtype=wp.int32)
     dists = wp.zeros(WALK_STACK, dtype=wp.float32)
     count = 0
-    overflow = False
+    sweep = span[1]  # the stackless pass's next node: none until the stack overflows
     if span[0] < span[1]:
         nodes[0] = span[0]  # (at distance 0: its children are tested against the bound)
         count = 1
-    while count > 0:
-        count = count - 1
-        node = nodes[count]
-        if dists[count] <= best.dist_sq:
-            nd = bvh.nodes[node]
-            inner = nd.first < 0
-            while inner:  # down the nearer child, the other onto the stack
-                near = node + 1
-                near_nd = bvh.nodes[near]
-                far = _skip(near_nd, near)
-                far_nd = bvh.nodes[far]
-                d_near = box_distance_sq(near_nd.lower, near_nd.upper, point)
-                d_far = box_distance_sq(far_nd.lower, far_nd.upper, point)
-                if d_far < d_near:
-                    tmp = near
-                    near = far
-                    far = tmp
-                    near_nd = far_nd
-                    tmp_d = d_near
-                    d_near = d_far
-                    d_far = tmp_d
-                if d_far <= best.dist_sq:  # (false for NaN: a NaN point prunes every box)
-                    if count < WALK_STACK:
-                        nodes[count] = far
-                        dists[count] = d_far
-                        count = count + 1
-                    else:
-                        overflow = True
-                inner = False
-                if d_near <= best.dist_sq:
-                    node = near
-                    nd = near_nd
-                    inner = nd.first < 0
-            if nd.first >= 0:  # a leaf reached (an inner node here: both children pruned)
-                best = _closest_in_leaf(rec, bvh, nd.first, nd.next, point, best)
-    if overflow:
-        node = span[0]
-        while node < span[1]:
-            step = _next_near_leaf(bvh, node, span[1], point, best.dist_sq)
-            node = step[2]
-            best = _closest_in_leaf(rec, bvh, step[0], step[1], point, best)
+    while count > 0 or sweep < span[1]:
+        first = 0  # the leaf to test: its items [first, first + items)
+        items = 0
+        if count == 0:  # after an overflow, the stackless pass: its next leaf
+            step = _next_near_leaf(bvh, sweep, span[1], point, best.dist_sq)
+            sweep = step[2]
+            first = step[0]
+            items = step[1]
+        else:
+            count = count - 1
+            node = nodes[count]
+            if dists[count] <= best.dist_sq:
+                nd = bvh.nodes[node]
+                inner = nd.first < 0
+                while inner:  # down the nearer child, the other onto the stack
+                    near = node + 1
+                    near_nd = bvh.nodes[near]
+                    far = _skip(near_nd, near)
+                    far_nd = bvh.nodes[far]
+                    d_near = box_distance_sq(near_nd.lower, near_nd.upper, point)
+                    d_far = box_distance_sq(far_nd.lower, far_nd.upper, point)
+                    if d_far < d_near:
+                        tmp = near
+                        near = far
+                        far = tmp
+                        near_nd = far_nd
+                        tmp_d = d_near
+                        d_near = d_far
+                        d_far = tmp_d
+                    if d_far <= best.dist_sq:  # (false for NaN: a NaN point prunes every box)
+                        count = _wait(nodes, dists, count, far, d_far)
+                        if count > WALK_STACK:  # full: a stackless pass once it is empty
+                            count = WALK_STACK
+                            sweep = span[0]
+                    inner = False
+                    if d_near <= best.dist_sq:
+                        node = near
+                        nd = near_nd
+                        inner = nd.first < 0
+                if nd.first >= 0:  # a leaf reached (an inner node: both children pruned)
+                    first = nd.first
+                    items = nd.next
+        best = _closest_in_leaf(rec, bvh, first, items, point, best)
     return best.face
 
 
@@ -341,15 +381,14 @@ def _furthest_face(id: wp.uint64, point: wp.vec3, min_dist: float) -> int:
         step = _next_far_leaf(bvh, node, span[1], point, best)
         node = step[2]
         for k in range(step[0], step[0] + step[1]):
-            f = bvh.items[k]
-            a = _vertex(rec, f, 0)
-            b = _vertex(rec, f, 1)
-            c = _vertex(rec, f, 2)
-            if not is_sliver(a, b, c):
-                uv = furthest_point_to_triangle(a, b, c, point)
-                q = a * uv[0] + b * uv[1] + c * (1.0 - uv[0] - uv[1])
-                d = wp.length_sq(q - point)
-                if d > best or (d == best and best_face >= 0 and f < best_face):
+            a = _corner(rec, k, 0)
+            b = _corner(rec, k, 1)
+            c = _corner(rec, k, 2)
+            q = _face_point(a, b, c, point, True)
+            d = wp.length_sq(q - point)
+            if d >= best and not is_sliver(a, b, c):
+                f = bvh.items[k]
+                if d > best or (best_face >= 0 and f < best_face):
                     best = d
                     best_face = f
     return best_face
@@ -476,25 +515,27 @@ def _point_answer_far(id: wp.uint64, point: wp.vec3, face: int) -> MeshQueryPoin
 
 @func
 def _ray_leaf(
-    rec: MeshRecord, bvh: BvhRecord, leaf: BvhNode, shear: RayShear, start: wp.vec3,
-    best: MeshQueryRay,
+    rec: MeshRecord, bvh: BvhRecord, first: int, count: int, shear: RayShear,
+    start: wp.vec3, best: MeshQueryRay,
 ) -> MeshQueryRay:  # fmt: skip
-    """``best`` updated with the hits of the faces of ``leaf``: a hit at ``t >= 0``
-    replaces it when nearer, or as near on a lower face."""
+    """``best`` updated with the hits of the ``count`` faces of a leaf from
+    ``items[first]``: a hit at ``t >= 0`` replaces it when nearer, or as near on a
+    lower face."""
     hit = best
-    for k in range(leaf.first, leaf.first + leaf.next):
-        f = bvh.items[k]
+    for k in range(first, first + count):
         h = intersect_ray_triangle(
-            shear, start, _vertex(rec, f, 0), _vertex(rec, f, 1), _vertex(rec, f, 2)
+            shear, start, _corner(rec, k, 0), _corner(rec, k, 1), _corner(rec, k, 2)
         )
         t = h[0]
-        if t >= 0.0 and (t < hit.t or (t == hit.t and hit.result and f < hit.face)):
-            hit.result = True
-            hit.t = t
-            hit.face = f
-            hit.u = h[1]
-            hit.v = h[2]
-            hit.sign = h[3]
+        if t >= 0.0 and t <= hit.t:  # the face's number is loaded only here
+            f = bvh.items[k]
+            if t < hit.t or (hit.result and f < hit.face):
+                hit.result = True
+                hit.t = t
+                hit.face = f
+                hit.u = h[1]
+                hit.v = h[2]
+                hit.sign = h[3]
     return hit
 
 
@@ -506,9 +547,9 @@ def _ray_closest_face(id: wp.uint64, start: wp.vec3, dir: wp.vec3, max_t: float,
     Front to back: at an inner node the child the ray enters first is visited next
     (its node, loaded for its entry ``t``, is not loaded again) and the other waits on
     a small stack with its entry ``t``, dropped when a hit nearer than that is found
-    meanwhile. A tree deeper than the stack (``WALK_STACK``)
-    overflows into a stackless pass over the whole range, bounded by the hit found so
-    far: the answer never depends on the order."""
+    meanwhile. A tree deeper than the stack (``WALK_STACK``) overflows into a stackless
+    pass over the whole range, bounded by the hit found so far, in the same loop (one
+    leaf test site): the answer never depends on the order."""
     rec = wp.object_record(id, MeshRecord)
     bvh = wp.object_record(rec.bvh, BvhRecord)
     shear = ray_shear(dir)
@@ -525,54 +566,62 @@ def _ray_closest_face(id: wp.uint64, start: wp.vec3, dir: wp.vec3, max_t: float,
     nodes = wp.zeros(WALK_STACK, dtype=wp.int32)
     enters = wp.zeros(WALK_STACK, dtype=wp.float32)
     count = 0
-    overflow = False
+    sweep = span[1]  # the stackless pass's next node: none until the stack overflows
     node = span[0]
     active = False  # ``node`` (packed as ``nd``) is to be visited
     nd = BvhNode()
     if span[0] < span[1]:
         nd = bvh.nodes[node]
         active = ray_box_enter(nd.lower, nd.upper, start, inv) <= hit.t
-    while active:
-        # Down the nearer children to a leaf (or to where both children are missed),
-        # then the leaf's faces: "while-while", as the closest-point walk.
-        at_leaf = nd.first >= 0
-        inner = not at_leaf
-        while inner:
-            near = node + 1
-            near_nd = bvh.nodes[near]
-            far = _skip(near_nd, near)
-            far_nd = bvh.nodes[far]
-            t_near = ray_box_enter(near_nd.lower, near_nd.upper, start, inv)
-            t_far = ray_box_enter(far_nd.lower, far_nd.upper, start, inv)
-            near_in = t_near <= hit.t  # (false for NaN: a missed box)
-            far_in = t_far <= hit.t
-            if far_in and (not near_in or t_far < t_near):  # the far child first
-                near_in = far_in
-                far_in = t_near <= hit.t
-                tmp = near
-                near = far
-                far = tmp
-                tmp_nd = near_nd
-                near_nd = far_nd
-                far_nd = tmp_nd
-                tmp_t = t_near
-                t_near = t_far
-                t_far = tmp_t
-            inner = False
-            if near_in:  # visit it now (its node is loaded); the other waits
-                if far_in:
-                    if count < WALK_STACK:
-                        nodes[count] = far
-                        enters[count] = t_far
-                        count = count + 1
-                    else:
-                        overflow = True
-                node = near
-                nd = near_nd
-                at_leaf = nd.first >= 0
-                inner = not at_leaf
-        if at_leaf:
-            hit = _ray_leaf(rec, bvh, nd, shear, start, hit)
+    while active or sweep < span[1]:
+        first = 0  # the leaf to test: its items [first, first + items)
+        items = 0
+        if active:
+            # Down the nearer children to a leaf (or to where both children are
+            # missed), then the leaf's faces: "while-while", as the closest point.
+            at_leaf = nd.first >= 0
+            inner = not at_leaf
+            while inner:
+                near = node + 1
+                near_nd = bvh.nodes[near]
+                far = _skip(near_nd, near)
+                far_nd = bvh.nodes[far]
+                t_near = ray_box_enter(near_nd.lower, near_nd.upper, start, inv)
+                t_far = ray_box_enter(far_nd.lower, far_nd.upper, start, inv)
+                near_in = t_near <= hit.t  # (false for NaN: a missed box)
+                far_in = t_far <= hit.t
+                if far_in and (not near_in or t_far < t_near):  # the far child first
+                    near_in = far_in
+                    far_in = t_near <= hit.t
+                    tmp = near
+                    near = far
+                    far = tmp
+                    tmp_nd = near_nd
+                    near_nd = far_nd
+                    far_nd = tmp_nd
+                    tmp_t = t_near
+                    t_near = t_far
+                    t_far = tmp_t
+                inner = False
+                if near_in:  # visit it now (its node is loaded); the other waits
+                    if far_in:
+                        count = _wait(nodes, enters, count, far, t_far)
+                        if count > WALK_STACK:  # full: a stackless pass once it is empty
+                            count = WALK_STACK
+                            sweep = span[0]
+                    node = near
+                    nd = near_nd
+                    at_leaf = nd.first >= 0
+                    inner = not at_leaf
+            if at_leaf:
+                first = nd.first
+                items = nd.next
+        else:  # after an overflow, the stackless pass: its next leaf
+            step = _next_ray_leaf(bvh, sweep, span[1], start, inv, hit.t)
+            sweep = step[2]
+            first = step[0]
+            items = step[1]
+        hit = _ray_leaf(rec, bvh, first, items, shear, start, hit)
         # the nearest waiting node not beyond the hit found so far
         active = False
         while count > 0 and not active:
@@ -581,16 +630,6 @@ def _ray_closest_face(id: wp.uint64, start: wp.vec3, dir: wp.vec3, max_t: float,
                 node = nodes[count]
                 nd = bvh.nodes[node]
                 active = True
-    if overflow:
-        node = span[0]
-        while node < span[1]:
-            nd = bvh.nodes[node]
-            if ray_box_entry(nd.lower, nd.upper, start, inv, hit.t):
-                if nd.first >= 0:
-                    hit = _ray_leaf(rec, bvh, nd, shear, start, hit)
-                node = node + 1
-            else:
-                node = _skip(nd, node)
     if hit.result:
         return hit.face
     return -1
@@ -692,9 +731,8 @@ def mesh_query_ray_anyhit(
         step = _next_ray_leaf(bvh, node, span[1], start, inv, max_t)
         node = step[2]
         for k in range(step[0], step[0] + step[1]):
-            f = bvh.items[k]
             h = intersect_ray_triangle(
-                shear, start, _vertex(rec, f, 0), _vertex(rec, f, 1), _vertex(rec, f, 2)
+                shear, start, _corner(rec, k, 0), _corner(rec, k, 1), _corner(rec, k, 2)
             )
             if h[0] >= 0.0 and h[0] < max_t:
                 found = True
@@ -734,9 +772,8 @@ def mesh_query_ray_count_intersections(
         step = _next_ray_leaf(bvh, node, span[1], start, inv, FLT_MAX)
         node = step[2]
         for k in range(step[0], step[0] + step[1]):
-            f = bvh.items[k]
             h = intersect_ray_triangle(
-                shear, start, _vertex(rec, f, 0), _vertex(rec, f, 1), _vertex(rec, f, 2)
+                shear, start, _corner(rec, k, 0), _corner(rec, k, 1), _corner(rec, k, 2)
             )
             if h[0] >= 0.0:
                 n = n + 1
@@ -959,15 +996,14 @@ def mesh_query_point_sign_normal(
         step = _next_near_leaf(bvh, node, span[1], point, reach * reach)
         node = step[2]
         for k in range(step[0], step[0] + step[1]):
-            f = bvh.items[k]
-            a = _vertex(rec, f, 0)
-            b = _vertex(rec, f, 1)
-            c = _vertex(rec, f, 2)
+            a = _corner(rec, k, 0)
+            b = _corner(rec, k, 1)
+            c = _corner(rec, k, 2)
             if not is_sliver(a, b, c):
-                uv = closest_point_to_triangle(a, b, c, point)
-                q = a * uv[0] + b * uv[1] + c * (1.0 - uv[0] - uv[1])
+                q = _face_point(a, b, c, point, False)
                 d = wp.length(q - point)
                 if d < best + eps:
+                    f = bvh.items[k]
                     n = wp.normalize(wp.cross(b - a, c - a))
                     w = _feature_weight(a, b, c, q, eps * eps)
                     if d > best - eps:  # as close as the best: add its normal
