@@ -295,13 +295,63 @@ def test_a_kernel_whose_pool_launches_cost_more_stays_inline(adaptive_two_thread
 
 
 def test_one_fast_pool_launch_replaces_a_slow_estimate():
-    # The overhead estimate takes a cheaper measurement as it is (one good retry brings
-    # a kernel back to the pool) and averages a dearer one in (one slow launch, half).
+    # The overhead is the minimum over the last cost_window pool launches: a cheaper
+    # measurement counts at once (one good retry brings a kernel back to the pool), a
+    # dearer one only once cost_window of them have come since.
     cost = pool.RangeCost()
     cost.seconds_per_thread = 1e-6
     cost.record_pool(1.0 + 1e-3 / 2, 1000, 2)  # 1 s beyond its share of the work
     assert cost.pool_overhead == pytest.approx(1.0)
     cost.record_pool(1e-3 / 2 + 1e-4, 1000, 2)  # then a fast launch: 0.1 ms beyond
     assert cost.pool_overhead == pytest.approx(1e-4)
-    cost.record_pool(1e-3 / 2 + 3e-4, 1000, 2)  # a slower one is averaged in
-    assert cost.pool_overhead == pytest.approx(2e-4)
+    cost.record_pool(1e-3 / 2 + 3e-4, 1000, 2)  # a slower one does not count yet
+    assert cost.pool_overhead == pytest.approx(1e-4)
+    for _ in range(pool.cost_window - 1):
+        cost.record_pool(1e-3 / 2 + 3e-4, 1000, 2)
+    assert cost.pool_overhead == pytest.approx(3e-4)  # the fast one has left the window
+
+
+DISPATCH = 1e-5  # an injected hand-off cost: the line is 2e-5 s on two threads
+
+
+def test_one_slow_inline_launch_does_not_send_a_cheap_kernel_to_the_pool():
+    cost = pool.RangeCost()
+    for _ in range(3):
+        cost.record(1e-6, 1000)  # 1 us for 1000 threads: far below the line
+    assert cost.runs_inline(1000, 2, DISPATCH)
+    cost.record(5e-3, 1000)  # one launch the host held up for 5 ms
+    assert cost.seconds_per_thread == pytest.approx(1e-9)
+    assert cost.runs_inline(1000, 2, DISPATCH)
+
+
+def test_a_pool_launch_brings_an_inflated_estimate_down():
+    # An estimate that came only from a slow launch sends the kernel to the pool; the
+    # pool's fast launch bounds the inline cost (2 threads x 1 us) and brings it back.
+    cost = pool.RangeCost()
+    cost.seconds_per_thread = 5e-3 / 1000
+    assert not cost.runs_inline(1000, 2, DISPATCH)
+    cost.record_pool(1e-6, 1000, 2)
+    assert cost.seconds_per_thread == pytest.approx(2e-9)
+    assert cost.runs_inline(1000, 2, DISPATCH)
+
+
+def test_the_choice_has_hysteresis():
+    line = DISPATCH * 2  # n / (n - 1) on two threads
+    cost = pool.RangeCost()
+    cost.seconds_per_thread = 1.1 * line / 1000  # 10% above the line: stays inline
+    assert cost.runs_inline(1000, 2, DISPATCH)
+    cost.seconds_per_thread = 1.3 * line / 1000  # past the band: the pool
+    assert not cost.runs_inline(1000, 2, DISPATCH) and cost.on_pool
+    cost.seconds_per_thread = 0.9 * line / 1000  # 10% below: stays on the pool
+    assert not cost.runs_inline(1000, 2, DISPATCH)
+    cost.seconds_per_thread = 0.7 * line / 1000  # past the band: inline again
+    assert cost.runs_inline(1000, 2, DISPATCH) and not cost.on_pool
+
+
+def test_a_kernel_held_inline_by_its_overhead_retries_the_pool():
+    cost = pool.RangeCost()
+    cost.seconds_per_thread = 1e-6  # 1 ms for 1000 threads: the pool by the hand-off alone
+    cost.pool_overhead = 1.0  # but its pool launches cost 1 s more
+    choices = [cost.runs_inline(1000, 2, DISPATCH) for _ in range(2 * pool.retry_pool_every)]
+    tries = [k for k, inline in enumerate(choices) if not inline]
+    assert tries == [pool.retry_pool_every - 1, 2 * pool.retry_pool_every - 1]

@@ -12,11 +12,12 @@ process may use and can be set with ``set_num_threads`` or the
 Whether a launch goes to the pool is decided by measurement, not by a fixed size:
 handing a launch to the workers costs a fixed time (measured once, when the pool
 starts: ``dispatch_seconds``), and each kernel's cost per thread is measured on
-its own inline launches (``RangeCost``). A launch runs on the pool when its
+its own launches (``RangeCost``: the minimum over its last ``cost_window``, so a
+launch the host slowed down does not count). A launch runs on the pool when its
 expected inline time exceeds what splitting it saves, ``t > overhead * n/(n-1)``
 for ``n`` threads, where ``overhead`` is what the kernel's own pool launches were
 measured to cost beyond their share of the work (``dispatch_seconds`` until one
-ran): some launches pay far more on the pool than the hand-off, when the workers
+ran), with ``hysteresis`` around that line: some launches pay far more on the pool than the hand-off, when the workers
 went to sleep (a worker polls ``native_pool.WORKER_SPIN`` yields after its share, then
 sleeps on a futex, and waking an idle vCPU takes tens of microseconds). That is the
 likely cause of the ``throw`` scene's 4,096-thread adjoint launches costing about
@@ -38,6 +39,7 @@ import os
 import queue
 import threading
 import time
+from collections import deque
 from collections.abc import Callable
 from typing import Any
 
@@ -66,41 +68,103 @@ retry_pool_every = 16
 #: A kernel not measured yet runs inline once (to be measured) up to this many threads,
 #: even above ``min_parallel``: its pool launches are then chosen from its cost.
 measure_inline_up_to = 1 << 16
+#: A kernel's costs are the minimum over this many last measurements (``RangeCost``).
+cost_window = 8
+#: The inline-or-pool line's hysteresis factor (``RangeCost.runs_inline``).
+hysteresis = 1.25
 
 
 class RangeCost:
-    """The measured costs of one kernel (running estimates): per thread on its inline
-    launches, and what a launch on the pool costs beyond its share of that work."""
+    """The measured costs of one kernel, and its inline-or-pool choice (``runs_inline``).
 
-    __slots__ = ("held_inline", "pool_overhead", "seconds_per_thread")
+    Each cost is the minimum over the last ``cost_window`` measurements: a launch
+    slowed by the host (another process on the core, a worker woken late) says nothing
+    about the kernel, and one such launch no longer moves the choice (a running mean
+    did: one slow inline launch of a 5 us kernel sent it to the pool, where it stayed,
+    since pool launches were never compared with the inline cost again). A pool launch
+    also bounds the inline cost from above (``workers`` times its time), so such an
+    estimate comes back down. Setting ``seconds_per_thread`` or ``pool_overhead``
+    replaces its measurements with that one value (tests inject costs that way).
+    """
+
+    __slots__ = ("_bound", "_extra", "_per", "held_inline", "on_pool")
 
     def __init__(self) -> None:
-        self.seconds_per_thread: float | None = None
-        #: Seconds a pool launch took beyond ``seconds_per_thread * threads / workers``;
-        #: None until a pool launch of a measured kernel (``dispatch_seconds`` stands in).
-        self.pool_overhead: float | None = None
+        #: Seconds per thread of inline launches, and the bounds pool launches put on it.
+        self._per: deque[float] = deque(maxlen=cost_window)
+        self._bound: deque[float] = deque(maxlen=cost_window)
+        #: Seconds a pool launch took beyond ``seconds_per_thread * threads / workers``.
+        self._extra: deque[float] = deque(maxlen=cost_window)
         #: Launches kept inline only by ``pool_overhead`` since the pool was last tried.
         self.held_inline = 0
+        #: Whether the last choice was the pool (the threshold's hysteresis side).
+        self.on_pool = False
+
+    @property
+    def seconds_per_thread(self) -> float | None:
+        """Seconds per thread of an inline launch (None until one was measured)."""
+        if not self._per:
+            return None
+        return min(min(self._per), min(self._bound)) if self._bound else min(self._per)
+
+    @seconds_per_thread.setter
+    def seconds_per_thread(self, value: float) -> None:
+        self._per.clear()
+        self._bound.clear()
+        self._per.append(value)
+
+    @property
+    def pool_overhead(self) -> float | None:
+        """Seconds a pool launch costs beyond its share of the work; None until one of a
+        measured kernel ran (``dispatch_seconds`` stands in)."""
+        return min(self._extra) if self._extra else None
+
+    @pool_overhead.setter
+    def pool_overhead(self, value: float) -> None:
+        self._extra.clear()
+        self._extra.append(value)
 
     def record(self, seconds: float, threads: int) -> None:
-        """Fold one inline launch of ``threads`` threads taking ``seconds`` into the estimate."""
-        per = seconds / threads
-        old = self.seconds_per_thread
-        self.seconds_per_thread = per if old is None else 0.5 * (old + per)
+        """Add one inline launch of ``threads`` threads taking ``seconds``."""
+        self._per.append(seconds / threads)
 
     def record_pool(self, seconds: float, threads: int, workers: int) -> None:
-        """Fold one pool launch over ``workers`` threads into ``pool_overhead``: a kernel
-        whose pool launches cost more than the model's hand-off (page faults, memory
-        traffic, the workers' wake-up) then stays inline where that is faster."""
-        if self.seconds_per_thread is None:
+        """Add one pool launch over ``workers`` threads: what it cost beyond its share of
+        the work (page faults, memory traffic, the workers' wake-up), so a kernel whose
+        pool launches cost more stays inline where that is faster, and the bound it puts
+        on the inline cost (each worker ran at most ``seconds`` of it)."""
+        per = self.seconds_per_thread
+        if per is None:
             return
-        extra = max(0.0, seconds - self.seconds_per_thread * threads / workers)
-        old = self.pool_overhead
-        # A cheaper launch replaces the estimate: the pool has shown it can do that, and
-        # a dear one is often the host's doing (a busy moment). Averaging it in instead
-        # kept kernels inline for several retries after one slow launch (cloth at 1.0x
-        # Warp instead of 1.9x in about half of the scene benchmark's runs).
-        self.pool_overhead = extra if old is None or extra < old else 0.5 * (old + extra)
+        self._extra.append(max(0.0, seconds - per * threads / workers))
+        self._bound.append(seconds * workers / threads)
+
+    def runs_inline(self, total: int, threads: int, dispatch: float) -> bool:
+        """Whether a measured kernel's launch of ``total`` threads runs inline on
+        ``threads`` threads, handing a launch over costing ``dispatch`` seconds.
+
+        Inline when its expected time is at most what splitting saves,
+        ``t <= overhead * n / (n - 1)`` with ``overhead`` the larger of ``dispatch`` and
+        ``pool_overhead``, with hysteresis: a kernel on the pool returns inline only
+        below ``1 / hysteresis`` of that line, one inline goes to the pool only above
+        ``hysteresis`` times it, so costs measured near the line do not flip the choice
+        launch by launch. Kept inline by ``pool_overhead`` alone, it tries the pool every
+        ``retry_pool_every``-th launch (a slow pool launch is often the host's doing)."""
+        per = self.seconds_per_thread
+        assert per is not None, "runs_inline needs a measured kernel"
+        t, scale = per * total, threads / (threads - 1)
+        line = dispatch * scale
+        if self.pool_overhead is not None:
+            line = max(line, self.pool_overhead * scale)
+        inline = t < line / hysteresis if self.on_pool else t <= line * hysteresis
+        if inline and t > dispatch * scale * hysteresis:  # held inline by the overhead alone
+            self.held_inline += 1
+            if self.held_inline >= retry_pool_every:
+                inline, self.held_inline = False, 0
+        elif not inline:
+            self.held_inline = 0
+        self.on_pool = not inline
+        return inline
 
 
 class _Worker:
@@ -261,14 +325,7 @@ def run_range(
     if per is None:  # not measured: small or first launches run inline (and are measured)
         inline = total < min_parallel or (measured and total <= measure_inline_up_to)
     else:
-        inline = per * total <= dispatch_seconds() * n / (n - 1)
-        if not inline and cost.pool_overhead is not None:
-            inline = per * total <= cost.pool_overhead * n / (n - 1)
-            # Held inline by a measured overhead: try the pool again now and then, so
-            # one slow pool launch (the workers' start, a busy host) is not final.
-            cost.held_inline = cost.held_inline + 1 if inline else 0
-            if cost.held_inline >= retry_pool_every:
-                inline, cost.held_inline = False, 0
+        inline = cost.runs_inline(total, n, dispatch_seconds())
     if not inline:
         t0 = time.perf_counter()
         if address is None or _native is None or not _native.run(address, total, *args, n):
