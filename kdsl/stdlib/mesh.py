@@ -513,11 +513,21 @@ def _point_answer_far(id: wp.uint64, point: wp.vec3, face: int) -> MeshQueryPoin
 # -- rays ------------------------------------------------------------------------------
 
 
+@wp.struct
+class _FirstHit:
+    """The nearest hit a ray search has found: its ``t``, its face and that face's
+    position in the BVH's items (``slot``; -1 while nothing is found)."""
+
+    t: wp.float32
+    face: wp.int32
+    slot: wp.int32
+
+
 @func
 def _ray_leaf(
     rec: MeshRecord, bvh: BvhRecord, first: int, count: int, shear: RayShear,
-    start: wp.vec3, best: MeshQueryRay,
-) -> MeshQueryRay:  # fmt: skip
+    start: wp.vec3, best: _FirstHit,
+) -> _FirstHit:  # fmt: skip
     """``best`` updated with the hits of the ``count`` faces of a leaf from
     ``items[first]``: a hit at ``t >= 0`` replaces it when nearer, or as near on a
     lower face."""
@@ -529,20 +539,17 @@ def _ray_leaf(
         t = h[0]
         if t >= 0.0 and t <= hit.t:  # the face's number is loaded only here
             f = bvh.items[k]
-            if t < hit.t or (hit.result and f < hit.face):
-                hit.result = True
+            if t < hit.t or (hit.slot >= 0 and f < hit.face):
                 hit.t = t
                 hit.face = f
-                hit.u = h[1]
-                hit.v = h[2]
-                hit.sign = h[3]
+                hit.slot = k
     return hit
 
 
 @func
-def _ray_closest_face(id: wp.uint64, start: wp.vec3, dir: wp.vec3, max_t: float, root: int) -> int:
-    """The face of the first hit along the ray at ``0 <= t < max_t`` (lowest face among
-    equal ``t``), or -1.
+def _ray_closest_slot(id: wp.uint64, start: wp.vec3, dir: wp.vec3, max_t: float, root: int) -> int:
+    """The position in the BVH's items of the face of the first hit along the ray at
+    ``0 <= t < max_t`` (lowest face among equal ``t``), or -1.
 
     Front to back: at an inner node the child the ray enters first is visited next
     (its node, loaded for its entry ``t``, is not loaded again) and the other waits on
@@ -554,14 +561,10 @@ def _ray_closest_face(id: wp.uint64, start: wp.vec3, dir: wp.vec3, max_t: float,
     bvh = wp.object_record(rec.bvh, BvhRecord)
     shear = ray_shear(dir)
     inv = wp.vec3(safe_inverse(dir[0]), safe_inverse(dir[1]), safe_inverse(dir[2]))
-    hit = MeshQueryRay()
-    hit.result = False
-    hit.sign = 0.0
-    hit.face = -1
+    hit = _FirstHit()
     hit.t = max_t
-    hit.u = 0.0
-    hit.v = 0.0
-    hit.normal = wp.vec3(0.0)
+    hit.face = -1
+    hit.slot = -1
     span = _root_range(bvh, root)
     nodes = wp.zeros(WALK_STACK, dtype=wp.int32)
     enters = wp.zeros(WALK_STACK, dtype=wp.float32)
@@ -630,13 +633,11 @@ def _ray_closest_face(id: wp.uint64, start: wp.vec3, dir: wp.vec3, max_t: float,
                 node = nodes[count]
                 nd = bvh.nodes[node]
                 active = True
-    if hit.result:
-        return hit.face
-    return -1
+    return hit.slot
 
 
-@wp.func_grad(_ray_closest_face)
-def _adj_ray_closest_face(
+@wp.func_grad(_ray_closest_slot)
+def _adj_ray_closest_slot(
     id: wp.uint64, start: wp.vec3, dir: wp.vec3, max_t: float, root: int, adj_ret: int
 ):  # fmt: skip
     """No gradient: the face found is piecewise constant in the ray. (The backward pass
@@ -651,8 +652,10 @@ def _ray_closest(
 ) -> MeshQueryRay:
     """The first hit along the ray at ``0 <= t < max_t`` (lowest face among equal ``t``).
     Its ``t``, barycentrics and sign are recomputed here, outside the search (the same
-    test, so the same values), so gradients reach ``start`` and ``dir`` through them."""
-    face = _ray_closest_face(id, start, dir, max_t, root)
+    test on the same corners, read from the leaves' copy, so the same values), so
+    gradients reach ``start`` and ``dir`` through them; the normal is
+    ``mesh_eval_face_normal``'s, from the same corners."""
+    slot = _ray_closest_slot(id, start, dir, max_t, root)
     hit = MeshQueryRay()
     hit.result = False
     hit.sign = 0.0
@@ -661,19 +664,19 @@ def _ray_closest(
     hit.u = 0.0
     hit.v = 0.0
     hit.normal = wp.vec3(0.0)
-    if face >= 0:
+    if slot >= 0:
         rec = wp.object_record(id, MeshRecord)
-        h = intersect_ray_triangle(
-            ray_shear(dir), start, _vertex(rec, face, 0), _vertex(rec, face, 1),
-            _vertex(rec, face, 2),
-        )  # fmt: skip
+        a = _corner(rec, slot, 0)
+        b = _corner(rec, slot, 1)
+        c = _corner(rec, slot, 2)
+        h = intersect_ray_triangle(ray_shear(dir), start, a, b, c)
         hit.result = True
-        hit.face = face
+        hit.face = wp.object_record(rec.bvh, BvhRecord).items[slot]
         hit.t = h[0]
         hit.u = h[1]
         hit.v = h[2]
         hit.sign = h[3]
-        hit.normal = mesh_eval_face_normal(id, face)
+        hit.normal = wp.normalize(wp.cross(b - a, c - a))
     return hit
 
 
