@@ -372,8 +372,16 @@ def storage_dtype(t: Type) -> np.dtype:
     if isinstance(t, VectorType | MatrixType):
         return np.dtype((t.elem.np_dtype, t.shape))
     if isinstance(t, StructType):
-        return struct_dtype(t, storage_dtype)
+        hit = _STRUCT_DTYPES.get(id(t))  # (by identity: hashing a struct hashes its fields)
+        if hit is None or hit[0] is not t:
+            hit = _STRUCT_DTYPES[id(t)] = (t, struct_dtype(t, storage_dtype))
+        return hit[1]
     raise TypeError(f"values of {t} cannot be stored in an array")
+
+
+#: ``storage_dtype`` of each struct type met, by identity (the entry holds the type, so
+#: its id is not reused): an array of records asks at every allocation and view.
+_STRUCT_DTYPES: dict[int, tuple[StructType, np.dtype]] = {}
 
 
 def struct_dtype(t: StructType, field_dtype: Callable[[Type], np.dtype]) -> np.dtype:
