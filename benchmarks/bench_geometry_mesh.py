@@ -85,7 +85,7 @@ def workload(tris: int, queries: int, seed: int = 0) -> dict[str, np.ndarray]:
             "ray_start": box_points(queries), "ray_dir": d.astype(np.float32)}  # fmt: skip
 
 
-def _kernels(m):
+def mesh_kernels(m):
     """The benchmark's kernels written against module ``m`` (kdsl or warp): one source,
     both compilers."""
 
@@ -135,7 +135,7 @@ def _run_side(m, name: str, data: dict, device: str, reps: int, sync,
               query_timer=median_seconds) -> tuple[dict, dict]:  # fmt: skip
     """Time one library's build, queries (with ``query_timer``) and refit; returns the
     row and its answers."""
-    closest, ray, anyhit, move = _kernels(m)
+    closest, ray, anyhit, move = mesh_kernels(m)
     n = len(data["points_q"])
 
     def v3(a):

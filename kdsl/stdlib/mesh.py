@@ -8,10 +8,14 @@ cannot use is jumped over with ``skip``), so their state is a few integers and f
 with two exceptions where the visiting order pays: the closest point and the closest
 ray hit visit the nearer child first (by box distance, by entry ``t``), the other
 waiting on a stack of ``WALK_STACK`` entries (a thread-local array; deeper trees fall
-back to a stackless pass). Neither order changes an answer. The stackless walks
-alternate two loops ("while-while", Aila and Laine 2009): nodes up to the next leaf to
-test (``_next_near_leaf``), then that leaf's faces; the ordered ones descend to a leaf
-in an inner loop. On a GPU the threads of a warp then test faces together.
+back to a stackless pass in the same loop, so each walk tests leaves at one place).
+Neither order changes an answer. The stackless walks alternate two loops
+("while-while", Aila and Laine 2009): nodes up to the next leaf to test
+(``_next_near_leaf``), then that leaf's faces; the ordered ones descend to a leaf in an
+inner loop. On a GPU the threads of a warp then test faces together. A leaf's faces are
+read from the record's ``tri`` (each face's corners copied in the BVH's item order, so
+a leaf's faces are consecutive; ``kdsl.geometry.mesh_tree_points``), and a face's number
+is loaded only for a face that would be the answer.
 
 Semantics are Warp 1.19's (signs, barycentric ``(u, v)`` weighing a face's first and
 second vertices, strict ``max_dist``/``max_t`` bounds). Where Warp's answer depends on
