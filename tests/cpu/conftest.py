@@ -1,10 +1,12 @@
-"""Fixtures: the cpu backend registered for the duration of a test module."""
+"""Fixtures: the cpu backend registered for the duration of a test module, and launches
+forced inline or onto the pool."""
 
 from __future__ import annotations
 
 import pytest
 
 from kdsl.backends import registry
+from kdsl.backends.cpu import pool
 
 
 @pytest.fixture(scope="module")
@@ -20,3 +22,15 @@ def cpu_backend():
         yield BACKEND
     finally:
         registry.unregister_backend("cpu")
+
+
+@pytest.fixture(params=["inline", "pool"])
+def split(request):
+    """Launches run inline (one range) or split over the pool's threads (a range each)."""
+    old = pool.min_parallel, pool.adaptive
+    pool.adaptive = False
+    pool.min_parallel = 1 << 30 if request.param == "inline" else 1
+    try:
+        yield request.param
+    finally:
+        pool.min_parallel, pool.adaptive = old

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import kdsl as wp
-from kdsl.backends.cpu import lane_blocks, pool
+from kdsl.backends.cpu import lane_blocks
 from kdsl.backends.cpu.lower import lower_kernels
 from kdsl.compiler import lower
 from tests.device_targets import TARGETS
@@ -148,18 +148,6 @@ def test_the_ir_has_the_three_lane_loops(cpu_backend):
 @pytest.mark.skipif(not _host_has("avx2"), reason="the vectorizer's choice depends on the host")
 def test_the_lane_loops_vectorize(cpu_backend):
     assert _ir(waves, "llvm-ir").count("vector.body") >= 3
-
-
-@pytest.fixture(params=["inline", "pool"])
-def split(request):
-    """Launches run inline (one range) or split over the pool's threads (a range each)."""
-    old = pool.min_parallel, pool.adaptive
-    pool.adaptive = False
-    pool.min_parallel = 1 << 30 if request.param == "inline" else 1
-    try:
-        yield request.param
-    finally:
-        pool.min_parallel, pool.adaptive = old
 
 
 def _run_waves(kernel, n: int, waves_k: np.ndarray, dev: str = "cpu", backend=None):

@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 
 import kdsl as wp
-from kdsl.backends.cpu import pool
 from kdsl.backends.cpu.local_sums import find_sites
 from kdsl.compiler import adjoint_module
 from tests.device_targets import TARGETS
@@ -111,18 +110,6 @@ def test_the_adjoint_of_a_parameter_every_thread_reads_is_summed_per_range():
     module = adjoint_module(scale_by_shared)
     adj = [f for f in module.funcs if f.attrs["sym_name"] != scale_by_shared.key]
     assert any(find_sites(f.regions[0].block) for f in adj)
-
-
-@pytest.fixture(params=["inline", "pool"])
-def split(request):
-    """Launches run inline (one range) or split over the pool's threads (a range each)."""
-    old = pool.min_parallel, pool.adaptive
-    pool.adaptive = False
-    pool.min_parallel = 1 << 30 if request.param == "inline" else 1
-    try:
-        yield request.param
-    finally:
-        pool.min_parallel, pool.adaptive = old
 
 
 @pytest.mark.parametrize(("dev", "backend"), TARGETS)

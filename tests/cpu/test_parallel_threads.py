@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import kdsl as wp
-from kdsl.backends.cpu import loop_md, pool
+from kdsl.backends.cpu import loop_md
 from kdsl.compiler import lower
 from tests.device_targets import TARGETS
 
@@ -159,18 +159,6 @@ def _cloth(n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     nbr[4, 0] = 5
     rest = rng.uniform(0.1, 1.0, size=(n, NBR)).astype(np.float32)
     return x, nbr.ravel(), rest.ravel()
-
-
-@pytest.fixture(params=["inline", "pool"])
-def split(request):
-    """Launches run inline (one range) or split over the pool's threads (a range each)."""
-    old = pool.min_parallel, pool.adaptive
-    pool.adaptive = False
-    pool.min_parallel = 1 << 30 if request.param == "inline" else 1
-    try:
-        yield request.param
-    finally:
-        pool.min_parallel, pool.adaptive = old
 
 
 def _run(kernel, x, nbr, rest, dev="cpu", backend=None, x_array=None) -> np.ndarray:

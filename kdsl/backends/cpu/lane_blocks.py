@@ -134,22 +134,43 @@ class _Slots:
         return rebuild_all(self.types, flat)
 
 
-def _lane_loop(em: Emitter, name: str, run: Callable[[ir.Value], None]) -> None:
-    """``run(lane)`` for lanes 0 to ``LANES - 1`` in a loop marked parallel."""
+def _loop(
+    em: Emitter,
+    name: str,
+    start: ir.Value,
+    test: Callable[[ir.Value], ir.Value],
+    step: Callable[[ir.Value], ir.Value],
+    run: Callable[[ir.Value], None],
+    parallel: bool = False,
+) -> ir.Value:
+    """A loop on one counter from ``start``: while ``test(i)``, ``run(i)`` then ``i =
+    step(i)``; marked parallel (``loop_md``) when asked. Gives the counter (its value
+    in the exit block, where the builder ends, is the first that failed the test)."""
     B, fn = em.b, em.fn
     entry = B.block
     head, body, done = (fn.append_basic_block(f"{name}.{n}") for n in ("head", "body", "exit"))
     B.branch(head)
     B.position_at_end(head)
-    lane = B.phi(LT.I32, name=name)
-    lane.add_incoming(ir.Constant(LT.I32, 0), entry)
-    B.cbranch(B.icmp_signed("<", lane, ir.Constant(LT.I32, LANES)), body, done)
+    i = B.phi(start.type, name=name)
+    i.add_incoming(start, entry)
+    B.cbranch(test(i), body, done)
     B.position_at_end(body)
-    run(lane)
-    lane.add_incoming(B.add(lane, ir.Constant(LT.I32, 1), flags=["nsw", "nuw"]), B.block)
+    run(i)
+    i.add_incoming(step(i), B.block)
     latch = B.branch(head)
-    latch.set_metadata("llvm.loop", loop_md.parallel_loop(em.state.llmod, em.access_group))
+    if parallel:
+        latch.set_metadata("llvm.loop", loop_md.parallel_loop(em.state.llmod, em.access_group))
     B.position_at_end(done)
+    return i
+
+
+def _lane_loop(em: Emitter, name: str, run: Callable[[ir.Value], None]) -> None:
+    """``run(lane)`` for lanes 0 to ``LANES - 1`` in a loop marked parallel."""
+    B = em.b
+    _loop(em, name, ir.Constant(LT.I32, 0),
+          lambda lane: B.icmp_signed("<", lane, ir.Constant(LT.I32, LANES)),
+          lambda lane: B.add(lane, ir.Constant(LT.I32, 1), flags=["nsw", "nuw"]),
+          run, parallel=True)  # fmt: skip
 
 
 def emit(
@@ -161,7 +182,7 @@ def emit(
 ) -> None:
     """Threads ``[lo, hi)`` (i32) in whole blocks of ``LANES``, then ``rest(first, hi)``
     runs the ones left in the ordinary thread loop. The builder ends in its exit block."""
-    B, fn = em.b, em.fn
+    B = em.b
     for op in plan.uniform:
         em.lower_op(op)
     keep = _Slots(em, [v.type for v in plan.crossing])
@@ -170,14 +191,7 @@ def emit(
     carry = _Slots(em, carried_types)
     lb, ub, step = (em.get(v) for v in loop.operands[:3])
     last = B.sub(hi, ir.Constant(LT.I32, LANES))  # a block starting at or before it is whole
-    entry = B.block
-    head, body, done = (fn.append_basic_block(f"lanes.{n}") for n in ("head", "body", "exit"))
-    B.branch(head)
-    B.position_at_end(head)
-    first = B.phi(LT.I32, name="lanes.first")
-    first.add_incoming(lo, entry)
-    B.cbranch(B.and_(B.icmp_signed("<=", first, last), B.icmp_signed("<", first, hi)), body, done)
-    B.position_at_end(body)
+    first: ir.Value = lo  # the block's first thread (the loop's counter, in ``block``)
 
     def at(lane: ir.Value) -> None:
         em.linear = B.add(first, lane, flags=["nsw"])
@@ -205,14 +219,22 @@ def emit(
         for op in plan.epilogue:
             em.lower_op(op)
 
-    _lane_loop(em, "lane.pro", prologue)
-    _uniform_loop(em, lb, ub, step, loop.operands[0].type.is_signed,
-                  lambda iv: _lane_loop(em, "lane.step", step_lane(iv)))  # fmt: skip
-    _lane_loop(em, "lane.epi", epilogue)
-    first.add_incoming(B.add(first, ir.Constant(LT.I32, LANES), flags=["nsw"]), B.block)
-    B.branch(head)
-    B.position_at_end(done)
-    rest(first, hi)
+    def block(start: ir.Value) -> None:
+        nonlocal first
+        first = start
+        _lane_loop(em, "lane.pro", prologue)
+        signed = loop.operands[0].type.is_signed
+        _uniform_loop(em, lb, ub, step, signed,
+                      lambda iv: _lane_loop(em, "lane.step", step_lane(iv)))  # fmt: skip
+        _lane_loop(em, "lane.epi", epilogue)
+
+    def whole(start: ir.Value) -> ir.Value:
+        return B.and_(B.icmp_signed("<=", start, last), B.icmp_signed("<", start, hi))
+
+    after = _loop(em, "lanes", lo, whole,
+                  lambda start: B.add(start, ir.Constant(LT.I32, LANES), flags=["nsw"]),
+                  block)  # fmt: skip
+    rest(after, hi)
 
 
 def _uniform_loop(
@@ -224,16 +246,5 @@ def _uniform_loop(
     run: Callable[[ir.Value], None],
 ) -> None:
     """``run(iv)`` for ``iv`` from ``lb`` by ``step`` while ``control.loop_test`` holds."""
-    B, fn = em.b, em.fn
-    entry = B.block
-    head, body, done = (fn.append_basic_block(f"uniform.{n}") for n in ("head", "body", "exit"))
-    B.branch(head)
-    B.position_at_end(head)
-    iv = B.phi(lb.type, name="uniform.iv")
-    iv.add_incoming(lb, entry)
-    B.cbranch(loop_test(em, iv, ub, step, signed), body, done)
-    B.position_at_end(body)
-    run(iv)
-    iv.add_incoming(B.add(iv, step), B.block)
-    B.branch(head)
-    B.position_at_end(done)
+    _loop(em, "uniform", lb, lambda iv: loop_test(em, iv, ub, step, signed),
+          lambda iv: em.b.add(iv, step), run)  # fmt: skip
