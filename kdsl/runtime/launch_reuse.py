@@ -39,7 +39,7 @@ flight launches one kernel on a different pair of arrays each step, and replays 
 adjoints): a table of entries keyed by the argument *objects* (``object_key``): a
 ``kdsl.array`` by identity (the entry holds it weakly, as ``relaunch`` does), a
 number by its value and kind (a Python number or the parameter's own NumPy type; a
-float zero is never keyed, since ``-0.0 == 0.0``), a kdsl vector or matrix of the
+float zero by its sign, since ``-0.0 == 0.0``), a kdsl vector or matrix of the
 parameter's exact class, dtype and shape by its bytes. Equal keys mean equal converted
 values, so a hit runs the entry without converting anything; any other argument (a
 struct, an object id, a foreign array, a tuple for a vector) makes the launch take the
@@ -74,6 +74,7 @@ from __future__ import annotations
 
 import weakref
 from collections.abc import Callable, Sequence
+from math import copysign
 from threading import get_ident
 from typing import Any
 
@@ -116,6 +117,8 @@ def _same_kind(t: Any) -> bool:
 
 #: ``_token`` functions return this for an argument that cannot key a launch by itself.
 _NO = object()
+#: The keys of a float zero by its sign (``0 == -0.0``, so the number itself cannot key it).
+_ZERO, _NEGATIVE_ZERO = object(), object()
 
 
 def _token(t: Any) -> Callable[[Any], Any] | None:
@@ -133,8 +136,11 @@ def _token(t: Any) -> Callable[[Any], Any] | None:
 
             def float_token(a: Any) -> Any:
                 ta = type(a)
-                if (ta is float or ta is np_type or ta is int) and a != 0:
-                    return a
+                if ta is float or ta is np_type or ta is int:
+                    if a != 0:
+                        return a
+                    # -0.0 == 0.0 (and hashes alike): a zero keys by its sign instead
+                    return _NEGATIVE_ZERO if copysign(1.0, a) < 0.0 else _ZERO
                 return _NO
 
             return float_token

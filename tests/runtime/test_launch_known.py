@@ -179,3 +179,31 @@ def test_streams_key_by_identity_cuda():
     assert {id(s) for s in streams} <= stream_ids
     assert all(entry[2] in streams for key, entry in reuse.known.items() if key[1] in
                {id(s) for s in streams})  # fmt: skip
+
+
+@pytest.mark.parametrize("device", DEVICES)
+def test_float_zero_arguments_key_a_launch_by_their_sign(device):
+    """A zero by-value argument (a scene's damping 0.0) made afresh at every launch, on
+    arrays that alternate (so ``relaunch`` cannot serve it), is served by ``run_known``;
+    +0.0 and -0.0 keep their own entries, and a bad scalar is still refused with the
+    kernel and parameter named."""
+    xs = _arrays(device, count=3)
+    g = wp.vec3(0.0, 0.0, 0.0)
+    reuse = launch_plan(put, device, None).reuse
+    for z in (0.0, np.float32(0.0), -0.0, np.float32(-0.0), 0, -0.0, 0.0):
+        for rep in range(4):  # seen, prepared, learnt, then served by the object key
+            for y in xs[1:]:
+                hits = reuse.hits
+                wp.launch(put, 4, [type(z)(z), y], device=device)
+                assert y.numpy().tobytes() == np.full(4, z * 1.0, np.float32).tobytes()
+                if rep == 3:
+                    assert reuse.hits == hits + 1
+                    assert reuse.object_key([type(z)(z), y], (4,), None) in reuse.known
+    reuse = launch_plan(step, device, None).reuse
+    plus = reuse.object_key([xs[0], g, 0.0, 0, xs[1]], (4,), None)
+    assert plus is not None and plus != reuse.object_key([xs[0], g, -0.0, 0, xs[1]], (4,), None)
+    assert plus == reuse.object_key([xs[0], g, 0, 0, xs[1]], (4,), None)  # an int 0 is +0.0
+    with pytest.raises(wp.KdslLaunchError, match=r"kernel 'step'.*argument 2 's'.*float64"):
+        wp.launch(step, 4, [xs[0], g, np.float64(0.0), 0, xs[1]], device=device)
+    with pytest.raises(wp.KdslLaunchError, match=r"kernel 'step'.*argument 3 'k'"):
+        wp.launch(step, 4, [xs[0], g, 0.0, 0.0, xs[1]], device=device)
