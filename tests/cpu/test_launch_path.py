@@ -311,6 +311,32 @@ def test_one_fast_pool_launch_replaces_a_slow_estimate():
     assert cost.pool_overhead == pytest.approx(3e-4)  # the fast one has left the window
 
 
+def test_kept_minima_are_the_window_minima():
+    # seconds_per_thread and pool_overhead are kept as measurements come (read at every
+    # launch); after any mix of launches they are the minima over the last cost_window.
+    rng = np.random.default_rng(7)
+    cost = pool.RangeCost()
+    per, bound, extra = [], [], []
+    for step in range(400):
+        seconds = float(rng.choice([1e-6, 2e-6, 5e-6, 1e-3])) * rng.uniform(0.5, 1.5)
+        if step % 7 == 3 and per:
+            spt = min(per[-pool.cost_window:] + bound[-pool.cost_window:])
+            extra.append(max(0.0, seconds - spt * 1000 / 2))
+            bound.append(seconds * 2 / 1000)
+            cost.record_pool(seconds, 1000, 2)
+        else:
+            per.append(seconds / 1000)
+            cost.record(seconds, 1000)
+        want = min(per[-pool.cost_window:] + bound[-pool.cost_window:])
+        assert cost.seconds_per_thread == pytest.approx(want, rel=1e-12)
+        if extra:
+            assert cost.pool_overhead == pytest.approx(min(extra[-pool.cost_window:]), rel=1e-12)
+    cost.seconds_per_thread = 3e-9  # an injected cost replaces the measurements
+    assert cost.seconds_per_thread == 3e-9
+    cost.record(1e-6, 1000)
+    assert cost.seconds_per_thread == pytest.approx(1e-9)
+
+
 DISPATCH = 1e-5  # an injected hand-off cost: the line is 2e-5 s on two threads
 
 

@@ -87,7 +87,7 @@ class RangeCost:
     replaces its measurements with that one value (tests inject costs that way).
     """
 
-    __slots__ = ("_bound", "_extra", "_per", "held_inline", "on_pool")
+    __slots__ = ("_bound", "_extra", "_over", "_per", "_spt", "held_inline", "on_pool")
 
     def __init__(self) -> None:
         #: Seconds per thread of inline launches, and the bounds pool launches put on it.
@@ -95,6 +95,10 @@ class RangeCost:
         self._bound: deque[float] = deque(maxlen=cost_window)
         #: Seconds a pool launch took beyond ``seconds_per_thread * threads / workers``.
         self._extra: deque[float] = deque(maxlen=cost_window)
+        #: ``seconds_per_thread`` and ``pool_overhead``, kept as measurements come (every
+        #: launch reads them; a minimum is recomputed only when the one it was leaves).
+        self._spt: float | None = None
+        self._over: float | None = None
         #: Launches kept inline only by ``pool_overhead`` since the pool was last tried.
         self.held_inline = 0
         #: Whether the last choice was the pool (the threshold's hysteresis side).
@@ -103,41 +107,50 @@ class RangeCost:
     @property
     def seconds_per_thread(self) -> float | None:
         """Seconds per thread of an inline launch (None until one was measured)."""
-        if not self._per:
-            return None
-        return min(min(self._per), min(self._bound)) if self._bound else min(self._per)
+        return self._spt
 
     @seconds_per_thread.setter
     def seconds_per_thread(self, value: float) -> None:
         self._per.clear()
         self._bound.clear()
         self._per.append(value)
+        self._spt = value
 
     @property
     def pool_overhead(self) -> float | None:
         """Seconds a pool launch costs beyond its share of the work; None until one of a
         measured kernel ran (``dispatch_seconds`` stands in)."""
-        return min(self._extra) if self._extra else None
+        return self._over
 
     @pool_overhead.setter
     def pool_overhead(self, value: float) -> None:
         self._extra.clear()
         self._extra.append(value)
+        self._over = value
 
     def record(self, seconds: float, threads: int) -> None:
         """Add one inline launch of ``threads`` threads taking ``seconds``."""
-        self._per.append(seconds / threads)
+        per, x, spt = self._per, seconds / threads, self._spt
+        if spt is None or (len(per) == per.maxlen and per[0] <= spt):
+            per.append(x)  # the minimum may leave the window: recompute it
+            self._spt = min(min(per), min(self._bound)) if self._bound else min(per)
+        else:
+            per.append(x)
+            if x < spt:
+                self._spt = x
 
     def record_pool(self, seconds: float, threads: int, workers: int) -> None:
         """Add one pool launch over ``workers`` threads: what it cost beyond its share of
         the work (page faults, memory traffic, the workers' wake-up), so a kernel whose
         pool launches cost more stays inline where that is faster, and the bound it puts
         on the inline cost (each worker ran at most ``seconds`` of it)."""
-        per = self.seconds_per_thread
+        per = self._spt
         if per is None:
             return
         self._extra.append(max(0.0, seconds - per * threads / workers))
+        self._over = min(self._extra)
         self._bound.append(seconds * workers / threads)
+        self._spt = min(min(self._per), min(self._bound))
 
     def runs_inline(self, total: int, threads: int, dispatch: float) -> bool:
         """Whether a measured kernel's launch of ``total`` threads runs inline on
@@ -150,12 +163,12 @@ class RangeCost:
         ``hysteresis`` times it, so costs measured near the line do not flip the choice
         launch by launch. Kept inline by ``pool_overhead`` alone, it tries the pool every
         ``retry_pool_every``-th launch (a slow pool launch is often the host's doing)."""
-        per = self.seconds_per_thread
+        per, over = self._spt, self._over
         assert per is not None, "runs_inline needs a measured kernel"
         t, scale = per * total, threads / (threads - 1)
         line = dispatch * scale
-        if self.pool_overhead is not None:
-            line = max(line, self.pool_overhead * scale)
+        if over is not None:
+            line = max(line, over * scale)
         inline = t < line / hysteresis if self.on_pool else t <= line * hysteresis
         if inline and t > dispatch * scale * hysteresis:  # held inline by the overhead alone
             self.held_inline += 1
@@ -321,7 +334,7 @@ def run_range(
             whole()
         return
     measured = cost is not None and adaptive
-    per = cost.seconds_per_thread if measured else None
+    per = cost._spt if measured else None  # cost.seconds_per_thread, without the property
     if per is None:  # not measured: small or first launches run inline (and are measured)
         inline = total < min_parallel or (measured and total <= measure_inline_up_to)
     else:
