@@ -38,8 +38,9 @@ re-pointed in place) never do.
 flight launches one kernel on a different pair of arrays each step, and replays their
 adjoints): a table of entries keyed by the argument *objects* (``object_key``): a
 ``kdsl.array`` by identity (the entry holds it weakly, as ``relaunch`` does), a
-number by its value and kind (a Python number or the parameter's own NumPy type; a
-float zero by its sign, since ``-0.0 == 0.0``), a kdsl vector or matrix of the
+number by its value and kind (a Python number or the parameter's own NumPy type, the
+latter as the Python number of its value, which hashes and compares faster; a float
+zero by its sign, since ``-0.0 == 0.0``), a kdsl vector or matrix of the
 parameter's exact class, dtype and shape by its bytes. Equal keys mean equal converted
 values, so a hit runs the entry without converting anything; any other argument (a
 struct, an object id, a foreign array, a tuple for a vector) makes the launch take the
@@ -136,19 +137,23 @@ def _token(t: Any) -> Callable[[Any], Any] | None:
 
             def float_token(a: Any) -> Any:
                 ta = type(a)
-                if ta is float or ta is np_type or ta is int:
-                    if a != 0:
-                        return a
-                    # -0.0 == 0.0 (and hashes alike): a zero keys by its sign instead
-                    return _NEGATIVE_ZERO if copysign(1.0, a) < 0.0 else _ZERO
-                return _NO
+                if ta is np_type:  # as a Python float (exact): NumPy scalars compare slowly
+                    a = float(a)
+                elif ta is not float and ta is not int:
+                    return _NO
+                if a != 0:
+                    return a
+                # -0.0 == 0.0 (and hashes alike): a zero keys by its sign instead
+                return _NEGATIVE_ZERO if copysign(1.0, a) < 0.0 else _ZERO
 
             return float_token
         py = bool if t.is_bool else int
 
         def int_token(a: Any) -> Any:
             ta = type(a)
-            return a if ta is py or ta is np_type else _NO
+            if ta is np_type:
+                return py(a)
+            return a if ta is py else _NO
 
         return int_token
     if isinstance(t, T.VectorType | T.MatrixType):
