@@ -203,6 +203,18 @@ def test_float_zero_arguments_key_a_launch_by_their_sign(device):
     plus = reuse.object_key([xs[0], g, 0.0, 0, xs[1]], (4,), None)
     assert plus is not None and plus != reuse.object_key([xs[0], g, -0.0, 0, xs[1]], (4,), None)
     assert plus == reuse.object_key([xs[0], g, 0, 0, xs[1]], (4,), None)  # an int 0 is +0.0
+    # a NumPy scalar keys as the Python number of its value: the same key, the same value
+    three = reuse.object_key([xs[0], g, 3.0, 5, xs[1]], (4,), None)
+    assert three == reuse.object_key([xs[0], g, np.float32(3.0), np.int32(5), xs[1]], (4,), None)
+    assert three != reuse.object_key([xs[0], g, np.float32(0.1), 5, xs[1]], (4,), None)
+    assert reuse.object_key([xs[0], g, np.float32(0.1), 5, xs[1]], (4,), None) != (
+        reuse.object_key([xs[0], g, 0.1, 5, xs[1]], (4,), None)
+    )  # float32(0.1) is not 0.1: two keys (each converts to float32(0.1))
+    for s in (np.float32(0.1), 0.1, np.float32(0.1), np.float32(np.nan), 0.1):
+        for y in xs[1:]:
+            for _ in range(3):
+                wp.launch(step, 4, [xs[0], g, s, 0, y], device=device)
+            np.testing.assert_array_equal(y.numpy(), np.float32(s))
     with pytest.raises(wp.KdslLaunchError, match=r"kernel 'step'.*argument 2 's'.*float64"):
         wp.launch(step, 4, [xs[0], g, np.float64(0.0), 0, xs[1]], device=device)
     with pytest.raises(wp.KdslLaunchError, match=r"kernel 'step'.*argument 3 'k'"):
