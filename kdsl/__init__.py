@@ -47,8 +47,8 @@ from kdsl.stdlib.api import *
 
 # isort: split
 # ``kdsl.autograd`` and ``kdsl.utils`` (Warp's ``warp.autograd``, ``warp.utils``) are built
-# on the runtime above.
-from kdsl import autograd, utils
+# on the runtime above; ``kdsl.ext`` holds kdsl's own kernel builtins (Warp has none such).
+from kdsl import autograd, ext, utils
 from kdsl.geometry import *
 from kdsl.texture import *
 from kdsl.utils.map import map  # noqa: A004 - Warp's name

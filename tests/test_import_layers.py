@@ -22,7 +22,7 @@ LAYERS: list[set[str]] = [
     {"ir"},
     {"passes", "types"},
     {"frontend", "backends"},
-    {"stdlib"},
+    {"stdlib", "ext"},
     {"compiler"},
     {"runtime"},
     {"interop", "autograd", "utils", "optim", "render", "texture"},

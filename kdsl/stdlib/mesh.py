@@ -78,8 +78,9 @@ AABB, SPHERE = 0, 1
 FLT_MAX = 3.402823466e38
 #: Nodes the ordered walks (closest point, closest ray hit) keep waiting: at most one
 #: per level of the tree below the root (a 200k-face mesh's tree is 24 deep); deeper
-#: trees fall back to a stackless pass. Warp's stack holds 32 too; each query
-#: zero-fills it.
+#: trees fall back to a stackless pass. Warp's stack holds 32 too. The stacks are
+#: ``kdsl.ext.empty`` arrays: every entry is written before it is read, so no query
+#: pays for a fill (Warp's are uninitialized C arrays too).
 WALK_STACK = 32
 #: 1 / (4 pi): solid angle to winding number.
 INV_4PI = 0.07957747154594767
@@ -282,12 +283,13 @@ def _closest_face(id: wp.uint64, point: wp.vec3, max_dist: float) -> int:
     best.dist_sq = max_dist * max_dist
     best.face = -1
     span = _root_range(bvh, -1)
-    nodes = wp.zeros(WALK_STACK, dtype=wp.int32)
-    dists = wp.zeros(WALK_STACK, dtype=wp.float32)
+    nodes = wp.ext.empty(WALK_STACK, dtype=wp.int32)  # written before read: no zero fill
+    dists = wp.ext.empty(WALK_STACK, dtype=wp.float32)
     count = 0
     sweep = span[1]  # the stackless pass's next node: none until the stack overflows
     if span[0] < span[1]:
-        nodes[0] = span[0]  # (at distance 0: its children are tested against the bound)
+        nodes[0] = span[0]  # at distance 0: its children are tested against the bound
+        dists[0] = 0.0
         count = 1
     while count > 0 or sweep < span[1]:
         first = 0  # the leaf to test: its items [first, first + items)
@@ -570,8 +572,8 @@ def _ray_closest_slot(id: wp.uint64, start: wp.vec3, dir: wp.vec3, max_t: float,
     hit.face = -1
     hit.slot = -1
     span = _root_range(bvh, root)
-    nodes = wp.zeros(WALK_STACK, dtype=wp.int32)
-    enters = wp.zeros(WALK_STACK, dtype=wp.float32)
+    nodes = wp.ext.empty(WALK_STACK, dtype=wp.int32)  # pushed before popped: no zero fill
+    enters = wp.ext.empty(WALK_STACK, dtype=wp.float32)
     count = 0
     sweep = span[1]  # the stackless pass's next node: none until the stack overflows
     node = span[0]

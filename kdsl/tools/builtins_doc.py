@@ -34,11 +34,12 @@ and the kdsl.stdlib modules. Do not edit by hand: change the docstrings and reru
 (tests/cli/test_builtins_doc.py fails when this page is stale). -->
 
 Every name below is callable inside `@kdsl.kernel` and `@kdsl.func` code as
-`wp.<name>` (`import kdsl as wp`). **Builtins** are lowered by the frontend: the
-*implementation* column lists the IR ops they emit (see [ir.md](ir.md)) or says
-that they call library code. **Library functions** are `@kdsl.func` code in
-`kdsl/stdlib/`, compiled like user code, so every backend has them. Edge-case
-results are in [semantics.md](semantics.md).
+`wp.<name>` (`import kdsl as wp`); names that begin `ext.` are kdsl's extensions,
+which Warp lacks ([language.md](language.md#kdsl-extensions-kdslext)). **Builtins**
+are lowered by the frontend: the *implementation* column lists the IR ops they emit
+(see [ir.md](ir.md)) or says that they call library code. **Library functions** are
+`@kdsl.func` code in `kdsl/stdlib/`, compiled like user code, so every backend has
+them. Edge-case results are in [semantics.md](semantics.md).
 """
 
 
@@ -115,11 +116,16 @@ def _aliases() -> dict[str, list[str]]:
 
 
 def all_builtins() -> dict[str, Any]:
-    """Every builtin by name: ``BUILTINS`` plus those reached only through Python names."""
+    """Every builtin by name: ``BUILTINS``, those reached only through Python names, and
+    kdsl's extensions (``kdsl.ext``, named ``ext.<name>``)."""
+    import kdsl.ext
     from kdsl.frontend.builtins import BUILTINS, PYTHON_ALIASES
 
     out = dict(BUILTINS)
     for b in PYTHON_ALIASES.values():
+        out.setdefault(b.name, b)
+    for name in kdsl.ext.__all__:
+        b = getattr(kdsl.ext, name)
         out.setdefault(b.name, b)
     return out
 

@@ -4,7 +4,8 @@ The storage is one ``alloca`` in the function's entry block, whatever loop or br
 the op sits in: LLVM's SROA/mem2reg promote only entry-block allocas, so a small local
 array indexed by constants (after unrolling) becomes registers, and the thread loop
 does not grow the stack on each iteration. Each run of the op zero-fills the storage
-with ``llvm.memset`` where the op is, then builds the descriptor over it: strides
+with ``llvm.memset`` where the op is (not with ``fill = "none"``: the contents are
+undefined until written, ``kdsl.ext.empty``), then builds the descriptor over it: strides
 count scalar elements (bytes for struct elements), as every array descriptor's do
 (``types``), so the memory ops work on it unchanged.
 """
@@ -20,7 +21,7 @@ from kdsl.backends.cpu.emitter import Emitter
 from kdsl.ir import types as T
 from kdsl.ir.core import Operation
 from kdsl.ir.lowering import LOWERINGS
-from kdsl.ir.ops_local import dense_strides
+from kdsl.ir.ops_local import dense_strides, fill_of
 
 CPU = LOWERINGS.for_backend("cpu")
 
@@ -46,8 +47,12 @@ def _local_array(em: Emitter, op: Operation) -> ir.Value:
     ptr = entry.alloca(storage, name=op.results[0].name_hint or "local")
     ptr.align = align
     B = em.b
-    memset = em.intrinsic("llvm.memset", [LT.PTR, LT.I64], LT.VOID, [LT.PTR, LT.I8, LT.I64, LT.I1])
-    B.call(memset, [ptr, ir.Constant(LT.I8, 0), ir.Constant(LT.I64, nbytes), ir.Constant(LT.I1, 0)])
+    if fill_of(op) == "zero":
+        memset = em.intrinsic(
+            "llvm.memset", [LT.PTR, LT.I64], LT.VOID, [LT.PTR, LT.I8, LT.I64, LT.I1]
+        )
+        zero, size = ir.Constant(LT.I8, 0), ir.Constant(LT.I64, nbytes)
+        B.call(memset, [ptr, zero, size, ir.Constant(LT.I1, 0)])
     desc = ir.Constant(LT.descriptor_type(t.ndim), ir.Undefined)
     desc = B.insert_value(desc, ptr, 0)
     for d, (n, s) in enumerate(zip(shape, dense_strides(t, shape, unit))):
