@@ -230,12 +230,13 @@ def _touches(q: BvhQuery, lo: wp.vec3, hi: wp.vec3, max_dist: float) -> bool:
 
 @func
 def bvh_query_next(
-    query: inout(BvhQuery), index: inout(wp.int32), max_dist: float = 1.0e38
+    query: inout(BvhQuery), index: inout(wp.int32), max_dist: float = float("inf")
 ) -> bool:
     """Advance ``query`` to the next item its shape touches: writes the item's index
     (into the arrays the BVH was built from) to ``index`` and gives True, or gives False
     (``index`` unchanged) when no item is left. ``max_dist`` bounds ray and capsule
-    queries (in multiples of ``dir``'s length); it may only shrink during a query."""
+    queries (in multiples of ``dir``'s length; unbounded by default, as Warp's); it may
+    only shrink during a query."""
     rec = wp.object_record(query.bvh, BvhRecord)
     found = False
     while not found:

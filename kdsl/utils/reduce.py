@@ -19,8 +19,8 @@ def array_sum(values, out=None, value_count: int | None = None, axis: int | None
     ``axis=None`` sums the first ``value_count`` elements (all by default) in element
     order and returns the sum (a float, or a vector/matrix value), or writes it to
     ``out[0]``. With ``axis``, sums along that dimension into ``out`` (made when None),
-    whose shape is ``values.shape`` without ``axis``; ``value_count`` then limits the
-    elements taken along ``axis``. Elements must be float32 or float64 based.
+    whose shape is ``values.shape`` with ``axis`` of size 1 (as Warp's); ``value_count``
+    then limits the elements taken along ``axis``. Elements must be float32 or float64 based.
     """
     a = check_array("values", values)
     return _reduce("array_sum", a, None, out, value_count, axis)
@@ -94,12 +94,12 @@ def _reduce(what: str, a: array, b: array | None, out: Any, count: int | None, a
         n = a.shape[axis] if count is None else _count(what, count, a.shape[axis])
         sl = (slice(None),) * axis + (slice(0, n),)
         total = _combine(xp, x[sl], None if y is None else y[sl], axis, len(inner))
-        shape = a.shape[:axis] + a.shape[axis + 1 :]
+        shape = (*a.shape[:axis], 1, *a.shape[axis + 1 :])  # Warp keeps the axis, of size 1
         if out is None:
             dtype = a.dtype if b is None else class_of(elem)
-            out = empty(shape or (1,), dtype=dtype, device=a.device)
-        _check_out(what, out, a if b is None else None, shape or (1,))
-        _store(out, total.reshape(out.shape + total.shape[len(shape or (1,)) :]))
+            out = empty(shape, dtype=dtype, device=a.device)
+        _check_out(what, out, a if b is None else None, shape)
+        _store(out, total.reshape(out.shape + total.shape[len(shape) - 1 :]))
         return out
 
 

@@ -131,10 +131,19 @@ def test_sums_and_inner_products(device):
     a, b = wp.array(x, device=device), wp.array(y, device=device)
     assert wp.utils.array_sum(a) == pytest.approx(x.sum())
     assert wp.utils.array_sum(a, value_count=7) == pytest.approx(x.ravel()[:7].sum())
-    np.testing.assert_allclose(wp.utils.array_sum(a, axis=1).numpy(), x.sum(axis=1))
-    np.testing.assert_allclose(wp.utils.array_sum(a, axis=-2).numpy(), x.sum(axis=0))
+    # along an axis the result keeps it, of size 1 (Warp's shapes)
+    np.testing.assert_allclose(wp.utils.array_sum(a, axis=1).numpy(), x.sum(axis=1, keepdims=True))
+    np.testing.assert_allclose(wp.utils.array_sum(a, axis=-2).numpy(), x.sum(axis=0, keepdims=True))
     assert wp.utils.array_inner(a, b) == pytest.approx((x * y).sum())
-    np.testing.assert_allclose(wp.utils.array_inner(a, b, axis=0).numpy(), (x * y).sum(axis=0))
+    np.testing.assert_allclose(wp.utils.array_inner(a, b, axis=0).numpy(),
+                               (x * y).sum(axis=0, keepdims=True))  # fmt: skip
+    np.testing.assert_allclose(wp.utils.array_sum(a, axis=1, value_count=2).numpy(),
+                               x[:, :2].sum(axis=1, keepdims=True))  # fmt: skip
+    col = wp.zeros((4, 1), dtype=wp.float64, device=device)
+    assert wp.utils.array_sum(a, out=col, axis=1) is col
+    np.testing.assert_allclose(col.numpy(), x.sum(axis=1, keepdims=True))
+    with pytest.raises(wp.utils.UtilsError, match=r"out must have shape \(4, 1\)"):
+        wp.utils.array_sum(a, out=wp.zeros(4, dtype=wp.float64, device=device), axis=1)
     out = wp.zeros(1, dtype=wp.float64, device=device)
     assert wp.utils.array_sum(a, out=out) is out and out.numpy()[0] == pytest.approx(x.sum())
 
@@ -145,6 +154,8 @@ def test_vector_sums_and_dot_products(device):
     a = wp.array(v, dtype=wp.vec3, device=device)
     total = wp.utils.array_sum(a)
     assert isinstance(total, wp.vec3) and list(total) == [18, 22, 26]
+    rows = wp.utils.array_sum(a, axis=0)
+    assert rows.shape == (1,) and rows.dtype is wp.vec3 and list(rows.numpy()[0]) == [18, 22, 26]
     assert wp.utils.array_inner(a, a) == pytest.approx(float((v * v).sum()))
 
 
