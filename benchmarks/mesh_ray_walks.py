@@ -1,0 +1,492 @@
+"""Variants of the closest-ray-hit walk (``mesh_query_ray``'s search), compiled side by
+side as user ``@func`` code, for A/B timing against the standard library and Warp.
+
+    python benchmarks/mesh_ray_walks.py [--tris 200000] [--rays 1000000] [--reps 20]
+        [--device cuda:0] [--variants lib,copy_zero,...] [--no-warp] [--json PATH]
+
+Each variant is a kernel that answers ``mesh_query_ray(mesh, start, dir, 1e6)`` for one
+ray per thread on the bumpy cube-sphere of ``bench_geometry_mesh.workload`` and writes
+the face and ``t``; its search differs from the standard library's
+(``kdsl.stdlib.mesh._ray_closest_slot``) in one or more knobs:
+
+- ``fill``: the stacks made with ``wp.zeros`` (filled: the library before session 11)
+  or ``wp.ext.empty`` (not filled);
+- ``fast``: the slab test without the box padding (Warp's form, plus the library's
+  exit slack) for rays with no tiny direction component; the padded
+  ``ray_box_enter`` otherwise (the padding only matters for a zero component);
+- ``payload``: Warp's stack discipline on nodes whose ``first`` holds minus the right
+  child's index (``right_linked``, built here on the host from the packed nodes): an
+  inner node names both children, so their two loads are independent, and a stack
+  entry carries a node's payload (children, or a leaf's range), so a pop loads no node;
+- ``recheck``: a stack entry keeps its entry ``t`` and is dropped when a nearer hit was
+  found meanwhile (the library's rule); without it a popped node is visited anyway
+  (Warp's).
+
+Every kernel recomputes the hit after the search as the library does (so the times
+compare searches). Times are the minimum over ``--reps`` launches after a warm-up.
+Answers are checked: every variant's faces and ``t`` must equal the library's exactly
+(same tie rule), and the library's hit/miss must agree with Warp's on all but
+``RAY_DISAGREEMENT`` of the rays. The table prints ms per launch and the ratio to
+Warp's time (> 1: faster than Warp).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+import kdsl as wp
+from kdsl.stdlib.bvh import BvhNode, BvhRecord
+from kdsl.stdlib.mesh import MeshRecord
+from kdsl.stdlib.mesh_primitives import (
+    BOX_EXIT_SLACK,
+    RayShear,
+    intersect_ray_triangle,
+    ray_box_enter,
+    ray_shear,
+    safe_inverse,
+)
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_geometry_mesh import MAX_T, RAY_DISAGREEMENT, workload
+
+STACK = 32
+#: The variants: name -> (walk, fill, fast, recheck).
+VARIANTS = {
+    "copy_zero": ("skip", "zero", False, True),
+    "copy_empty": ("skip", "empty", False, True),
+    "copy_fast": ("skip", "empty", True, True),
+    "payload": ("payload", "empty", False, True),
+    "payload_fast": ("payload", "empty", True, True),
+    "payload_fast_norecheck": ("payload", "empty", True, False),
+}
+
+
+@wp.struct
+class Hit:
+    t: wp.float32
+    face: wp.int32
+    slot: wp.int32
+
+
+@wp.func
+def slab_fast(lo: wp.vec3, hi: wp.vec3, start: wp.vec3, inv: wp.vec3) -> float:
+    """Entry ``t`` of the ray into ``[lo, hi]`` or NaN: the slab test without padding,
+    exit grown by the library's ``BOX_EXIT_SLACK`` (conservative for finite ``inv``)."""
+    t0 = wp.cw_mul(lo - start, inv)
+    t1 = wp.cw_mul(hi - start, inv)
+    near = wp.max(wp.max(wp.min(t0[0], t1[0]), wp.min(t0[1], t1[1])), wp.min(t0[2], t1[2]))
+    far = wp.min(wp.min(wp.max(t0[0], t1[0]), wp.max(t0[1], t1[1])), wp.max(t0[2], t1[2]))
+    far = far * BOX_EXIT_SLACK
+    if near <= far and far >= 0.0:
+        return near
+    return wp.nan
+
+
+def _enter(fast_form: bool):
+    @wp.func
+    def enter(lo: wp.vec3, hi: wp.vec3, start: wp.vec3, inv: wp.vec3, fast: bool) -> float:
+        if wp.static(fast_form) and fast:
+            return slab_fast(lo, hi, start, inv)
+        return ray_box_enter(lo, hi, start, inv)
+
+    return enter
+
+
+@wp.func
+def leaf_hits(rec: MeshRecord, bvh: BvhRecord, first: int, count: int, shear: RayShear,
+              start: wp.vec3, best: Hit) -> Hit:  # fmt: skip
+    hit = best
+    for k in range(first, first + count):
+        h = intersect_ray_triangle(
+            shear, start, rec.tri[k * 3], rec.tri[k * 3 + 1], rec.tri[k * 3 + 2]
+        )
+        t = h[0]
+        if t >= 0.0 and t <= hit.t:
+            f = bvh.items[k]
+            if t < hit.t or (hit.slot >= 0 and f < hit.face):
+                hit.t = t
+                hit.face = f
+                hit.slot = k
+    return hit
+
+
+@wp.func
+def skip_of(nd: BvhNode, node: int) -> int:
+    if nd.first < 0:
+        return nd.next
+    return node + 1
+
+
+@wp.func
+def fast_ray(dir: wp.vec3) -> bool:
+    """Whether every direction component is large enough for ``slab_fast``."""
+    m = wp.min(wp.min(wp.abs(dir[0]), wp.abs(dir[1])), wp.abs(dir[2]))
+    return m >= 1.0e-30
+
+
+def _skip_walk(fill: str, fast_form: bool):
+    """The library's walk (node indices and entry ``t`` on the stack; the far child
+    found through the near child's ``skip``), with the stack fill and slab form given."""
+    enter = _enter(fast_form)
+    zero = fill == "zero"
+
+    @wp.func
+    def walk(id: wp.uint64, alt: wp.array(dtype=BvhNode), start: wp.vec3, dir: wp.vec3,
+             max_t: float) -> int:  # fmt: skip
+        rec = wp.object_record(id, MeshRecord)
+        bvh = wp.object_record(rec.bvh, BvhRecord)
+        shear = ray_shear(dir)
+        inv = wp.vec3(safe_inverse(dir[0]), safe_inverse(dir[1]), safe_inverse(dir[2]))
+        fast = fast_ray(dir)
+        hit = Hit()
+        hit.t = max_t
+        hit.face = -1
+        hit.slot = -1
+        if wp.static(zero):
+            nodes = wp.zeros(STACK, dtype=wp.int32)
+            enters = wp.zeros(STACK, dtype=wp.float32)
+        else:
+            nodes = wp.ext.empty(STACK, dtype=wp.int32)
+            enters = wp.ext.empty(STACK, dtype=wp.float32)
+        count = 0
+        lost = False
+        node = bvh.root
+        active = False
+        nd = BvhNode()
+        if node >= 0:
+            nd = bvh.nodes[node]
+            active = enter(nd.lower, nd.upper, start, inv, fast) <= hit.t
+        while active:
+            first = 0
+            items = 0
+            at_leaf = nd.first >= 0
+            inner = not at_leaf
+            while inner:
+                near = node + 1
+                near_nd = bvh.nodes[near]
+                far = skip_of(near_nd, near)
+                far_nd = bvh.nodes[far]
+                t_near = enter(near_nd.lower, near_nd.upper, start, inv, fast)
+                t_far = enter(far_nd.lower, far_nd.upper, start, inv, fast)
+                near_in = t_near <= hit.t
+                far_in = t_far <= hit.t
+                if far_in and (not near_in or t_far < t_near):
+                    near_in = far_in
+                    far_in = t_near <= hit.t
+                    tmp = near
+                    near = far
+                    far = tmp
+                    tmp_nd = near_nd
+                    near_nd = far_nd
+                    far_nd = tmp_nd
+                    tmp_t = t_near
+                    t_near = t_far
+                    t_far = tmp_t
+                inner = False
+                if near_in:
+                    if far_in:
+                        if count < STACK:
+                            nodes[count] = far
+                            enters[count] = t_far
+                            count = count + 1
+                        else:
+                            lost = True
+                    node = near
+                    nd = near_nd
+                    at_leaf = nd.first >= 0
+                    inner = not at_leaf
+            if at_leaf:
+                first = nd.first
+                items = nd.next
+            hit = leaf_hits(rec, bvh, first, items, shear, start, hit)
+            active = False
+            while count > 0 and not active:
+                count = count - 1
+                if enters[count] <= hit.t:
+                    node = nodes[count]
+                    nd = bvh.nodes[node]
+                    active = True
+        if lost:
+            return -2
+        return hit.slot
+
+    return walk
+
+
+def _payload_walk(fast_form: bool, recheck: bool):
+    """Warp's discipline on right-linked nodes (``alt``): a node is carried as its
+    payload ``(a, b)``: an inner node's children ``(a, -b)``, a leaf's items
+    ``[a, a + b)``; a stack entry is a payload (and its entry ``t`` with ``recheck``)."""
+    enter = _enter(fast_form)
+
+    @wp.func
+    def walk(id: wp.uint64, alt: wp.array(dtype=BvhNode), start: wp.vec3, dir: wp.vec3,
+             max_t: float) -> int:  # fmt: skip
+        rec = wp.object_record(id, MeshRecord)
+        bvh = wp.object_record(rec.bvh, BvhRecord)
+        shear = ray_shear(dir)
+        inv = wp.vec3(safe_inverse(dir[0]), safe_inverse(dir[1]), safe_inverse(dir[2]))
+        fast = fast_ray(dir)
+        hit = Hit()
+        hit.t = max_t
+        hit.face = -1
+        hit.slot = -1
+        sa = wp.ext.empty(STACK, dtype=wp.int32)
+        sb = wp.ext.empty(STACK, dtype=wp.int32)
+        st = wp.ext.empty(STACK, dtype=wp.float32)
+        count = 0
+        lost = False
+        root = bvh.root
+        active = False
+        a = 0
+        b = 0
+        if root >= 0:
+            nd = alt[root]
+            active = enter(nd.lower, nd.upper, start, inv, fast) <= hit.t
+            a = nd.first
+            b = nd.next
+            if nd.first < 0:
+                a = root + 1
+                b = nd.first
+        while active:
+            while b < 0:  # an inner node: both children, loaded independently
+                left = alt[a]
+                right = alt[-b]
+                t_l = enter(left.lower, left.upper, start, inv, fast)
+                t_r = enter(right.lower, right.upper, start, inv, fast)
+                l_in = t_l <= hit.t
+                r_in = t_r <= hit.t
+                # payloads of the two children
+                la = left.first
+                lb = left.next
+                if left.first < 0:
+                    la = a + 1
+                    lb = left.first
+                ra = right.first
+                rb = right.next
+                if right.first < 0:
+                    ra = -b + 1
+                    rb = right.first
+                if r_in and (not l_in or t_r < t_l):  # the right child first
+                    if l_in:
+                        if count < STACK:
+                            sa[count] = la
+                            sb[count] = lb
+                            if wp.static(recheck):
+                                st[count] = t_l
+                            count = count + 1
+                        else:
+                            lost = True
+                    a = ra
+                    b = rb
+                elif l_in:
+                    if r_in:
+                        if count < STACK:
+                            sa[count] = ra
+                            sb[count] = rb
+                            if wp.static(recheck):
+                                st[count] = t_r
+                            count = count + 1
+                        else:
+                            lost = True
+                    a = la
+                    b = lb
+                else:
+                    b = 0  # both missed: nothing to test
+            hit = leaf_hits(rec, bvh, a, b, shear, start, hit)
+            active = False
+            while count > 0 and not active:
+                count = count - 1
+                take = True
+                if wp.static(recheck):
+                    take = st[count] <= hit.t
+                if take:
+                    a = sa[count]
+                    b = sb[count]
+                    active = True
+        if lost:
+            return -2
+        return hit.slot
+
+    return walk
+
+
+@wp.func
+def finish(id: wp.uint64, slot: int, start: wp.vec3, dir: wp.vec3) -> wp.vec2:
+    """The library's tail after the search: the hit recomputed from its slot (``t``,
+    face as a float; face -1 for a miss)."""
+    if slot < 0:
+        return wp.vec2(0.0, float(slot))
+    rec = wp.object_record(id, MeshRecord)
+    a = rec.tri[slot * 3]
+    b = rec.tri[slot * 3 + 1]
+    c = rec.tri[slot * 3 + 2]
+    h = intersect_ray_triangle(ray_shear(dir), start, a, b, c)
+    face = wp.object_record(rec.bvh, BvhRecord).items[slot]
+    return wp.vec2(h[0], float(face))
+
+
+def variant_kernel(walk_kind: str, fill: str, fast: bool, recheck: bool):
+    """The kernel of one variant: ``face[i]``, ``t[i]`` of ray ``i``."""
+    walk = _skip_walk(fill, fast) if walk_kind == "skip" else _payload_walk(fast, recheck)
+
+    @wp.kernel(enable_backward=False)
+    def rays(mesh: wp.uint64, alt: wp.array(dtype=BvhNode), start: wp.array(dtype=wp.vec3),
+             d: wp.array(dtype=wp.vec3), face: wp.array(dtype=wp.int32),
+             t: wp.array(dtype=float)):  # fmt: skip
+        i = wp.tid()
+        slot = walk(mesh, alt, start[i], d[i], MAX_T)
+        r = finish(mesh, slot, start[i], d[i])
+        face[i] = int(r[1])
+        t[i] = r[0]
+
+    return rays
+
+
+@wp.kernel(enable_backward=False)
+def lib_rays(mesh: wp.uint64, alt: wp.array(dtype=BvhNode), start: wp.array(dtype=wp.vec3),
+             d: wp.array(dtype=wp.vec3), face: wp.array(dtype=wp.int32),
+             t: wp.array(dtype=float)):  # fmt: skip
+    i = wp.tid()
+    q = wp.mesh_query_ray(mesh, start[i], d[i], MAX_T)
+    face[i] = -1
+    t[i] = 0.0
+    if q.result:
+        face[i] = q.face
+        t[i] = q.t
+
+
+def right_linked(nodes: np.ndarray) -> np.ndarray:
+    """A copy of packed nodes (a ``BvhNode`` structured array) whose inner nodes'
+    ``first`` is minus their right child's index (the left child is the next node)."""
+    out = nodes.copy()
+    first, nxt = nodes["first"], nodes["next"]
+    inner = np.flatnonzero(first == -1)
+    left = inner + 1
+    right = np.where(first[left] >= 0, left + 1, nxt[left])
+    out["first"][inner] = -right
+    return out
+
+
+def _time(fn, reps: int, sync) -> float:
+    fn()
+    sync()
+    best = float("inf")
+    for _ in range(reps):
+        t0 = time.perf_counter()
+        fn()
+        sync()
+        best = min(best, time.perf_counter() - t0)
+    return best
+
+
+def _warp_side(data: dict, device: str, reps: int):
+    import warp
+
+    warp.config.quiet = True
+    warp.init()
+
+    @warp.kernel
+    def wrays(mesh: warp.uint64, start: warp.array(dtype=warp.vec3),
+              d: warp.array(dtype=warp.vec3), face: warp.array(dtype=warp.int32),
+              t: warp.array(dtype=float)):  # fmt: skip
+        i = warp.tid()
+        q = warp.mesh_query_ray(mesh, start[i], d[i], MAX_T)
+        face[i] = -1
+        t[i] = 0.0
+        if q.result:
+            face[i] = q.face
+            t[i] = q.t
+
+    pts = warp.array(data["points"], dtype=warp.vec3, device=device)
+    idx = warp.array(data["faces"].reshape(-1), dtype=warp.int32, device=device)
+    mesh = warp.Mesh(pts, idx)
+    n = len(data["ray_start"])
+    s = warp.array(data["ray_start"], dtype=warp.vec3, device=device)
+    d = warp.array(data["ray_dir"], dtype=warp.vec3, device=device)
+    face = warp.zeros(n, dtype=warp.int32, device=device)
+    t = warp.zeros(n, dtype=float, device=device)
+
+    def run():
+        warp.launch(wrays, n, [mesh.id, s, d, face, t], device=device)
+
+    secs = _time(run, reps, lambda: warp.synchronize_device(device))
+    return secs, face.numpy(), t.numpy(), mesh
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the variants (and Warp), print the table, check the answers; exit status 1
+    when an answer disagrees."""
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--tris", type=int, default=200_000)
+    ap.add_argument("--rays", type=int, default=1_000_000)
+    ap.add_argument("--reps", type=int, default=20)
+    ap.add_argument("--device", default="cuda:0")
+    ap.add_argument("--variants", default=",".join(VARIANTS))
+    ap.add_argument("--no-warp", action="store_true")
+    ap.add_argument("--json", default=None)
+    args = ap.parse_args(argv)
+    dev = args.device
+    data = workload(args.tris, args.rays)
+    n = len(data["ray_start"])
+    mesh = wp.Mesh(wp.array(data["points"], dtype=wp.vec3, device=dev),
+                   wp.array(data["faces"].reshape(-1), dtype=wp.int32, device=dev))  # fmt: skip
+    alt = wp.array(right_linked(mesh.bvh.packed_nodes.numpy()), dtype=BvhNode, device=dev)
+    s = wp.array(data["ray_start"], dtype=wp.vec3, device=dev)
+    d = wp.array(data["ray_dir"], dtype=wp.vec3, device=dev)
+    rows: list[dict] = []
+    answers: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    warp_row = None
+    if not args.no_warp:
+        secs, wface, wt, _keep = _warp_side(data, dev, args.reps)
+        warp_row = {"variant": "warp", "ms": secs * 1e3}
+        answers["warp"] = (wface, wt)
+    kernels = {"lib": lib_rays}
+    for name in [v for v in args.variants.split(",") if v]:
+        kernels[name] = variant_kernel(*VARIANTS[name])
+    for name, k in kernels.items():
+        face = wp.zeros(n, dtype=wp.int32, device=dev)
+        t = wp.zeros(n, dtype=float, device=dev)
+
+        def run(k=k, face=face, t=t):
+            wp.launch(k, n, [mesh.id, alt, s, d, face, t], device=dev)
+
+        secs = _time(run, args.reps, lambda: wp.synchronize_device(dev))
+        answers[name] = (face.numpy(), t.numpy())
+        rows.append({"variant": name, "ms": secs * 1e3})
+    ok = True
+    lf, lt = answers["lib"]
+    for row in rows:
+        f, t = answers[row["variant"]]
+        row["face_diff"] = int((f != lf).sum())
+        row["t_diff"] = int(((t != lt) & (lf >= 0)).sum())
+        ok &= row["face_diff"] == 0 and row["t_diff"] == 0
+    if warp_row is not None:
+        wf, wt = answers["warp"]
+        warp_row["face_diff"] = int(((wf >= 0) != (lf >= 0)).sum())
+        both = (wf >= 0) & (lf >= 0)
+        warp_row["t_diff"] = int((np.abs(wt - lt) > 1e-5 * np.maximum(1, np.abs(lt)))[both].sum())
+        ok &= warp_row["face_diff"] <= RAY_DISAGREEMENT * n
+        rows.insert(0, warp_row)
+        for row in rows:
+            row["vs_warp"] = warp_row["ms"] / row["ms"]
+    print(f"{n} rays, {len(data['faces'])} triangles, {dev}, min of {args.reps} launches")
+    print(f"{'variant':<26}{'ms':>8}{'x Warp':>8}{'face diff':>11}{'t diff':>8}")
+    for r in rows:
+        print(f"{r['variant']:<26}{r['ms']:8.3f}{r.get('vs_warp', float('nan')):8.2f}"
+              f"{r['face_diff']:11d}{r['t_diff']:8d}")  # fmt: skip
+    if args.json:
+        Path(args.json).write_text(json.dumps({"rows": rows, "n": n}, indent=1))
+    if not ok:
+        print("ANSWERS DISAGREE")
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
