@@ -56,7 +56,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_geometry_mesh import MAX_T, RAY_DISAGREEMENT, workload
 
 STACK = 32
-#: The variants: name -> (walk, fill, fast, recheck).
+#: The variants: name -> (walk, fill, fast, recheck[, while_while]).
 VARIANTS = {
     "copy_zero": ("skip", "zero", False, True),
     "copy_empty": ("skip", "empty", False, True),
@@ -64,6 +64,7 @@ VARIANTS = {
     "payload": ("payload", "empty", False, True),
     "payload_fast": ("payload", "empty", True, True),
     "payload_fast_norecheck": ("payload", "empty", True, False),
+    "payload_fast_ifif": ("payload", "empty", True, True, False),
 }
 
 
@@ -219,10 +220,12 @@ def _skip_walk(fill: str, fast_form: bool):
     return walk
 
 
-def _payload_walk(fast_form: bool, recheck: bool):
+def _payload_walk(fast_form: bool, recheck: bool, while_while: bool = True):
     """Warp's discipline on right-linked nodes (``alt``): a node is carried as its
     payload ``(a, b)``: an inner node's children ``(a, -b)``, a leaf's items
-    ``[a, a + b)``; a stack entry is a payload (and its entry ``t`` with ``recheck``)."""
+    ``[a, a + b)``; a stack entry is a payload (and its entry ``t`` with ``recheck``).
+    ``while_while``: descend to a leaf in an inner loop (the library's form); else one
+    node per iteration of the outer loop (Warp's "if-if")."""
     enter = _enter(fast_form)
 
     @wp.func
@@ -255,7 +258,8 @@ def _payload_walk(fast_form: bool, recheck: bool):
                 a = root + 1
                 b = nd.first
         while active:
-            while b < 0:  # an inner node: both children, loaded independently
+            descend = b < 0
+            while descend:  # an inner node: both children, loaded independently
                 left = alt[a]
                 right = alt[-b]
                 t_l = enter(left.lower, left.upper, start, inv, fast)
@@ -299,17 +303,19 @@ def _payload_walk(fast_form: bool, recheck: bool):
                     b = lb
                 else:
                     b = 0  # both missed: nothing to test
-            hit = leaf_hits(rec, bvh, a, b, shear, start, hit)
-            active = False
-            while count > 0 and not active:
-                count = count - 1
-                take = True
-                if wp.static(recheck):
-                    take = st[count] <= hit.t
-                if take:
-                    a = sa[count]
-                    b = sb[count]
-                    active = True
+                descend = wp.static(while_while) and b < 0
+            if b >= 0:  # at a leaf (b = 0: both children missed): its faces, then a pop
+                hit = leaf_hits(rec, bvh, a, b, shear, start, hit)
+                active = False
+                while count > 0 and not active:
+                    count = count - 1
+                    take = True
+                    if wp.static(recheck):
+                        take = st[count] <= hit.t
+                    if take:
+                        a = sa[count]
+                        b = sb[count]
+                        active = True
         if lost:
             return -2
         return hit.slot
@@ -332,9 +338,12 @@ def finish(id: wp.uint64, slot: int, start: wp.vec3, dir: wp.vec3) -> wp.vec2:
     return wp.vec2(h[0], float(face))
 
 
-def variant_kernel(walk_kind: str, fill: str, fast: bool, recheck: bool):
+def variant_kernel(walk_kind: str, fill: str, fast: bool, recheck: bool, ww: bool = True):
     """The kernel of one variant: ``face[i]``, ``t[i]`` of ray ``i``."""
-    walk = _skip_walk(fill, fast) if walk_kind == "skip" else _payload_walk(fast, recheck)
+    if walk_kind == "skip":
+        walk = _skip_walk(fill, fast)
+    else:
+        walk = _payload_walk(fast, recheck, ww)
 
     @wp.kernel(enable_backward=False)
     def rays(mesh: wp.uint64, alt: wp.array(dtype=BvhNode), start: wp.array(dtype=wp.vec3),
