@@ -11,11 +11,17 @@ the node count on the host.
 
 ``refit`` runs as kdsl kernels on the device. On a GPU it is one launch, bottom up as
 Karras and Apetrei build theirs: a thread per leaf writes the union of its items' boxes,
-then climbs; at each parent it fences and bumps the parent's arrival counter, and the
-second child's thread to arrive (it fences again, so it sees the first child's bounds)
-writes the parent's union and climbs on, while the first stops. On a CPU, after the
-leaves, one thread walks the inner nodes in reverse preorder (children before parents),
-which beats atomics on a few cores.
+then climbs (``climb``); at each parent it fences and bumps the parent's arrival
+counter, and the second child's thread to arrive (it fences again, so it sees the first
+child's bounds) writes the parent's union and climbs on, while the first stops. The
+climb is a chain of dependent memory round trips as long as the tree is deep, so each
+step does few: the links it needs next (the sibling, the grandparent) are read before
+the counter, the arriving thread keeps its own union in registers and reads only its
+sibling's bounds, and the counters are never reset: the second arrival is the one that
+finds an odd count, so a refit adds two to each inner node's counter and leaves them
+all even (no memset, no reset store). On a CPU, after the leaves, one thread walks the
+inner nodes in reverse preorder (children before parents), which beats atomics on a
+few cores.
 """
 
 from __future__ import annotations
@@ -51,7 +57,7 @@ class DeviceTree:
     items: array
     group_roots: array
     parent: array  # empty on a CPU
-    arrivals: array  # int32 per slot, zero between refits; empty on a CPU
+    arrivals: array  # int32 per slot, even between refits; empty on a CPU
     slots: int
     #: The packed nodes (``kdsl.stdlib.bvh.BvhNode``) with their links written, when the
     #: constructor wrote them itself (``lbvh``); None: ``kdsl.Bvh`` packs them.
@@ -168,6 +174,32 @@ def _refit_leaves(
         uppers[n] = hi
 
 
+@func
+def climb(
+    n: int, lo: vec3, hi: vec3, skip: array(dtype=int32), parent: array(dtype=int32),
+    arrivals: array(dtype=int32), lowers: array(dtype=vec3), uppers: array(dtype=vec3),
+):  # fmt: skip
+    """Climb from node ``n``, whose bounds ``lo``/``hi`` this thread has just written:
+    at each parent, the second child's thread to arrive (the one that finds an odd
+    count) writes the parent's union and climbs on (see the module docstring)."""
+    p = parent[n]
+    while p >= 0:
+        s = p + 1  # the sibling: the parent's other child
+        if s == n:
+            s = skip[s]
+        up = parent[p]  # (read now: not behind the counter)
+        thread_fence()  # publish this child's bounds before its arrival
+        if (atomic_add(arrivals, p, 1) & 1) == 0:
+            return  # the sibling's thread, arriving second, completes ``p``
+        thread_fence()  # see the sibling's bounds, published before its arrival
+        lo = vmin(lo, lowers[s])
+        hi = vmax(hi, uppers[s])
+        lowers[p] = lo
+        uppers[p] = hi
+        n = p
+        p = up
+
+
 @kernel
 def _refit_bottom_up(
     first: array(dtype=int32), count: array(dtype=int32), items: array(dtype=int32),
@@ -184,18 +216,7 @@ def _refit_bottom_up(
     _leaf_bounds(f, count[n], items, item_lowers, item_uppers, lo, hi)
     lowers[n] = lo
     uppers[n] = hi
-    p = parent[n]
-    while p >= 0:
-        thread_fence()  # publish this child's bounds before its arrival
-        if atomic_add(arrivals, p, 1) == 0:
-            return  # the sibling's thread, arriving second, completes ``p``
-        thread_fence()  # see the sibling's bounds, published before its arrival
-        arrivals[p] = 0  # ready for the next refit
-        a = p + 1
-        b = skip[a]
-        lowers[p] = vmin(lowers[a], lowers[b])
-        uppers[p] = vmax(uppers[a], uppers[b])
-        p = parent[p]
+    climb(n, lo, hi, skip, parent, arrivals, lowers, uppers)
 
 
 @kernel
@@ -236,6 +257,17 @@ def _refit_inner_reverse_preorder(
             uppers[n] = vmax(uppers[a], uppers[b])
 
 
+def refit_inner(tree: DeviceTree, lowers: array, uppers: array,
+                record_cmd: bool = False) -> Callable[[], object] | None:  # fmt: skip
+    """Write the inner nodes' bounds from their children's, after the leaves': one thread
+    in reverse preorder (a CPU's way; see the module docstring). ``record_cmd``: return
+    the launch prepared (a callable), not run."""
+    cmd = launch(_refit_inner_reverse_preorder, dim=1, device=lowers.device,
+                 inputs=[tree.slots, tree.first, tree.skip, lowers, uppers],
+                 record_cmd=record_cmd)  # fmt: skip
+    return cmd.launch if record_cmd else None
+
+
 def refit(tree: DeviceTree, item_lowers: array, item_uppers: array, lowers: array,
           uppers: array) -> None:  # fmt: skip
     """Write the node bounds of ``tree`` over the item boxes into ``lowers``/``uppers``:
@@ -250,8 +282,7 @@ def refit(tree: DeviceTree, item_lowers: array, item_uppers: array, lowers: arra
             inputs=[tree.first, tree.count, tree.items, item_lowers, item_uppers, lowers,
                     uppers],
         )  # fmt: skip
-        launch(_refit_inner_reverse_preorder, dim=1, device=device,
-               inputs=[tree.slots, tree.first, tree.skip, lowers, uppers])  # fmt: skip
+        refit_inner(tree, lowers, uppers)
         return
     launch(
         _refit_bottom_up, dim=tree.slots, device=device,

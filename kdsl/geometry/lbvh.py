@@ -508,7 +508,8 @@ class LbvhBuild:
         # One block of packed nodes (one allocation, one fill): the tree's nodes,
         # then, as views of the rest, the radix tree's inner nodes' bounds, the keys and
         # the int32 arrays. Every element of ``ints`` is written before it is read;
-        # ``zero`` must start at zero, and every build leaves it so.
+        # ``zero`` must start at zero, and every build leaves it so (``arrivals``, the
+        # refit's counters, which refits leave even: see ``device_tree``).
         layout = {"items": n, "skip": slots, "first": slots, "count": slots, "parent": slots,
                   "left": n - 1, "right": n - 1, "node_a": n - 1, "node_b": n - 1,
                   "kept": n - 1, "before": n + 1,

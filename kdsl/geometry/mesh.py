@@ -114,7 +114,7 @@ class Mesh:
             leaf_size=bvh_leaf_size,
         )  # fmt: skip
         self._raise_if_bad()  # (waits for the check, not for the BVH's build)
-        self._tree_points = TreePoints(pts, idx, num_tris)  # the vertices in item order
+        self._tree_points = TreePoints(pts, idx, self._faces.tri)  # the vertices in item order
         self.bvh.tree_points = self._tree_points  # (its rebuild() writes them again)
         self._tree_points.items = self.bvh.item_order
         self._tree_points.write()
@@ -146,18 +146,14 @@ class Mesh:
 
     def refit(self) -> None:
         """Update the face boxes and the BVH's bounds from the current points (the tree
-        keeps its shape: rebuild with ``mesh.bvh.rebuild()`` after large motions). A
-        non-finite point is an error, raised before the BVH changes."""
-        self._write_boxes()
-        self.bvh.refit()
-        self._tree_points.write()
-        self._write_record()
-
-    def _write_boxes(self) -> None:
-        """The faces' boxes (the BVH's items) and the average edge length, by one checking
-        kernel on the mesh's device: an index out of range or a non-finite point raises."""
+        keeps its shape: rebuild with ``mesh.bvh.rebuild()`` after large motions). An
+        index out of range or a non-finite point is an error, and the BVH keeps its
+        bounds. The check, the edge sum and the BVH's refit are issued before the host
+        waits for the check's answers (the refit reads them on the device)."""
         self._faces.start(self._points, self.indices)
+        self.bvh.refit_points(self._faces.found)
         self._raise_if_bad()
+        self._write_record()
 
     def _raise_if_bad(self) -> None:
         """Wait for the answers of the check ``FaceBoxes.start`` issued; raise for a bad

@@ -11,8 +11,9 @@ construction or a refit. The arrays it writes are allocated once per mesh
 pinned memory, behind an event: ``host_read``) and the edge sum (``ChunkSum``: kdsl
 kernels, skipped on the device when the check found something, so the sum is left as
 it was); ``finish`` waits for the read only. A construction issues its BVH build
-between the two, so the host never waits for the build; a refit waits before it
-refits the BVH, which keeps its bounds when the points are bad.
+between the two, so the host never waits for the build; a refit issues the BVH's refit
+between them too (``MeshBvh.refit_points``, which reads the answers on the device and
+keeps the bounds when the points are bad), then waits and raises.
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ from kdsl.frontend.api import min as vmin
 from kdsl.geometry.graph_steps import StepGraph, graphs_on
 from kdsl.geometry.host_read import IntsReader
 from kdsl.geometry.recycle import RecycleBin
-from kdsl.runtime.alloc import zeros
+from kdsl.runtime.alloc import empty, zeros
 from kdsl.runtime.array import array
 from kdsl.runtime.carve import carve
 from kdsl.runtime.launch import launch
@@ -77,22 +78,27 @@ class FaceBoxes:
     ``lowers``/``uppers``, the faces' boxes; ``edges``, each face's three edge lengths
     summed, and ``edge_sum``, their sum (the mean edge length is ``edge_sum[0] / (3 *
     faces)``; 0.0 with no faces); ``none``, an empty vec3 array (a mesh's missing
-    velocities); and the check's two counters, which hold "nothing found" (zero)
-    between calls (a call that finds something zeroes them again), so a call fills
-    nothing. The check's launch is prepared per points and indices arrays (and stream),
-    the sum's once (and replayed as a graph on a GPU from its second run)."""
+    velocities); and ``found``, the check's two counters, which hold "nothing found"
+    (zero) between calls (a call that finds something zeroes them again), so a call
+    fills nothing; kernels issued behind a check may read them (``MeshBvh.refit_points``
+    writes nothing when they are set). Also ``tri``, the storage of the mesh's vertex
+    copy in tree order (``TreePoints``: ``3 * faces`` vec3, not zeroed), which comes
+    back with the boxes when they are recycled. The check's launch is prepared per
+    points and indices arrays (and stream), the sum's once (and replayed as a graph on a
+    GPU from its second run)."""
 
     def __init__(self, num_tris: int, device) -> None:
         floats = 7 * num_tris + 1  # boxes (six per face), edges, their sum
         m, scratch = num_tris, scratch_size(num_tris)
         # (and the two counters, then the sum's scratch)
         block = zeros(floats + 2 + scratch, dtype=float32, device=device)
-        (self.lowers, self.uppers, self.none, self.edges, self.edge_sum, self._first_bad,
+        (self.lowers, self.uppers, self.none, self.edges, self.edge_sum, self.found,
          self._scratch) = carve(block, [
             (0, vec3, m), (12 * m, vec3, m), (0, vec3, 0), (24 * m, float32, m),
             (28 * m, float32, 1), (4 * floats, int32, 2), (4 * floats + 8, float32, scratch),
         ])  # fmt: skip
-        self._read = IntsReader(self._first_bad)
+        self.tri = empty(3 * num_tris, dtype=vec3, device=device)
+        self._read = IntsReader(self.found)
         #: The edge sum's prepared launches and the stream they run on.
         self._sum: StepGraph | None = None
         #: (points, indices, stream) of the prepared check, and the check.
@@ -116,7 +122,7 @@ class FaceBoxes:
             check = launch(
                 _checked_face_boxes, dim=max(num_points, num_tris), device=device,
                 inputs=[points, indices, num_points, num_tris, self.lowers, self.uppers,
-                        self.edges, self._first_bad], record_cmd=True,
+                        self.edges, self.found], record_cmd=True,
             ).launch  # fmt: skip
             held = self._check = (points, indices, stream, check)
         held[3]()
@@ -124,7 +130,7 @@ class FaceBoxes:
         if num_tris:
             total = self._sum
             if total is None or total.stream is not stream:
-                steps = ChunkSum(self.edges, self.edge_sum, guard=self._first_bad,
+                steps = ChunkSum(self.edges, self.edge_sum, guard=self.found,
                                  scratch=self._scratch).steps  # fmt: skip
                 total = self._sum = StepGraph(steps, stream, graphs_on(device))
             total()  # (writes nothing when the check found something)
@@ -140,7 +146,7 @@ class FaceBoxes:
         self._pending = False
         bad_index, bad_point = self._read.values()
         if bad_index or bad_point:
-            self._first_bad.zero_()  # "nothing found" again, for the next call
+            self.found.zero_()  # "nothing found" again, for the next call
         self.clean = True
         return (
             -1 if bad_index == 0 else _TOP - bad_index,

@@ -15,15 +15,26 @@ The copy must follow the points and the tree: ``Mesh`` writes it at construction
 at every ``refit()`` (after the points moved, in place or by assigning
 ``mesh.points``), and the mesh's BVH (``MeshBvh``) writes it again after every
 ``rebuild()``, which reorders the items.
+
+A mesh's ``refit()`` writes the copy and the BVH's bounds in one pass
+(``MeshBvh.refit_points``): a thread per leaf reads its faces' corners once, in item
+order, writes them to the copy and bounds the leaf with them (the union of the faces'
+boxes, in the order ``device_tree``'s leaves take them: the same bits), then climbs
+(``device_tree.climb``) on a GPU; on a CPU one thread then walks the inner nodes. It
+reads the mesh check's answers on the device and writes nothing when the check found
+a bad index or point, so the host need not wait for the check before issuing it.
 """
 
 from __future__ import annotations
 
-from kdsl.frontend.api import kernel, tid
+from kdsl.frontend.api import func, inout, kernel, tid
+from kdsl.frontend.api import max as vmax
+from kdsl.frontend.api import min as vmin
 from kdsl.geometry.bvh import Bvh
-from kdsl.runtime.alloc import empty
+from kdsl.geometry.device_tree import climb, refit_inner
 from kdsl.runtime.array import array
 from kdsl.runtime.launch import launch
+from kdsl.runtime.stream import current_stream
 from kdsl.types import int32, vec3
 
 
@@ -40,15 +51,83 @@ def _gather_tree_points(
         tri[k * 3 + j] = points[indices[f * 3 + j]]
 
 
-class TreePoints:
-    """The copy (``tri``: ``3 * faces`` vec3 on the mesh's device) and what it is
-    copied from: ``points`` (the mesh's current points array; ``Mesh`` sets it when
-    the points array is replaced), ``indices`` and the BVH whose item order it
-    follows (set once the BVH exists)."""
+@func
+def _copy_leaf(
+    f: int, count: int, items: array(dtype=int32), points: array(dtype=vec3),
+    indices: array(dtype=int32), tri: array(dtype=vec3), lo: inout(vec3), hi: inout(vec3),
+):  # fmt: skip
+    """Copy the corners of the faces ``items[f : f + count]`` to ``tri[3 f ..]`` and
+    bound them into ``lo``/``hi`` (each face's box as the mesh check computes it, then
+    their union in item order, as ``device_tree``'s leaves take their items' boxes)."""
+    for j in range(f, f + count):
+        k = items[j]
+        a = points[indices[k * 3]]
+        b = points[indices[k * 3 + 1]]
+        c = points[indices[k * 3 + 2]]
+        tri[j * 3] = a
+        tri[j * 3 + 1] = b
+        tri[j * 3 + 2] = c
+        box_lo = vmin(vmin(a, b), c)
+        box_hi = vmax(vmax(a, b), c)
+        if j == f:
+            lo = box_lo
+            hi = box_hi
+        else:
+            lo = vmin(lo, box_lo)
+            hi = vmax(hi, box_hi)
 
-    def __init__(self, points: array, indices: array, num_tris: int) -> None:
-        self.points, self.indices = points, indices
-        self.tri = empty(3 * num_tris, dtype=vec3, device=points.device)
+
+@func
+def _found_bad(found: array(dtype=int32)) -> bool:
+    """Whether the mesh check's two counters (``FaceBoxes.found``) found something."""
+    return found[0] != 0 or found[1] != 0
+
+
+@kernel
+def _refit_points_bottom_up(
+    first: array(dtype=int32), count: array(dtype=int32), items: array(dtype=int32),
+    points: array(dtype=vec3), indices: array(dtype=int32), tri: array(dtype=vec3),
+    found: array(dtype=int32), skip: array(dtype=int32), parent: array(dtype=int32),
+    arrivals: array(dtype=int32), lowers: array(dtype=vec3), uppers: array(dtype=vec3),
+):  # fmt: skip
+    n = tid()
+    f = first[n]
+    if f < 0 or _found_bad(found):
+        return
+    lo = vec3()
+    hi = vec3()
+    _copy_leaf(f, count[n], items, points, indices, tri, lo, hi)
+    lowers[n] = lo
+    uppers[n] = hi
+    climb(n, lo, hi, skip, parent, arrivals, lowers, uppers)
+
+
+@kernel
+def _refit_points_leaves(
+    first: array(dtype=int32), count: array(dtype=int32), items: array(dtype=int32),
+    points: array(dtype=vec3), indices: array(dtype=int32), tri: array(dtype=vec3),
+    found: array(dtype=int32), lowers: array(dtype=vec3), uppers: array(dtype=vec3),
+):  # fmt: skip
+    n = tid()
+    f = first[n]
+    if f < 0 or _found_bad(found):
+        return
+    lo = vec3()
+    hi = vec3()
+    _copy_leaf(f, count[n], items, points, indices, tri, lo, hi)
+    lowers[n] = lo
+    uppers[n] = hi
+
+
+class TreePoints:
+    """The copy (``tri``: ``3 * faces`` vec3 on the mesh's device, given: the mesh's
+    ``FaceBoxes`` own it, so it is recycled with them) and what it is copied from:
+    ``points`` (the mesh's current points array; ``Mesh`` sets it when the points
+    array is replaced), ``indices`` and the BVH whose item order it follows (set once
+    the BVH exists)."""
+
+    def __init__(self, points: array, indices: array, tri: array) -> None:
+        self.points, self.indices, self.tri = points, indices, tri
         self.items: array | None = None
 
     def write(self) -> None:
@@ -64,10 +143,13 @@ class TreePoints:
 
 class MeshBvh(Bvh):
     """A mesh's BVH: a ``kdsl.Bvh`` that also rewrites the mesh's ``TreePoints`` after
-    each ``rebuild()`` (the items' order changes). It holds the copy, not the mesh, so
-    a BVH the user keeps does not keep its mesh alive."""
+    each ``rebuild()`` (the items' order changes), and refits from the mesh's points
+    (``refit_points``). It holds the copy, not the mesh, so a BVH the user keeps does
+    not keep its mesh alive."""
 
     tree_points: TreePoints | None = None
+    #: (the tree, points, stream) of the prepared ``refit_points`` launches, and them.
+    _refit_held: tuple | None = None
 
     def rebuild(self, constructor: str | None = None) -> None:
         """``Bvh.rebuild``, then the mesh's vertex copy in the new item order."""
@@ -75,3 +157,31 @@ class MeshBvh(Bvh):
         if self.tree_points is not None:
             self.tree_points.items = self.item_order
             self.tree_points.write()
+
+    def refit_points(self, found: array) -> None:
+        """Refit the bounds from the mesh's points and write its vertex copy, in one
+        pass over the leaves (see the module docstring); nothing is written when the
+        mesh check's counters ``found`` are not zero. The launches are prepared once per
+        tree, points array and stream."""
+        tree, copy = self._tree, self.tree_points
+        if tree.slots == 0 or copy is None:
+            return
+        device = self.device
+        key = (tree, copy.points, None if device.is_cpu else current_stream(device))
+        held = self._refit_held
+        if held is None or any(a is not b for a, b in zip(held[0], key)):
+            lowers, uppers = self._bounds
+            leaf_args = [tree.first, tree.count, tree.items, copy.points, copy.indices,
+                         copy.tri, found]  # fmt: skip
+            if tree.parent.shape[0]:  # bottom up (a GPU's tree)
+                steps = [launch(
+                    _refit_points_bottom_up, dim=tree.slots, device=device, record_cmd=True,
+                    inputs=[*leaf_args, tree.skip, tree.parent, tree.arrivals, lowers, uppers],
+                ).launch]  # fmt: skip
+            else:
+                steps = [launch(_refit_points_leaves, dim=tree.slots, device=device,
+                                inputs=[*leaf_args, lowers, uppers], record_cmd=True).launch,
+                         refit_inner(tree, lowers, uppers, record_cmd=True)]  # fmt: skip
+            held = self._refit_held = (key, steps)
+        for step in held[1]:
+            step()

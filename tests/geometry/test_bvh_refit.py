@@ -46,7 +46,7 @@ def test_bottom_up_refit_matches_sequential(device, constructor, leaf_size):
     assert bottom_up.parent.shape[0] == bottom_up.slots >= bottom_up.num_nodes
     parent = bottom_up.parent.numpy()[: bottom_up.num_nodes]  # then unused slots (lbvh)
     assert parent[0] == -1 and np.all(parent[1:] < np.arange(1, bottom_up.num_nodes))
-    for step in range(3):  # the arrival counters must be ready again after each refit
+    for step in range(3):  # the arrival counters must be ready (even) after each refit
         if step:
             lo, hi = boxes(rng, 3000, device)
         want = node_bounds(sequential, lo, hi)
@@ -55,7 +55,11 @@ def test_bottom_up_refit_matches_sequential(device, constructor, leaf_size):
         np.testing.assert_array_equal(got[1], want[1])
         np.testing.assert_array_equal(got[0][0], lo.numpy().min(axis=0))
         np.testing.assert_array_equal(got[1][0], hi.numpy().max(axis=0))
-    assert not bottom_up.arrivals.numpy().any()
+    arrivals = bottom_up.arrivals.numpy()
+    assert not (arrivals & 1).any()  # each refit adds two to every inner node's
+    inner = bottom_up.first.numpy() == -1
+    np.testing.assert_array_equal(arrivals[inner], 6)
+    assert not arrivals[~inner].any()
 
 
 @pytest.mark.parametrize("device", ["cpu", pytest.param("cuda:0", marks=cuda)])

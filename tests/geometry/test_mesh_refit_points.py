@@ -1,0 +1,223 @@
+"""A mesh's ``refit()`` in one pass over the BVH's leaves (``MeshBvh.refit_points``):
+each leaf copies its faces' corners in item order and bounds them, then the inner
+nodes follow (bottom up through the arrival counters, a GPU's way, or one thread in
+reverse preorder, a CPU's). Checked after every vertex moved against a float64 brute
+force (each node's box is the union of its faces' corners, the vertex copy holds the
+corners in item order, the queries find the brute force's answers) and bit for bit
+against the generic refit over the face boxes plus the gather; with groups, several
+leaf sizes and constructors, degenerate and empty meshes; a refit that finds a bad
+point keeps the bounds and the copy. The bottom-up kernels run on the CPU's threads
+here too; interp runs both leaf kernels; cuda on the GPU machine."""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+import pytest
+
+import kdsl as wp
+from kdsl.errors import KdslTypeError
+from kdsl.geometry import bvh as bvh_module
+from kdsl.geometry import lbvh
+from kdsl.geometry.device_tree import refit, refit_inner
+from kdsl.geometry.mesh_tree_points import _refit_points_bottom_up, _refit_points_leaves
+from tests.geometry.mesh_reference import icosphere
+from tests.geometry.test_mesh_tree_points import _check_copy, _check_queries, move_kernel
+
+cuda = pytest.mark.skipif(not wp.is_cuda_available(), reason="no GPU")
+DEVICES = ["cpu", pytest.param("cuda:0", marks=cuda)]
+V3 = wp.vec3
+
+
+@pytest.fixture
+def bottom_up_on_cpu(monkeypatch):
+    """lbvh trees with parent links (the GPU's bottom-up refit) on the CPU too."""
+    monkeypatch.setitem(bvh_module.CONSTRUCTORS, "lbvh",
+                        functools.partial(lbvh.build_lbvh, bottom_up=True))  # fmt: skip
+
+
+def _brute_force_bounds(mesh, pts: np.ndarray, faces: np.ndarray):
+    """Each node's box from the faces' corners (float64 min/max of float32 values: the
+    exact float32 bounds), children before parents; and the corners in item order."""
+    tree = mesh.bvh._tree
+    m = tree.num_nodes
+    first, count = tree.first.numpy()[:m], tree.count.numpy()[:m]
+    skip, items = tree.skip.numpy()[:m], tree.items.numpy()
+    corners = pts.astype(np.float64)[faces]
+    lo, hi = np.empty((m, 3)), np.empty((m, 3))
+    for n in range(m - 1, -1, -1):
+        if first[n] >= 0:
+            c = corners[items[first[n] : first[n] + count[n]]].reshape(-1, 3)
+            lo[n], hi[n] = c.min(axis=0), c.max(axis=0)
+        else:
+            a = n + 1
+            b = skip[a]
+            lo[n], hi[n] = np.minimum(lo[a], lo[b]), np.maximum(hi[a], hi[b])
+    return lo, hi, pts[faces[items]].reshape(-1, 3)
+
+
+def _node_bounds(mesh):
+    nodes = mesh.bvh._nodes.numpy()[: mesh.bvh._tree.num_nodes]
+    return nodes["lower"], nodes["upper"]
+
+
+def _check_against_brute_force(mesh, faces: np.ndarray) -> None:
+    pts = mesh.points.numpy()
+    want_lo, want_hi, want_tri = _brute_force_bounds(mesh, pts, faces)
+    got_lo, got_hi = _node_bounds(mesh)
+    np.testing.assert_array_equal(got_lo, want_lo.astype(np.float32))
+    np.testing.assert_array_equal(got_hi, want_hi.astype(np.float32))
+    np.testing.assert_array_equal(mesh._tree_points.tri.numpy(), want_tri)
+    # every face inside each leaf holding it (the brute force's containment)
+    tree = mesh.bvh._tree
+    first, count = tree.first.numpy(), tree.count.numpy()
+    items = tree.items.numpy()
+    for n in np.flatnonzero(first[: tree.num_nodes] >= 0):
+        c = pts[faces[items[first[n] : first[n] + count[n]]]].reshape(-1, 3)
+        assert np.all(c >= got_lo[n]) and np.all(c <= got_hi[n])
+
+
+def _generic_refit(mesh):
+    """The node bounds the generic refit over the mesh's face boxes gives."""
+    tree = mesh.bvh._tree
+    lo = wp.empty(tree.slots, dtype=V3, device=mesh.device)
+    hi = wp.empty(tree.slots, dtype=V3, device=mesh.device)
+    if tree.arrivals.shape[0]:
+        tree.arrivals.zero_()  # (any even counts do; zero is one)
+    refit(tree, mesh._faces.lowers, mesh._faces.uppers, lo, hi)
+    m = tree.num_nodes
+    return lo.numpy()[:m], hi.numpy()[:m]
+
+
+def _moves(mesh, pts, faces, steps=3):
+    """Move every vertex (in place, then by assignment), refit, yield after each."""
+    dev = mesh.device
+    rng = np.random.default_rng(5)
+    for step in range(steps):
+        if step % 2 == 0:
+            shift = wp.vec3(*rng.uniform(-1, 1, 3).astype(np.float32))
+            wp.launch(move_kernel, dim=len(pts), inputs=[mesh.points, shift, 1.0 + 0.3 * step],
+                      device=dev)  # fmt: skip
+            mesh.refit()
+        else:
+            wobble = 1.0 + 0.2 * rng.uniform(-1, 1, (len(pts), 1))
+            mesh.points = wp.array((mesh.points.numpy() * wobble).astype(np.float32), dtype=V3,
+                                   device=dev)  # fmt: skip
+        yield step
+
+
+@pytest.mark.parametrize("device", DEVICES)
+@pytest.mark.parametrize("bottom_up", [False, True])
+@pytest.mark.parametrize("leaf_size", [1, 4])
+@pytest.mark.parametrize("num_groups", [0, 3])
+def test_refit_after_moves_matches_brute_force(device, bottom_up, leaf_size, num_groups, request):
+    if bottom_up and device == "cpu":
+        request.getfixturevalue("bottom_up_on_cpu")
+    pts, faces = icosphere(2, bumps=0.05, seed=3)
+    groups = None
+    if num_groups:
+        g = np.random.default_rng(1).integers(0, num_groups, len(faces)).astype(np.int32)
+        groups = wp.array(g, dtype=wp.int32, device=device)
+    mesh = wp.Mesh(wp.array(pts, dtype=V3, device=device),
+                   wp.array(faces, dtype=wp.int32, device=device), groups=groups,
+                   bvh_leaf_size=leaf_size)  # fmt: skip
+    assert bool(mesh.bvh._tree.parent.shape[0]) == (bottom_up or device != "cpu")
+    for _ in _moves(mesh, pts, faces):
+        _check_against_brute_force(mesh, faces)
+        want_lo, want_hi = _generic_refit(mesh)  # the same bits as boxes-then-refit
+        got_lo, got_hi = _node_bounds(mesh)
+        np.testing.assert_array_equal(got_lo, want_lo)
+        np.testing.assert_array_equal(got_hi, want_hi)
+    arrivals = mesh.bvh._tree.arrivals.numpy()
+    assert not (arrivals & 1).any()  # ready for the next refit
+    backend = "cuda" if device != "cpu" else "cpu"
+    _check_copy(mesh, backend)
+    _check_queries(mesh, mesh.points.numpy(), faces, backend)
+
+
+@pytest.mark.parametrize("device", DEVICES)
+@pytest.mark.parametrize("constructor", ["sah", "median"])
+def test_refit_of_host_built_trees(device, constructor):
+    pts, faces = icosphere(2, bumps=0.05, seed=4)
+    mesh = wp.Mesh(wp.array(pts, dtype=V3, device=device),
+                   wp.array(faces, dtype=wp.int32, device=device), bvh_constructor=constructor)
+    for _ in _moves(mesh, pts, faces, steps=2):
+        _check_against_brute_force(mesh, faces)
+    mesh.bvh.rebuild("lbvh")  # another tree: the refit's launches are prepared again
+    for _ in _moves(mesh, pts, faces, steps=2):
+        _check_against_brute_force(mesh, faces)
+
+
+@pytest.mark.parametrize("device", DEVICES)
+def test_degenerate_faces_and_a_single_face(device, bottom_up_on_cpu):
+    # every face a point or a segment (repeated corners), then one face alone
+    pts = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 1]], np.float32)
+    faces = np.array([[0, 0, 0], [1, 1, 2], [2, 3, 2], [3, 3, 3], [0, 1, 0]], np.int32)
+    for f in (faces, faces[1:2]):
+        mesh = wp.Mesh(wp.array(pts, dtype=V3, device=device),
+                       wp.array(f, dtype=wp.int32, device=device))  # fmt: skip
+        for _ in _moves(mesh, pts, f):
+            _check_against_brute_force(mesh, f)
+
+
+@pytest.mark.parametrize("device", DEVICES)
+def test_meshes_without_faces_refit(device, bottom_up_on_cpu):
+    for n in (0, 5):  # no points and no faces; points but no faces
+        mesh = wp.Mesh(wp.zeros(n, dtype=V3, device=device),
+                       wp.zeros(0, dtype=wp.int32, device=device))  # fmt: skip
+        mesh.refit()
+        mesh.points = wp.ones(n, dtype=V3, device=device)
+        assert mesh.bvh._tree.slots == 0
+
+
+@pytest.mark.parametrize("device", DEVICES)
+@pytest.mark.parametrize("bottom_up", [False, True])
+def test_a_bad_point_keeps_the_bounds_and_the_copy(device, bottom_up, request):
+    if bottom_up and device == "cpu":
+        request.getfixturevalue("bottom_up_on_cpu")
+    pts, faces = icosphere(1, bumps=0.05, seed=2)
+    points = wp.array(pts, dtype=V3, device=device)
+    mesh = wp.Mesh(points, wp.array(faces, dtype=wp.int32, device=device))
+    before = (mesh.bvh._nodes.numpy().tobytes(), mesh._tree_points.tri.numpy().tobytes())
+    bad = pts * 2.0
+    bad[4, 2] = np.inf
+    wp.copy(points, wp.array(bad, dtype=V3, device=device))
+    with pytest.raises(KdslTypeError, match="point 4 is not finite"):
+        mesh.refit()
+    assert (mesh.bvh._nodes.numpy().tobytes(), mesh._tree_points.tri.numpy().tobytes()) == before
+    wp.copy(points, wp.array(pts * 2.0, dtype=V3, device=device))
+    mesh.refit()  # the counters were left ready: a good refit after a bad one
+    _check_against_brute_force(mesh, faces)
+
+
+@pytest.mark.parametrize("bottom_up", [False, True])
+def test_leaf_kernels_on_interp_match_cpu(bottom_up, bottom_up_on_cpu):
+    """The refit's kernels run by the interpreter (the mesh's arrays on the CPU): the
+    same bounds and copy as the cpu backend's."""
+    pts, faces = icosphere(1, bumps=0.1, seed=6)
+    mesh = wp.Mesh(wp.array(pts * 1.5, dtype=V3), wp.array(faces, dtype=wp.int32),
+                   bvh_leaf_size=2)  # fmt: skip
+    mesh.refit()
+    want = (mesh.bvh._nodes.numpy().copy(), mesh._tree_points.tri.numpy().copy())
+    tree, copy = mesh.bvh._tree, mesh._tree_points
+    lo, hi = mesh.bvh._bounds
+    nodes = mesh.bvh._nodes
+    scratch = nodes.numpy()
+    scratch["lower"], scratch["upper"] = 7.0, -7.0
+    wp.copy(nodes, wp.array(scratch, dtype=nodes.dtype))
+    copy.tri.zero_()
+    leaf_args = [tree.first, tree.count, tree.items, copy.points, copy.indices, copy.tri,
+                 mesh._faces.found]  # fmt: skip
+    if bottom_up:
+        wp.launch(_refit_points_bottom_up, dim=tree.slots, backend="interp",
+                  inputs=[*leaf_args, tree.skip, tree.parent, tree.arrivals, lo, hi])  # fmt: skip
+    else:
+        wp.launch(_refit_points_leaves, dim=tree.slots, backend="interp",
+                  inputs=[*leaf_args, lo, hi])  # fmt: skip
+        first = tree.first.numpy()
+        assert np.array_equal(nodes.numpy()["lower"][first >= 0], want[0]["lower"][first >= 0])
+        refit_inner(tree, lo, hi)
+    m = tree.num_nodes
+    np.testing.assert_array_equal(nodes.numpy()[:m], want[0][:m])
+    np.testing.assert_array_equal(copy.tri.numpy(), want[1])
