@@ -56,11 +56,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_geometry_mesh import MAX_T, RAY_DISAGREEMENT, workload
 
 STACK = 32
-#: The variants: name -> (walk, fill, fast, recheck[, while_while]).
+#: The variants: name -> (walk, fill, fast, recheck[, keep (skip) or while_while (payload)]).
 VARIANTS = {
     "copy_zero": ("skip", "zero", False, True),
     "copy_empty": ("skip", "empty", False, True),
     "copy_fast": ("skip", "empty", True, True),
+    "copy_keep": ("skip", "empty", False, True, True),
     "payload": ("payload", "empty", False, True),
     "payload_fast": ("payload", "empty", True, True),
     "payload_fast_norecheck": ("payload", "empty", True, False),
@@ -131,9 +132,11 @@ def fast_ray(dir: wp.vec3) -> bool:
     return m >= 1.0e-30
 
 
-def _skip_walk(fill: str, fast_form: bool):
+def _skip_walk(fill: str, fast_form: bool, keep: bool = False):
     """The library's walk (node indices and entry ``t`` on the stack; the far child
-    found through the near child's ``skip``), with the stack fill and slab form given."""
+    found through the near child's ``skip``), with the stack fill and slab form given.
+    ``keep``: a stack entry also keeps the node's ``first`` and ``next``, so a pop loads
+    no node (the library's layout otherwise)."""
     enter = _enter(fast_form)
     zero = fill == "zero"
 
@@ -155,6 +158,8 @@ def _skip_walk(fill: str, fast_form: bool):
         else:
             nodes = wp.ext.empty(STACK, dtype=wp.int32)
             enters = wp.ext.empty(STACK, dtype=wp.float32)
+        firsts = wp.ext.empty(STACK, dtype=wp.int32)
+        nexts = wp.ext.empty(STACK, dtype=wp.int32)
         count = 0
         lost = False
         node = bvh.root
@@ -195,6 +200,9 @@ def _skip_walk(fill: str, fast_form: bool):
                         if count < STACK:
                             nodes[count] = far
                             enters[count] = t_far
+                            if wp.static(keep):
+                                firsts[count] = far_nd.first
+                                nexts[count] = far_nd.next
                             count = count + 1
                         else:
                             lost = True
@@ -211,7 +219,11 @@ def _skip_walk(fill: str, fast_form: bool):
                 count = count - 1
                 if enters[count] <= hit.t:
                     node = nodes[count]
-                    nd = bvh.nodes[node]
+                    if wp.static(keep):
+                        nd.first = firsts[count]
+                        nd.next = nexts[count]
+                    else:
+                        nd = bvh.nodes[node]
                     active = True
         if lost:
             return -2
@@ -338,10 +350,12 @@ def finish(id: wp.uint64, slot: int, start: wp.vec3, dir: wp.vec3) -> wp.vec2:
     return wp.vec2(h[0], float(face))
 
 
-def variant_kernel(walk_kind: str, fill: str, fast: bool, recheck: bool, ww: bool = True):
-    """The kernel of one variant: ``face[i]``, ``t[i]`` of ray ``i``."""
+def variant_kernel(walk_kind: str, fill: str, fast: bool, recheck: bool, knob: bool | None = None):
+    """The kernel of one variant: ``face[i]``, ``t[i]`` of ray ``i`` (``knob``: the skip
+    walk's ``keep``, the payload walk's ``while_while``)."""
+    ww = True if knob is None else knob
     if walk_kind == "skip":
-        walk = _skip_walk(fill, fast)
+        walk = _skip_walk(fill, fast, bool(knob))
     else:
         walk = _payload_walk(fast, recheck, ww)
 
