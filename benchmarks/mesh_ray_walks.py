@@ -79,14 +79,17 @@ class Hit:
 @wp.func
 def slab_fast(lo: wp.vec3, hi: wp.vec3, start: wp.vec3, inv: wp.vec3) -> float:
     """Entry ``t`` of the ray into ``[lo, hi]`` or NaN: the slab test without padding,
-    exit grown by the library's ``BOX_EXIT_SLACK`` (conservative for finite ``inv``)."""
+    exit grown by the library's ``BOX_EXIT_SLACK`` (Ize's robust slab test: conservative
+    for finite ``inv``), entry shrunk by as much."""
     t0 = wp.cw_mul(lo - start, inv)
     t1 = wp.cw_mul(hi - start, inv)
     near = wp.max(wp.max(wp.min(t0[0], t1[0]), wp.min(t0[1], t1[1])), wp.min(t0[2], t1[2]))
     far = wp.min(wp.min(wp.max(t0[0], t1[0]), wp.max(t0[1], t1[1])), wp.max(t0[2], t1[2]))
     far = far * BOX_EXIT_SLACK
     if near <= far and far >= 0.0:
-        return near
+        # Entry moved earlier by the same relative slack: a box entered exactly at the
+        # hit found so far is still visited (the lowest face among equal ``t`` wins).
+        return near - wp.abs(near) * (BOX_EXIT_SLACK - 1.0)
     return wp.nan
 
 
