@@ -56,12 +56,15 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_geometry_mesh import MAX_T, RAY_DISAGREEMENT, workload
 
 STACK = 32
-#: The variants: name -> (walk, fill, fast, recheck[, keep (skip) or while_while (payload)]).
+#: The variants: name -> (walk, fill, fast, recheck[, knob]); the knob is the skip walk's
+#: ``keep``, the spec walk's ``spec_right``, the payload walk's ``while_while``.
 VARIANTS = {
     "copy_zero": ("skip", "zero", False, True),
     "copy_empty": ("skip", "empty", False, True),
     "copy_fast": ("skip", "empty", True, True),
     "copy_keep": ("skip", "empty", False, True, True),
+    "spec_left": ("spec", "empty", False, True, False),
+    "spec_both": ("spec", "empty", False, True, True),
     "payload": ("payload", "empty", False, True),
     "payload_fast": ("payload", "empty", True, True),
     "payload_fast_norecheck": ("payload", "empty", True, False),
@@ -338,6 +341,111 @@ def _payload_walk(fast_form: bool, recheck: bool, while_while: bool = True):
     return walk
 
 
+def _spec_walk(fast_form: bool, spec_right: bool):
+    """The library's layout with the node loads of a level issued together: at an inner
+    node ``c`` whose left child ``L = c + 1`` is loaded, the right child (``c + 2`` or
+    ``L.next``) and ``L``'s left child ``c + 2`` (and with ``spec_right`` the right
+    child's left child) are loaded at once, so a level costs one load latency instead
+    of two (the library's: ``L``, then the right child it names). A stack entry keeps
+    the node's ``first``/``next``; a pop loads only the node's left child."""
+    enter = _enter(fast_form)
+
+    @wp.func
+    def walk(id: wp.uint64, alt: wp.array(dtype=BvhNode), start: wp.vec3, dir: wp.vec3,
+             max_t: float) -> int:  # fmt: skip
+        rec = wp.object_record(id, MeshRecord)
+        bvh = wp.object_record(rec.bvh, BvhRecord)
+        shear = ray_shear(dir)
+        inv = wp.vec3(safe_inverse(dir[0]), safe_inverse(dir[1]), safe_inverse(dir[2]))
+        fast = fast_ray(dir)
+        hit = Hit()
+        hit.t = max_t
+        hit.face = -1
+        hit.slot = -1
+        nodes = wp.ext.empty(STACK, dtype=wp.int32)
+        enters = wp.ext.empty(STACK, dtype=wp.float32)
+        firsts = wp.ext.empty(STACK, dtype=wp.int32)
+        nexts = wp.ext.empty(STACK, dtype=wp.int32)
+        last = bvh.nodes.shape[0] - 1
+        count = 0
+        lost = False
+        c = bvh.root
+        active = False
+        cf = 0  # the current node's first and next
+        cn = 0
+        lnd = BvhNode()  # its left child, loaded when it is inner
+        if c >= 0:
+            nd = bvh.nodes[c]
+            active = enter(nd.lower, nd.upper, start, inv, fast) <= hit.t
+            cf = nd.first
+            cn = nd.next
+        while active:
+            if cf < 0:
+                lnd = bvh.nodes[c + 1]
+            while cf < 0:
+                left = c + 1
+                right = c + 2
+                if lnd.first < 0:
+                    right = lnd.next
+                rnd = bvh.nodes[right]
+                llnd = bvh.nodes[wp.min(c + 2, last)]
+                rlnd = lnd
+                if wp.static(spec_right):
+                    rlnd = bvh.nodes[wp.min(right + 1, last)]
+                t_l = enter(lnd.lower, lnd.upper, start, inv, fast)
+                t_r = enter(rnd.lower, rnd.upper, start, inv, fast)
+                l_in = t_l <= hit.t
+                r_in = t_r <= hit.t
+                go_right = r_in and (not l_in or t_r < t_l)
+                # the far child waits (when entered)
+                if (go_right and l_in) or (not go_right and l_in and r_in):
+                    if count < STACK:
+                        if go_right:
+                            nodes[count] = left
+                            enters[count] = t_l
+                            firsts[count] = lnd.first
+                            nexts[count] = lnd.next
+                        else:
+                            nodes[count] = right
+                            enters[count] = t_r
+                            firsts[count] = rnd.first
+                            nexts[count] = rnd.next
+                        count = count + 1
+                    else:
+                        lost = True
+                if go_right:
+                    c = right
+                    cf = rnd.first
+                    cn = rnd.next
+                    if cf < 0:
+                        if wp.static(spec_right):
+                            lnd = rlnd
+                        else:
+                            lnd = bvh.nodes[right + 1]
+                elif l_in:
+                    c = left
+                    cf = lnd.first
+                    cn = lnd.next
+                    lnd = llnd
+                else:
+                    cf = 0  # both missed: an empty leaf
+                    cn = 0
+            hit = leaf_hits(rec, bvh, cf, cn, shear, start, hit)
+            active = False
+            while count > 0 and not active:
+                count = count - 1
+                if enters[count] <= hit.t:
+                    c = nodes[count]
+                    cf = firsts[count]
+                    cn = nexts[count]
+                    active = True
+        if lost:
+            return -2
+        return hit.slot
+
+    return walk
+
+
 @wp.func
 def finish(id: wp.uint64, slot: int, start: wp.vec3, dir: wp.vec3) -> wp.vec2:
     """The library's tail after the search: the hit recomputed from its slot (``t``,
@@ -354,11 +462,13 @@ def finish(id: wp.uint64, slot: int, start: wp.vec3, dir: wp.vec3) -> wp.vec2:
 
 
 def variant_kernel(walk_kind: str, fill: str, fast: bool, recheck: bool, knob: bool | None = None):
-    """The kernel of one variant: ``face[i]``, ``t[i]`` of ray ``i`` (``knob``: the skip
-    walk's ``keep``, the payload walk's ``while_while``)."""
+    """The kernel of one variant: ``face[i]``, ``t[i]`` of ray ``i`` (``knob``: see
+    ``VARIANTS``)."""
     ww = True if knob is None else knob
     if walk_kind == "skip":
         walk = _skip_walk(fill, fast, bool(knob))
+    elif walk_kind == "spec":
+        walk = _spec_walk(fast, bool(knob))
     else:
         walk = _payload_walk(fast, recheck, ww)
 
