@@ -56,19 +56,20 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_geometry_mesh import MAX_T, RAY_DISAGREEMENT, workload
 
 STACK = 32
-#: The variants: name -> (walk, fill, fast, recheck[, knob]); the knob is the skip walk's
-#: ``keep``, the spec walk's ``spec_right``, the payload walk's ``while_while``.
+#: The variants: name -> ``variant_kernel``'s keywords (its defaults: the library's walk).
 VARIANTS = {
-    "copy_zero": ("skip", "zero", False, True),
-    "copy_empty": ("skip", "empty", False, True),
-    "copy_fast": ("skip", "empty", True, True),
-    "copy_keep": ("skip", "empty", False, True, True),
-    "spec_left": ("spec", "empty", False, True, False),
-    "spec_both": ("spec", "empty", False, True, True),
-    "payload": ("payload", "empty", False, True),
-    "payload_fast": ("payload", "empty", True, True),
-    "payload_fast_norecheck": ("payload", "empty", True, False),
-    "payload_fast_ifif": ("payload", "empty", True, True, False),
+    "copy_zero": {"fill": "zero"},
+    "copy_empty": {},
+    "copy_param": {"param": True},
+    "copy_fast": {"fast": True},
+    "copy_keep": {"keep": True},
+    "spec_left": {"walk": "spec"},
+    "spec_both": {"walk": "spec", "spec_right": True},
+    "spec_left_param": {"walk": "spec", "param": True},
+    "payload": {"walk": "payload"},
+    "payload_fast": {"walk": "payload", "fast": True},
+    "payload_fast_norecheck": {"walk": "payload", "fast": True, "recheck": False},
+    "payload_fast_ifif": {"walk": "payload", "fast": True, "while_while": False},
 }
 
 
@@ -138,12 +139,32 @@ def fast_ray(dir: wp.vec3) -> bool:
     return m >= 1.0e-30
 
 
-def _skip_walk(fill: str, fast_form: bool, keep: bool = False):
+def _node_source(param: bool):
+    """``(load, count_nodes)``: a walk's node reads, through the BVH's record or
+    (``param``) from the kernel's ``alt`` parameter."""
+
+    @wp.func
+    def load(bvh: BvhRecord, alt: wp.array(dtype=BvhNode), i: int) -> BvhNode:
+        if wp.static(param):
+            return alt[i]
+        return bvh.nodes[i]
+
+    @wp.func
+    def count_nodes(bvh: BvhRecord, alt: wp.array(dtype=BvhNode)) -> int:
+        if wp.static(param):
+            return alt.shape[0]
+        return bvh.nodes.shape[0]
+
+    return load, count_nodes
+
+
+def _skip_walk(fill: str, fast_form: bool, keep: bool = False, param: bool = False):
     """The library's walk (node indices and entry ``t`` on the stack; the far child
     found through the near child's ``skip``), with the stack fill and slab form given.
     ``keep``: a stack entry also keeps the node's ``first`` and ``next``, so a pop loads
     no node (the library's layout otherwise)."""
     enter = _enter(fast_form)
+    load, _count = _node_source(param)
     zero = fill == "zero"
 
     @wp.func
@@ -172,7 +193,7 @@ def _skip_walk(fill: str, fast_form: bool, keep: bool = False):
         active = False
         nd = BvhNode()
         if node >= 0:
-            nd = bvh.nodes[node]
+            nd = load(bvh, alt, node)
             active = enter(nd.lower, nd.upper, start, inv, fast) <= hit.t
         while active:
             first = 0
@@ -181,9 +202,9 @@ def _skip_walk(fill: str, fast_form: bool, keep: bool = False):
             inner = not at_leaf
             while inner:
                 near = node + 1
-                near_nd = bvh.nodes[near]
+                near_nd = load(bvh, alt, near)
                 far = skip_of(near_nd, near)
-                far_nd = bvh.nodes[far]
+                far_nd = load(bvh, alt, far)
                 t_near = enter(near_nd.lower, near_nd.upper, start, inv, fast)
                 t_far = enter(far_nd.lower, far_nd.upper, start, inv, fast)
                 near_in = t_near <= hit.t
@@ -229,7 +250,7 @@ def _skip_walk(fill: str, fast_form: bool, keep: bool = False):
                         nd.first = firsts[count]
                         nd.next = nexts[count]
                     else:
-                        nd = bvh.nodes[node]
+                        nd = load(bvh, alt, node)
                     active = True
         if lost:
             return -2
@@ -341,7 +362,7 @@ def _payload_walk(fast_form: bool, recheck: bool, while_while: bool = True):
     return walk
 
 
-def _spec_walk(fast_form: bool, spec_right: bool):
+def _spec_walk(fast_form: bool, spec_right: bool, param: bool = False):
     """The library's layout with the node loads of a level issued together: at an inner
     node ``c`` whose left child ``L = c + 1`` is loaded, the right child (``c + 2`` or
     ``L.next``) and ``L``'s left child ``c + 2`` (and with ``spec_right`` the right
@@ -349,6 +370,7 @@ def _spec_walk(fast_form: bool, spec_right: bool):
     of two (the library's: ``L``, then the right child it names). A stack entry keeps
     the node's ``first``/``next``; a pop loads only the node's left child."""
     enter = _enter(fast_form)
+    load, count_nodes = _node_source(param)
 
     @wp.func
     def walk(id: wp.uint64, alt: wp.array(dtype=BvhNode), start: wp.vec3, dir: wp.vec3,
@@ -366,7 +388,7 @@ def _spec_walk(fast_form: bool, spec_right: bool):
         enters = wp.ext.empty(STACK, dtype=wp.float32)
         firsts = wp.ext.empty(STACK, dtype=wp.int32)
         nexts = wp.ext.empty(STACK, dtype=wp.int32)
-        last = bvh.nodes.shape[0] - 1
+        last = count_nodes(bvh, alt) - 1
         count = 0
         lost = False
         c = bvh.root
@@ -375,23 +397,23 @@ def _spec_walk(fast_form: bool, spec_right: bool):
         cn = 0
         lnd = BvhNode()  # its left child, loaded when it is inner
         if c >= 0:
-            nd = bvh.nodes[c]
+            nd = load(bvh, alt, c)
             active = enter(nd.lower, nd.upper, start, inv, fast) <= hit.t
             cf = nd.first
             cn = nd.next
         while active:
             if cf < 0:
-                lnd = bvh.nodes[c + 1]
+                lnd = load(bvh, alt, c + 1)
             while cf < 0:
                 left = c + 1
                 right = c + 2
                 if lnd.first < 0:
                     right = lnd.next
-                rnd = bvh.nodes[right]
-                llnd = bvh.nodes[wp.min(c + 2, last)]
+                rnd = load(bvh, alt, right)
+                llnd = load(bvh, alt, wp.min(c + 2, last))
                 rlnd = lnd
                 if wp.static(spec_right):
-                    rlnd = bvh.nodes[wp.min(right + 1, last)]
+                    rlnd = load(bvh, alt, wp.min(right + 1, last))
                 t_l = enter(lnd.lower, lnd.upper, start, inv, fast)
                 t_r = enter(rnd.lower, rnd.upper, start, inv, fast)
                 l_in = t_l <= hit.t
@@ -421,7 +443,7 @@ def _spec_walk(fast_form: bool, spec_right: bool):
                         if wp.static(spec_right):
                             lnd = rlnd
                         else:
-                            lnd = bvh.nodes[right + 1]
+                            lnd = load(bvh, alt, right + 1)
                 elif l_in:
                     c = left
                     cf = lnd.first
@@ -461,23 +483,26 @@ def finish(id: wp.uint64, slot: int, start: wp.vec3, dir: wp.vec3) -> wp.vec2:
     return wp.vec2(h[0], float(face))
 
 
-def variant_kernel(walk_kind: str, fill: str, fast: bool, recheck: bool, knob: bool | None = None):
-    """The kernel of one variant: ``face[i]``, ``t[i]`` of ray ``i`` (``knob``: see
-    ``VARIANTS``)."""
-    ww = True if knob is None else knob
-    if walk_kind == "skip":
-        walk = _skip_walk(fill, fast, bool(knob))
-    elif walk_kind == "spec":
-        walk = _spec_walk(fast, bool(knob))
+def variant_kernel(walk: str = "skip", fill: str = "empty", fast: bool = False,
+                   recheck: bool = True, keep: bool = False, spec_right: bool = False,
+                   while_while: bool = True, param: bool = False):  # fmt: skip
+    """The kernel of one variant: ``face[i]``, ``t[i]`` of ray ``i``. ``walk``: "skip"
+    (the library's), "spec" or "payload"; ``param``: the skip and spec walks read the
+    nodes from the kernel's ``alt`` parameter (global loads) rather than through the
+    BVH's record (generic loads); the rest: see the walks."""
+    if walk == "skip":
+        search = _skip_walk(fill, fast, keep, param)
+    elif walk == "spec":
+        search = _spec_walk(fast, spec_right, param)
     else:
-        walk = _payload_walk(fast, recheck, ww)
+        search = _payload_walk(fast, recheck, while_while)
 
     @wp.kernel(enable_backward=False)
     def rays(mesh: wp.uint64, alt: wp.array(dtype=BvhNode), start: wp.array(dtype=wp.vec3),
              d: wp.array(dtype=wp.vec3), face: wp.array(dtype=wp.int32),
              t: wp.array(dtype=float)):  # fmt: skip
         i = wp.tid()
-        slot = walk(mesh, alt, start[i], d[i], MAX_T)
+        slot = search(mesh, alt, start[i], d[i], MAX_T)
         r = finish(mesh, slot, start[i], d[i])
         face[i] = int(r[1])
         t[i] = r[0]
@@ -585,7 +610,7 @@ def main(argv: list[str] | None = None) -> int:
         answers["warp"] = (wface, wt)
     kernels = {"lib": lib_rays}
     for name in [v for v in args.variants.split(",") if v]:
-        kernels[name] = variant_kernel(*VARIANTS[name])
+        kernels[name] = variant_kernel(**VARIANTS[name])
     for name, k in kernels.items():
         face = wp.zeros(n, dtype=wp.int32, device=dev)
         t = wp.zeros(n, dtype=float, device=dev)
