@@ -30,6 +30,10 @@ class TripCounter:
         self.table = table
         self.b = b
         self.counts = counts
+        #: The tapes the adjoint made (``counts`` has one slot each). Replaying every
+        #: loop, the counter may meet loops the adjoint never taped; it numbers them
+        #: after these and records nothing for them (their slot would be out of range).
+        self.known = len(table.tapes)
 
     def tape(self, op: Operation) -> LoopTape:
         """The tape the adjoint gave loop ``op``."""
@@ -39,8 +43,9 @@ class TripCounter:
         """Nothing to store: only the sizes are wanted."""
 
     def record_trips(self, tape: LoopTape, slots: Value) -> None:
-        """Raise ``counts[tape]`` to ``slots`` when the tape's size is not static."""
-        if tape.static_slots is None:
+        """Raise ``counts[tape]`` to ``slots`` when the tape is the adjoint's and its
+        size is not static."""
+        if tape.static_slots is None and tape.index < self.known:
             self.b.create("kd.atomic_rmw", [slots, self.counts, self.b.constant(tape.index, I32)],
                           attrs={"kind": "max"})  # fmt: skip
 
