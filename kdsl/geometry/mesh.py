@@ -14,7 +14,7 @@ from typing import Any
 
 from kdsl.errors import KdslTypeError
 from kdsl.geometry.mesh_refit import face_boxes, keep_face_boxes
-from kdsl.geometry.mesh_tree_points import MeshBvh, TreePoints
+from kdsl.geometry.mesh_tree_points import MeshBvh
 from kdsl.ir import types as T
 from kdsl.runtime.array import array
 from kdsl.runtime.objects import ObjectRecord
@@ -114,7 +114,8 @@ class Mesh:
             leaf_size=bvh_leaf_size,
         )  # fmt: skip
         self._raise_if_bad()  # (waits for the check, not for the BVH's build)
-        self._tree_points = TreePoints(pts, idx, self._faces.tri)  # the vertices in item order
+        self._tree_points = self._faces.tree_points  # the vertices in item order
+        self._tree_points.attach(pts, idx)
         self.bvh.tree_points = self._tree_points  # (its rebuild() writes them again)
         self._tree_points.items = self.bvh.item_order
         self._tree_points.write()

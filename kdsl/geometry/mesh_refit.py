@@ -23,6 +23,7 @@ from kdsl.frontend.api import max as vmax
 from kdsl.frontend.api import min as vmin
 from kdsl.geometry.graph_steps import StepGraph, graphs_on
 from kdsl.geometry.host_read import IntsReader
+from kdsl.geometry.mesh_tree_points import TreePoints
 from kdsl.geometry.recycle import RecycleBin
 from kdsl.runtime.alloc import empty, zeros
 from kdsl.runtime.array import array
@@ -81,9 +82,9 @@ class FaceBoxes:
     velocities); and ``found``, the check's two counters, which hold "nothing found"
     (zero) between calls (a call that finds something zeroes them again), so a call
     fills nothing; kernels issued behind a check may read them (``MeshBvh.refit_points``
-    writes nothing when they are set). Also ``tri``, the storage of the mesh's vertex
-    copy in tree order (``TreePoints``: ``3 * faces`` vec3, not zeroed), which comes
-    back with the boxes when they are recycled. The check's launch is prepared per
+    writes nothing when they are set). Also ``tree_points``, the mesh's vertex copy in
+    tree order (``TreePoints``: ``3 * faces`` vec3, not zeroed, and its prepared
+    launches), which comes back with the boxes when they are recycled. The check's launch is prepared per
     points and indices arrays (and stream), the sum's once (and replayed as a graph on a
     GPU from its second run)."""
 
@@ -97,7 +98,7 @@ class FaceBoxes:
             (0, vec3, m), (12 * m, vec3, m), (0, vec3, 0), (24 * m, float32, m),
             (28 * m, float32, 1), (4 * floats, int32, 2), (4 * floats + 8, float32, scratch),
         ])  # fmt: skip
-        self.tri = empty(3 * num_tris, dtype=vec3, device=device)
+        self.tree_points = TreePoints(empty(3 * num_tris, dtype=vec3, device=device))
         self._read = IntsReader(self.found)
         #: The edge sum's prepared launches and the stream they run on.
         self._sum: StepGraph | None = None

@@ -31,7 +31,7 @@ from kdsl.frontend.api import func, inout, kernel, tid
 from kdsl.frontend.api import max as vmax
 from kdsl.frontend.api import min as vmin
 from kdsl.geometry.bvh import Bvh
-from kdsl.geometry.device_tree import climb, refit_inner
+from kdsl.geometry.device_tree import DeviceTree, climb, refit_inner
 from kdsl.runtime.array import array
 from kdsl.runtime.launch import launch
 from kdsl.runtime.stream import current_stream
@@ -119,26 +119,76 @@ def _refit_points_leaves(
     uppers[n] = hi
 
 
-class TreePoints:
-    """The copy (``tri``: ``3 * faces`` vec3 on the mesh's device, given: the mesh's
-    ``FaceBoxes`` own it, so it is recycled with them) and what it is copied from:
-    ``points`` (the mesh's current points array; ``Mesh`` sets it when the points
-    array is replaced), ``indices`` and the BVH whose item order it follows (set once
-    the BVH exists)."""
+def _stream_of(device) -> object:
+    return None if device.is_cpu else current_stream(device)
 
-    def __init__(self, points: array, indices: array, tri: array) -> None:
-        self.points, self.indices, self.tri = points, indices, tri
+
+def _same(a: tuple, b: tuple) -> bool:
+    return all(x is y for x, y in zip(a, b))
+
+
+class TreePoints:
+    """The copy (``tri``: ``3 * faces`` vec3 on the mesh's device) and what it is copied
+    from: ``points`` (the mesh's current points array; ``Mesh`` sets it when the points
+    array is replaced), ``indices`` (both set by ``attach``) and the BVH's item order
+    (``items``, set once the BVH exists). A mesh's ``FaceBoxes`` make one and it comes
+    back with them when they are recycled; its launches are prepared once per set of
+    arrays and stream, so a fresh mesh over the arrays of a collected one (its build
+    recycled too) prepares none."""
+
+    def __init__(self, tri: array) -> None:
+        self.tri = tri
+        self.points: array | None = None
+        self.indices: array | None = None
         self.items: array | None = None
+        self._gather: tuple | None = None  # (its arrays and stream, the prepared gather)
+        self._refit: tuple | None = None  # (its arrays and stream, the prepared refit steps)
+
+    def attach(self, points: array, indices: array) -> None:
+        """Copy from ``points`` and ``indices`` (a new mesh's) from now on."""
+        self.points, self.indices, self.items = points, indices, None
 
     def write(self) -> None:
         """Copy every face's corners in the BVH's item order (one launch)."""
         items = self.items
         if items is None or items.shape[0] == 0:
             return
-        launch(
-            _gather_tree_points, dim=items.shape[0], device=self.points.device,
-            inputs=[self.points, self.indices, items, self.tri],
-        )  # fmt: skip
+        device = self.tri.device
+        key = (self.points, self.indices, items, _stream_of(device))
+        held = self._gather
+        if held is None or not _same(held[0], key):
+            gather = launch(
+                _gather_tree_points, dim=items.shape[0], device=device, record_cmd=True,
+                inputs=[self.points, self.indices, items, self.tri],
+            ).launch  # fmt: skip
+            held = self._gather = (key, gather)
+        held[1]()
+
+    def refit(self, tree: DeviceTree, lowers: array, uppers: array, found: array) -> None:
+        """Write the copy and ``tree``'s node bounds (``lowers``/``uppers``) from the
+        points, in one pass over the leaves (see the module docstring); nothing is
+        written when the mesh check's counters ``found`` are not zero."""
+        if tree.slots == 0:
+            return
+        device = self.tri.device
+        key = (tree.first, tree.items, lowers, self.points, self.indices, found,
+               _stream_of(device))  # fmt: skip
+        held = self._refit
+        if held is None or not _same(held[0], key):
+            leaf_args = [tree.first, tree.count, tree.items, self.points, self.indices,
+                         self.tri, found]  # fmt: skip
+            if tree.parent.shape[0]:  # bottom up (a GPU's tree)
+                steps = [launch(
+                    _refit_points_bottom_up, dim=tree.slots, device=device, record_cmd=True,
+                    inputs=[*leaf_args, tree.skip, tree.parent, tree.arrivals, lowers, uppers],
+                ).launch]  # fmt: skip
+            else:
+                steps = [launch(_refit_points_leaves, dim=tree.slots, device=device,
+                                inputs=[*leaf_args, lowers, uppers], record_cmd=True).launch,
+                         refit_inner(tree, lowers, uppers, record_cmd=True)]  # fmt: skip
+            held = self._refit = (key, steps)
+        for step in held[1]:
+            step()
 
 
 class MeshBvh(Bvh):
@@ -148,8 +198,6 @@ class MeshBvh(Bvh):
     not keep its mesh alive."""
 
     tree_points: TreePoints | None = None
-    #: (the tree, points, stream) of the prepared ``refit_points`` launches, and them.
-    _refit_held: tuple | None = None
 
     def rebuild(self, constructor: str | None = None) -> None:
         """``Bvh.rebuild``, then the mesh's vertex copy in the new item order."""
@@ -160,28 +208,7 @@ class MeshBvh(Bvh):
 
     def refit_points(self, found: array) -> None:
         """Refit the bounds from the mesh's points and write its vertex copy, in one
-        pass over the leaves (see the module docstring); nothing is written when the
-        mesh check's counters ``found`` are not zero. The launches are prepared once per
-        tree, points array and stream."""
-        tree, copy = self._tree, self.tree_points
-        if tree.slots == 0 or copy is None:
-            return
-        device = self.device
-        key = (tree, copy.points, None if device.is_cpu else current_stream(device))
-        held = self._refit_held
-        if held is None or any(a is not b for a, b in zip(held[0], key)):
-            lowers, uppers = self._bounds
-            leaf_args = [tree.first, tree.count, tree.items, copy.points, copy.indices,
-                         copy.tri, found]  # fmt: skip
-            if tree.parent.shape[0]:  # bottom up (a GPU's tree)
-                steps = [launch(
-                    _refit_points_bottom_up, dim=tree.slots, device=device, record_cmd=True,
-                    inputs=[*leaf_args, tree.skip, tree.parent, tree.arrivals, lowers, uppers],
-                ).launch]  # fmt: skip
-            else:
-                steps = [launch(_refit_points_leaves, dim=tree.slots, device=device,
-                                inputs=[*leaf_args, lowers, uppers], record_cmd=True).launch,
-                         refit_inner(tree, lowers, uppers, record_cmd=True)]  # fmt: skip
-            held = self._refit_held = (key, steps)
-        for step in held[1]:
-            step()
+        pass over the leaves (``TreePoints.refit``); nothing is written when the mesh
+        check's counters ``found`` are not zero."""
+        if self.tree_points is not None:
+            self.tree_points.refit(self._tree, self._bounds[0], self._bounds[1], found)
