@@ -23,37 +23,45 @@ V3 = wp.vec3
 KINDS = range(8)
 
 
-@wp.kernel
-def point_loss(mesh: wp.uint64, xs: wp.array(dtype=V3), kind: int, out: wp.array(dtype=V3)):
-    i = wp.tid()
-    x = xs[i]
-    q = wp.MeshQueryPoint()
-    if kind == 0:
-        q = wp.mesh_query_point_no_sign(mesh, x, 1.0e6)
-    elif kind == 1:
-        q = wp.mesh_query_point(mesh, x, 1.0e6)
-    elif kind == 2:
-        q = wp.mesh_query_point_sign_normal(mesh, x, 1.0e6)
-    elif kind == 3:
-        q = wp.mesh_query_point_sign_parity(mesh, x, 1.0e6)
-    elif kind == 4:
-        q = wp.mesh_query_point_sign_winding_number(mesh, x, 1.0e6)
-    elif kind == 5:
-        q = wp.mesh_query_furthest_point_no_sign(mesh, x, 0.0)
-    else:
-        sign = 0.0
-        face = 0
-        u = 0.0
-        v = 0.0
-        if kind == 6:
-            q.result = wp.mesh_query_point(mesh, x, 1.0e6, sign, face, u, v)
+def _point_loss(kind: int):
+    """A kernel for query ``kind`` alone (one query per kernel keeps compiles short)."""
+
+    @wp.kernel
+    def point_loss(mesh: wp.uint64, xs: wp.array(dtype=V3), out: wp.array(dtype=V3)):
+        i = wp.tid()
+        x = xs[i]
+        q = wp.MeshQueryPoint()
+        if wp.static(kind == 0):
+            q = wp.mesh_query_point_no_sign(mesh, x, 1.0e6)
+        elif wp.static(kind == 1):
+            q = wp.mesh_query_point(mesh, x, 1.0e6)
+        elif wp.static(kind == 2):
+            q = wp.mesh_query_point_sign_normal(mesh, x, 1.0e6)
+        elif wp.static(kind == 3):
+            q = wp.mesh_query_point_sign_parity(mesh, x, 1.0e6)
+        elif wp.static(kind == 4):
+            q = wp.mesh_query_point_sign_winding_number(mesh, x, 1.0e6)
+        elif wp.static(kind == 5):
+            q = wp.mesh_query_furthest_point_no_sign(mesh, x, 0.0)
         else:
-            q.result = wp.mesh_query_point_no_sign(mesh, x, 1.0e6, face, u, v)
-        q.face = face
-        q.u = u
-        q.v = v
-    if q.result:
-        out[i] = wp.mesh_eval_position(mesh, q.face, q.u, q.v)
+            sign = 0.0
+            face = 0
+            u = 0.0
+            v = 0.0
+            if wp.static(kind == 6):
+                q.result = wp.mesh_query_point(mesh, x, 1.0e6, sign, face, u, v)
+            else:
+                q.result = wp.mesh_query_point_no_sign(mesh, x, 1.0e6, face, u, v)
+            q.face = face
+            q.u = u
+            q.v = v
+        if q.result:
+            out[i] = wp.mesh_eval_position(mesh, q.face, q.u, q.v)
+
+    return point_loss
+
+
+LOSSES = [_point_loss(kind) for kind in KINDS]
 
 
 @pytest.mark.parametrize("backend", BACKENDS)
@@ -71,15 +79,15 @@ def test_point_query_gradient_matches_finite_differences(backend, kind):
 
     def loss(x: np.ndarray) -> np.ndarray:
         out = wp.zeros(n, dtype=V3, device=dev)
-        wp.launch(point_loss, dim=n, backend=backend, device=dev,
-                  inputs=[mesh.id, wp.array(x, dtype=V3, device=dev), kind, out])  # fmt: skip
+        wp.launch(LOSSES[kind], dim=n, backend=backend, device=dev,
+                  inputs=[mesh.id, wp.array(x, dtype=V3, device=dev), out])  # fmt: skip
         return (out.numpy().astype(np.float64) * w).sum(axis=1)
 
     xs = wp.array(xs0, dtype=V3, device=dev, requires_grad=True)
     out = wp.zeros(n, dtype=V3, device=dev, requires_grad=True)
     tape = wp.Tape()
     with tape:
-        wp.launch(point_loss, dim=n, inputs=[mesh.id, xs, kind, out], backend=backend, device=dev)
+        wp.launch(LOSSES[kind], dim=n, inputs=[mesh.id, xs, out], backend=backend, device=dev)
     tape.backward(grads={out: wp.array(w, dtype=V3, device=dev)})
     h = 1e-3
     fd = np.zeros((n, 3))
