@@ -121,6 +121,12 @@ class Bvh:
         them (and replace the array)."""
         return self._tree.items
 
+    @property
+    def packed_nodes(self) -> array:
+        """The packed nodes (``kdsl.stdlib.bvh.BvhNode``, one per slot) kernels walk; a
+        ``rebuild()`` may replace the array."""
+        return self._nodes
+
     def rebuild(self, constructor: str | None = None) -> None:
         """Build the tree again from the current boxes (optionally with another constructor)."""
         if constructor is not None:

@@ -15,6 +15,7 @@ from typing import Any
 from kdsl.errors import KdslTypeError
 from kdsl.geometry.mesh_refit import face_boxes, keep_face_boxes
 from kdsl.geometry.mesh_tree_points import MeshBvh
+from kdsl.geometry.wide_tree import WideTree, wants_wide_tree
 from kdsl.ir import types as T
 from kdsl.runtime.array import array
 from kdsl.runtime.objects import ObjectRecord
@@ -119,6 +120,11 @@ class Mesh:
         self.bvh.tree_points = self._tree_points  # (its rebuild() writes them again)
         self._tree_points.items = self.bvh.item_order
         self._tree_points.write()
+        self._wide = None  # the CPU's 4-wide tree for the closest points (wide_tree)
+        if wants_wide_tree(self.device, self.bvh.leaf_size):
+            self._wide = WideTree(self._tree_points, self.device)
+            self._wide.rebuild(self.bvh)
+            self.bvh.wide = self._wide  # (its rebuild() collapses the new tree)
         keep_face_boxes(self.bvh, self._faces)  # for a later mesh, once the BVH is collected
         self._record = ObjectRecord(self, MeshRecord.__kdsl_type__, "mesh", self.device)
         self._write_record()
@@ -154,6 +160,8 @@ class Mesh:
         self._faces.start(self._points, self.indices)
         self.bvh.refit_points(self._faces.found)
         self._raise_if_bad()
+        if self._wide is not None:
+            self._wide.refit(self.bvh)
         self._write_record()
 
     def _raise_if_bad(self) -> None:
@@ -183,5 +191,6 @@ class Mesh:
                 "num_points": self._points.shape[0], "num_tris": self._num_tris,
                 "edge_length_sum": self._faces.edge_sum,
                 "support_winding_number": int(self.support_winding_number),
+                "wide": 0 if self._wide is None else self._wide.id,
             }
         )  # fmt: skip

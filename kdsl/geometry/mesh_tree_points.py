@@ -198,6 +198,8 @@ class MeshBvh(Bvh):
     not keep its mesh alive."""
 
     tree_points: TreePoints | None = None
+    #: The mesh's 4-wide tree (``kdsl.geometry.wide_tree.WideTree``), if it keeps one.
+    wide = None
 
     def rebuild(self, constructor: str | None = None) -> None:
         """``Bvh.rebuild``, then the mesh's vertex copy in the new item order."""
@@ -205,6 +207,8 @@ class MeshBvh(Bvh):
         if self.tree_points is not None:
             self.tree_points.items = self.item_order
             self.tree_points.write()
+        if self.wide is not None:
+            self.wide.rebuild(self)
 
     def refit_points(self, found: array) -> None:
         """Refit the bounds from the mesh's points and write its vertex copy, in one

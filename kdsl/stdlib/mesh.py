@@ -56,6 +56,7 @@ from kdsl.stdlib.mesh_primitives import (
     safe_inverse,
     triangle_solid_angle,
 )
+from kdsl.stdlib.mesh_wide import WIDE_OVERFLOW, wide_closest_face
 from kdsl.stdlib.random import rand_init, randf
 
 __kdsl_group__ = "geometry"
@@ -92,7 +93,8 @@ class MeshRecord:
     ``velocities`` (empty without velocities), ``indices`` (three per face), ``bvh``
     (the id of the BVH over the faces' boxes), ``tri`` (each face's corners in the
     BVH's item order: ``tri[3 k + j]`` is corner ``j`` of face ``items[k]``,
-    ``kdsl.geometry.mesh_tree_points``) and per-mesh constants."""
+    ``kdsl.geometry.mesh_tree_points``), ``wide`` (the id of the mesh's 4-wide tree,
+    ``kdsl.stdlib.mesh_wide``; 0 on a device that keeps none) and per-mesh constants."""
 
     tag: wp.uint64
     points: wp.array(dtype=wp.vec3)
@@ -104,6 +106,7 @@ class MeshRecord:
     num_tris: wp.int32
     edge_length_sum: wp.array(dtype=wp.float32)  # one element: the faces' edges, summed
     support_winding_number: wp.int32
+    wide: wp.uint64
 
 
 @wp.struct
@@ -276,8 +279,15 @@ def _closest_face(id: wp.uint64, point: wp.vec3, max_dist: float) -> int:
     a warp's threads in step; visiting one node per step measured 25% slower on an
     H200). A tree deeper than the stack finishes with a stackless pass bounded by the
     distance found (``sweep``: its next node), in the same loop, so that the leaf test
-    is inlined once: the answer never depends on the order."""
+    is inlined once: the answer never depends on the order.
+
+    A mesh with a 4-wide tree (the CPU's, ``kdsl.geometry.wide_tree``) is walked there
+    instead, with the same answer; this walk then runs only when that one cannot."""
     rec = wp.object_record(id, MeshRecord)
+    if rec.wide != wp.uint64(0):
+        wide = wide_closest_face(rec.wide, point, max_dist)
+        if wide != WIDE_OVERFLOW:
+            return wide
     bvh = wp.object_record(rec.bvh, BvhRecord)
     best = _Closest()
     best.dist_sq = max_dist * max_dist

@@ -1,0 +1,306 @@
+"""A mesh's BVH collapsed to four children a node, for the CPU's closest-point walk.
+
+``WideTree`` keeps, beside a mesh's binary ``kdsl.Bvh``, the same tree with four
+children a node in the SoA layout of ``kdsl.stdlib.mesh_wide`` (``WideNode``,
+``WideLeaf``), which the closest-point queries walk with vector instructions. Where a
+mesh keeps one is decided here, once, by device kind (``WIDE_TREE``): the CPU, where
+it measured faster (docs/performance.md, "CPU closest points: a 4-wide tree"); a GPU
+walks the binary tree. docs/geometry.md ("Wide tree") describes the layout.
+
+The collapse (``rebuild``, after every build of the binary tree) is one kdsl kernel
+run by one thread: from the root, breadth first, each wide node takes its binary
+node's two children and splits the one of largest surface area into its own two,
+until it has four or only leaves are left, where a leaf is any binary subtree of at
+most four faces whose faces are consecutive in the item order (so two small sibling
+leaves share one wide leaf). It writes the topology (``WideNode.child``, ``src``) and
+each wide leaf's faces; ``refit`` (after every refit of the binary tree, so also after
+the points moved) copies each child's box from its binary node and gathers the
+leaves' corners from the points in parallel kernels.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from kdsl.frontend.api import func, kernel, static, tid
+from kdsl.frontend.constants import nan
+from kdsl.geometry.bvh import Bvh
+from kdsl.geometry.mesh_tree_points import TreePoints
+from kdsl.runtime.alloc import clone, empty
+from kdsl.runtime.array import array
+from kdsl.runtime.launch import launch
+from kdsl.runtime.objects import ObjectRecord
+from kdsl.stdlib.bvh import BvhNode
+from kdsl.stdlib.mesh_primitives import is_sliver
+from kdsl.stdlib.mesh_wide import WideLeaf, WideNode, WideRecord
+from kdsl.types import float32, int32, vec2i, vec3, vec4, vec4i
+
+#: Whether a mesh keeps a 4-wide tree, per device kind (the one place this is chosen).
+WIDE_TREE = {"cpu": True, "cuda": False}
+#: The most faces a wide leaf holds (its four lanes).
+LANES = 4
+#: ``_collapse``'s status when a binary leaf holds more faces than a wide leaf.
+_REFUSED = 1
+
+
+@func
+def _end(nodes: array(dtype=BvhNode), n: int) -> int:
+    """The node after the subtree of binary node ``n`` (preorder)."""
+    nd = nodes[n]
+    if nd.first >= 0:
+        return n + 1
+    return nd.next
+
+
+@func
+def _small(nodes: array(dtype=BvhNode), n: int) -> vec2i:
+    """``(first, count)`` of the faces of binary node ``n``'s subtree when it holds at
+    most ``LANES`` of them, at consecutive positions of the item order; count -1
+    otherwise. Reads at most a few nodes: it stops past ``LANES`` faces."""
+    end = _end(nodes, n)
+    first = -1
+    total = 0
+    m = n
+    while m < end and total >= 0:
+        nd = nodes[m]
+        if nd.first >= 0:
+            if first < 0:
+                first = nd.first
+            if nd.first != first + total or total + nd.next > LANES:
+                total = -1
+            else:
+                total = total + nd.next
+        m = m + 1
+    return vec2i(first, total)
+
+
+@func
+def _area(nodes: array(dtype=BvhNode), n: int) -> float:
+    """Half the surface area of binary node ``n``'s box."""
+    nd = nodes[n]
+    e = nd.upper - nd.lower
+    return e[0] * e[1] + e[1] * e[2] + e[2] * e[0]
+
+
+@func
+def _children(nodes: array(dtype=BvhNode), b: int) -> vec4i:
+    """The (up to) four binary nodes under inner node ``b`` that become a wide node's
+    children: ``b``'s two, then the largest (by area) that is not a wide leaf split
+    into its two, until four or only wide leaves (-1: an empty slot)."""
+    c = vec4i(b + 1, _end(nodes, b + 1), -1, -1)
+    k = 2
+    while k < LANES:
+        pick = -1
+        pick_area = float32(0.0)
+        for j in range(static(LANES)):
+            if j < k and _small(nodes, c[j])[1] < 0:
+                a = _area(nodes, c[j])
+                if pick < 0 or a > pick_area:
+                    pick = j
+                    pick_area = a
+        if pick < 0:
+            k = LANES
+        else:
+            split = c[pick]
+            c[pick] = split + 1
+            c[k] = _end(nodes, split + 1)
+            k = k + 1
+    return c
+
+
+@kernel
+def _collapse(
+    nodes: array(dtype=BvhNode), items: array(dtype=int32), queue: array(dtype=int32),
+    child: array(dtype=vec4i), src: array(dtype=vec4i), faces: array(dtype=vec4i),
+    counts: array(dtype=int32),
+):  # fmt: skip
+    # One thread: wide node w stands for binary node queue[w]; writes child[w], src[w]
+    # and each wide leaf's faces; counts = (wide nodes, wide leaves, status).
+    num_nodes = 1
+    num_leaves = 0
+    status = 0
+    queue[0] = 0
+    w = 0
+    while w < num_nodes:
+        b = queue[w]
+        c = vec4i(b, -1, -1, -1)  # a root of at most four faces: one leaf under the root
+        if _small(nodes, b)[1] < 0:
+            if nodes[b].first >= 0:
+                status = _REFUSED  # a binary leaf of more faces than a wide leaf's lanes
+            else:
+                c = _children(nodes, b)
+        kids = vec4i(-1)
+        for j in range(static(LANES)):
+            n = c[j]
+            if n >= 0:
+                r = _small(nodes, n)
+                if r[1] >= 0:
+                    f = vec4i(-1)
+                    for i in range(static(LANES)):
+                        if i < r[1]:
+                            f[i] = items[r[0] + i]
+                    faces[num_leaves] = f
+                    kids[j] = -num_leaves - 1
+                    num_leaves = num_leaves + 1
+                elif nodes[n].first >= 0:
+                    status = _REFUSED
+                else:
+                    queue[num_nodes] = n
+                    kids[j] = num_nodes
+                    num_nodes = num_nodes + 1
+        child[w] = kids
+        src[w] = c
+        w = w + 1
+        if status != 0:
+            w = num_nodes  # (stop: the mesh walks its binary tree)
+    counts[0] = num_nodes
+    counts[1] = num_leaves
+    counts[2] = status
+
+
+@func
+def _lane_boxes(nd: WideNode, bnodes: array(dtype=BvhNode)) -> WideNode:
+    """``nd`` with each child's box copied from its binary node (NaN: an empty slot)."""
+    out = nd
+    lo_x = vec4(float32(0.0))
+    lo_y = vec4(float32(0.0))
+    lo_z = vec4(float32(0.0))
+    hi_x = vec4(float32(0.0))
+    hi_y = vec4(float32(0.0))
+    hi_z = vec4(float32(0.0))
+    for i in range(static(LANES)):
+        lo = vec3(float32(nan))
+        hi = vec3(float32(nan))
+        s = nd.src[i]
+        if s >= 0:
+            b = bnodes[s]
+            lo = b.lower
+            hi = b.upper
+        lo_x[i] = lo[0]
+        lo_y[i] = lo[1]
+        lo_z[i] = lo[2]
+        hi_x[i] = hi[0]
+        hi_y[i] = hi[1]
+        hi_z[i] = hi[2]
+    out.lo_x = lo_x
+    out.lo_y = lo_y
+    out.lo_z = lo_z
+    out.hi_x = hi_x
+    out.hi_y = hi_y
+    out.hi_z = hi_z
+    return out
+
+
+@kernel
+def _init_nodes(
+    child: array(dtype=vec4i), src: array(dtype=vec4i), bnodes: array(dtype=BvhNode),
+    out: array(dtype=WideNode),
+):  # fmt: skip
+    w = tid()
+    nd = WideNode()
+    nd.child = child[w]
+    nd.src = src[w]
+    out[w] = _lane_boxes(nd, bnodes)
+
+
+@kernel
+def _refit_nodes(bnodes: array(dtype=BvhNode), nodes: array(dtype=WideNode)):
+    w = tid()
+    nodes[w] = _lane_boxes(nodes[w], bnodes)
+
+
+@kernel
+def _gather_leaves(
+    points: array(dtype=vec3), indices: array(dtype=int32), faces: array(dtype=vec4i),
+    leaves: array(dtype=WideLeaf),
+):  # fmt: skip
+    # Leaf k's lanes: its faces' corners (zero in an empty lane) and numbers (-1 for an
+    # empty lane or a sliver). The indices were checked by the mesh's face-box kernel.
+    k = tid()
+    f = faces[k]
+    lf = WideLeaf()
+    lf.face = vec4i(-1)
+    for i in range(static(LANES)):
+        a = vec3(float32(0.0))
+        b = vec3(float32(0.0))
+        c = vec3(float32(0.0))
+        if f[i] >= 0:
+            a = points[indices[f[i] * 3]]
+            b = points[indices[f[i] * 3 + 1]]
+            c = points[indices[f[i] * 3 + 2]]
+            if not is_sliver(a, b, c):
+                lf.face[i] = f[i]
+        lf.ax[i] = a[0]
+        lf.ay[i] = a[1]
+        lf.az[i] = a[2]
+        lf.bx[i] = b[0]
+        lf.by[i] = b[1]
+        lf.bz[i] = b[2]
+        lf.cx[i] = c[0]
+        lf.cy[i] = c[1]
+        lf.cz[i] = c[2]
+    leaves[k] = lf
+
+
+def wants_wide_tree(device: Any, leaf_size: int) -> bool:
+    """Whether a mesh on ``device`` whose BVH has leaves of at most ``leaf_size`` faces
+    keeps a 4-wide tree (``WIDE_TREE``; never for leaves wider than a wide leaf)."""
+    return WIDE_TREE["cuda" if device.is_cuda else "cpu"] and leaf_size <= LANES
+
+
+class WideTree:
+    """A mesh's 4-wide tree (``kdsl.stdlib.mesh_wide.WideRecord``; ``id`` for the mesh's
+    record). ``tree_points`` is the mesh's ``TreePoints``, whose ``points`` and
+    ``indices`` the leaves are gathered from. ``rebuild(bvh)`` collapses the binary
+    tree again (after it was built), ``refit(bvh)`` refreshes the boxes and corners
+    (after it was refit)."""
+
+    def __init__(self, tree_points: TreePoints, device: Any) -> None:
+        self.tree_points = tree_points
+        self.device = device
+        self._record = ObjectRecord(self, WideRecord.__kdsl_type__, "mesh wide tree", device)
+        self.nodes: array | None = None
+        self.leaves: array | None = None
+        self._faces: array | None = None
+
+    @property
+    def id(self) -> int:
+        """The record's id (a ``uint64``), for ``MeshRecord.wide``."""
+        return self._record.id
+
+    def rebuild(self, bvh: Bvh) -> None:
+        """Collapse ``bvh``'s tree (current bounds) and gather the leaves."""
+        dev = self.device
+        tris = self.tree_points.indices.shape[0] // 3
+        cap = max(tris, 1)  # at most one wide node and one wide leaf per face
+        queue = empty(cap, dtype=int32, device=dev)
+        child, src, faces = (empty(cap, dtype=vec4i, device=dev) for _ in range(3))
+        counts = empty(3, dtype=int32, device=dev)
+        num_nodes = num_leaves = status = 0
+        if tris > 0:
+            launch(_collapse, dim=1, device=dev,
+                   inputs=[bvh.packed_nodes, bvh.item_order, queue, child, src, faces, counts])  # fmt: skip
+            num_nodes, num_leaves, status = (int(x) for x in counts.numpy())
+        if status != 0:
+            num_nodes = num_leaves = 0
+        self.nodes = empty(num_nodes, dtype=WideNode, device=dev)
+        self.leaves = empty(num_leaves, dtype=WideLeaf, device=dev)
+        self._faces = clone(faces[:num_leaves])
+        if num_nodes:
+            launch(_init_nodes, dim=num_nodes, device=dev,
+                   inputs=[child[:num_nodes], src[:num_nodes], bvh.packed_nodes, self.nodes])  # fmt: skip
+        self._gather()
+        self._record.write({"nodes": self.nodes, "leaves": self.leaves, "fallback": status})
+
+    def refit(self, bvh: Bvh) -> None:
+        """Copy the children's boxes from ``bvh``'s refit nodes; gather the corners again."""
+        if self.nodes.shape[0]:
+            launch(_refit_nodes, dim=self.nodes.shape[0], device=self.device,
+                   inputs=[bvh.packed_nodes, self.nodes])  # fmt: skip
+        self._gather()
+
+    def _gather(self) -> None:
+        if self.leaves.shape[0]:
+            tp = self.tree_points
+            launch(_gather_leaves, dim=self.leaves.shape[0], device=self.device,
+                   inputs=[tp.points, tp.indices, self._faces, self.leaves])  # fmt: skip
