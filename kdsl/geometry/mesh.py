@@ -66,6 +66,10 @@ def _as_indices(a: Any) -> array:
     return a
 
 
+#: The most faces a BVH leaf holds when ``bvh_leaf_size`` is None (Warp's default).
+DEFAULT_LEAF_SIZE = 4
+
+
 class Mesh:
     """A triangle mesh, as ``warp.Mesh``: ``points`` (vec3 per vertex), ``indices``
     (three int32 per face, flat or ``(faces, 3)``), optional ``velocities``. Pass
@@ -73,8 +77,9 @@ class Mesh:
     and the other ``mesh_*`` functions. After moving the points (``mesh.points``, in
     place or assigned), call ``refit()``. ``groups`` (int32 per face) makes each group
     a subtree (``mesh_get_group_root``); ``bvh_constructor`` picks the BVH builder and
-    ``bvh_leaf_size`` the most faces a leaf holds (4, Warp's default: a point query
-    then steps through a quarter of the nodes, for a few more triangle tests)."""
+    ``bvh_leaf_size`` the most faces a leaf holds (None: 4, Warp's default: a point
+    query then steps through a quarter of the nodes, for a few more triangle tests).
+    The parameters are Warp 1.19's, in its order."""
 
     def __init__(
         self,
@@ -83,8 +88,8 @@ class Mesh:
         velocities: array | None = None,
         support_winding_number: bool = False,
         bvh_constructor: str | None = None,
+        bvh_leaf_size: int | None = None,
         groups: array | None = None,
-        bvh_leaf_size: int = 4,
     ) -> None:
         pts = _as_points(points, "points")
         idx = _as_indices(indices)
@@ -112,7 +117,7 @@ class Mesh:
         self._faces.start(pts, idx)  # the check, the boxes, the edge sum: answers below
         self.bvh = MeshBvh(
             self._faces.lowers, self._faces.uppers, constructor=bvh_constructor, groups=groups,
-            leaf_size=bvh_leaf_size,
+            leaf_size=DEFAULT_LEAF_SIZE if bvh_leaf_size is None else bvh_leaf_size,
         )  # fmt: skip
         self._raise_if_bad()  # (waits for the check, not for the BVH's build)
         self._tree_points = self._faces.tree_points  # the vertices in item order
