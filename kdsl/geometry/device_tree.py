@@ -11,7 +11,7 @@ the node count on the host.
 
 ``refit`` runs as kdsl kernels on the device. On a GPU it is one launch, bottom up as
 Karras and Apetrei build theirs: a thread per leaf writes the union of its items' boxes,
-then climbs (``climb``); at each parent it fences and bumps the parent's arrival
+then climbs (``store_leaf``); at each parent it fences and bumps the parent's arrival
 counter, and the second child's thread to arrive (it fences again, so it sees the first
 child's bounds) writes the parent's union and climbs on, while the first stops. The
 climb is a chain of dependent memory round trips as long as the tree is deep, so each
@@ -157,25 +157,8 @@ def _leaf_bounds(
         hi = vmax(hi, item_uppers[k])
 
 
-@kernel
-def _refit_leaves(
-    first: array(dtype=int32), count: array(dtype=int32),
-    items: array(dtype=int32), item_lowers: array(dtype=vec3),
-    item_uppers: array(dtype=vec3), lowers: array(dtype=vec3),
-    uppers: array(dtype=vec3),
-):  # fmt: skip
-    n = tid()
-    f = first[n]
-    if f >= 0:
-        lo = vec3()
-        hi = vec3()
-        _leaf_bounds(f, count[n], items, item_lowers, item_uppers, lo, hi)
-        lowers[n] = lo
-        uppers[n] = hi
-
-
 @func
-def climb(
+def _climb(
     n: int, lo: vec3, hi: vec3, skip: array(dtype=int32), parent: array(dtype=int32),
     arrivals: array(dtype=int32), lowers: array(dtype=vec3), uppers: array(dtype=vec3),
 ):  # fmt: skip
@@ -200,13 +183,27 @@ def climb(
         p = up
 
 
+@func
+def store_leaf(
+    n: int, lo: vec3, hi: vec3, skip: array(dtype=int32), parent: array(dtype=int32),
+    arrivals: array(dtype=int32), lowers: array(dtype=vec3), uppers: array(dtype=vec3),
+):  # fmt: skip
+    """Write leaf ``n``'s bounds; then, when the tree has parent links (``parent`` not
+    empty: the bottom-up refit), climb from it (see the module docstring)."""
+    lowers[n] = lo
+    uppers[n] = hi
+    if parent.shape[0] > 0:
+        _climb(n, lo, hi, skip, parent, arrivals, lowers, uppers)
+
+
 @kernel
-def _refit_bottom_up(
+def _refit_leaves(
     first: array(dtype=int32), count: array(dtype=int32), items: array(dtype=int32),
     item_lowers: array(dtype=vec3), item_uppers: array(dtype=vec3),
     skip: array(dtype=int32), parent: array(dtype=int32), arrivals: array(dtype=int32),
     lowers: array(dtype=vec3), uppers: array(dtype=vec3),
 ):  # fmt: skip
+    # Thread n: leaf n's bounds from its items' boxes, then (with parents) the climb.
     n = tid()
     f = first[n]
     if f < 0:
@@ -214,9 +211,7 @@ def _refit_bottom_up(
     lo = vec3()
     hi = vec3()
     _leaf_bounds(f, count[n], items, item_lowers, item_uppers, lo, hi)
-    lowers[n] = lo
-    uppers[n] = hi
-    climb(n, lo, hi, skip, parent, arrivals, lowers, uppers)
+    store_leaf(n, lo, hi, skip, parent, arrivals, lowers, uppers)
 
 
 @kernel
@@ -275,17 +270,10 @@ def refit(tree: DeviceTree, item_lowers: array, item_uppers: array, lowers: arra
     sequential pass (see the module docstring)."""
     if tree.slots == 0:
         return
-    device = item_lowers.device
-    if tree.parent.shape[0] == 0:
-        launch(
-            _refit_leaves, dim=tree.slots, device=device,
-            inputs=[tree.first, tree.count, tree.items, item_lowers, item_uppers, lowers,
-                    uppers],
-        )  # fmt: skip
-        refit_inner(tree, lowers, uppers)
-        return
     launch(
-        _refit_bottom_up, dim=tree.slots, device=device,
+        _refit_leaves, dim=tree.slots, device=item_lowers.device,
         inputs=[tree.first, tree.count, tree.items, item_lowers, item_uppers, tree.skip,
                 tree.parent, tree.arrivals, lowers, uppers],
     )  # fmt: skip
+    if tree.parent.shape[0] == 0:
+        refit_inner(tree, lowers, uppers)

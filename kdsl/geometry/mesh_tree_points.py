@@ -20,7 +20,7 @@ A mesh's ``refit()`` writes the copy and the BVH's bounds in one pass
 (``MeshBvh.refit_points``): a thread per leaf reads its faces' corners once, in item
 order, writes them to the copy and bounds the leaf with them (the union of the faces'
 boxes, in the order ``device_tree``'s leaves take them: the same bits), then climbs
-(``device_tree.climb``) on a GPU; on a CPU one thread then walks the inner nodes. It
+(``device_tree.store_leaf``) on a GPU; on a CPU one thread then walks the inner nodes. It
 reads the mesh check's answers on the device and writes nothing when the check found
 a bad index or point, so the host need not wait for the check before issuing it.
 """
@@ -31,7 +31,7 @@ from kdsl.frontend.api import func, inout, kernel, tid
 from kdsl.frontend.api import max as vmax
 from kdsl.frontend.api import min as vmin
 from kdsl.geometry.bvh import Bvh
-from kdsl.geometry.device_tree import DeviceTree, climb, refit_inner
+from kdsl.geometry.device_tree import DeviceTree, refit_inner, store_leaf
 from kdsl.runtime.array import array
 from kdsl.runtime.launch import launch
 from kdsl.runtime.stream import current_stream
@@ -84,12 +84,13 @@ def _found_bad(found: array(dtype=int32)) -> bool:
 
 
 @kernel
-def _refit_points_bottom_up(
+def _refit_points(
     first: array(dtype=int32), count: array(dtype=int32), items: array(dtype=int32),
     points: array(dtype=vec3), indices: array(dtype=int32), tri: array(dtype=vec3),
     found: array(dtype=int32), skip: array(dtype=int32), parent: array(dtype=int32),
     arrivals: array(dtype=int32), lowers: array(dtype=vec3), uppers: array(dtype=vec3),
 ):  # fmt: skip
+    # Thread n: leaf n's corners copied and bounded, then (with parents) the climb.
     n = tid()
     f = first[n]
     if f < 0 or _found_bad(found):
@@ -97,26 +98,7 @@ def _refit_points_bottom_up(
     lo = vec3()
     hi = vec3()
     _copy_leaf(f, count[n], items, points, indices, tri, lo, hi)
-    lowers[n] = lo
-    uppers[n] = hi
-    climb(n, lo, hi, skip, parent, arrivals, lowers, uppers)
-
-
-@kernel
-def _refit_points_leaves(
-    first: array(dtype=int32), count: array(dtype=int32), items: array(dtype=int32),
-    points: array(dtype=vec3), indices: array(dtype=int32), tri: array(dtype=vec3),
-    found: array(dtype=int32), lowers: array(dtype=vec3), uppers: array(dtype=vec3),
-):  # fmt: skip
-    n = tid()
-    f = first[n]
-    if f < 0 or _found_bad(found):
-        return
-    lo = vec3()
-    hi = vec3()
-    _copy_leaf(f, count[n], items, points, indices, tri, lo, hi)
-    lowers[n] = lo
-    uppers[n] = hi
+    store_leaf(n, lo, hi, skip, parent, arrivals, lowers, uppers)
 
 
 def _stream_of(device) -> object:
@@ -175,17 +157,13 @@ class TreePoints:
                _stream_of(device))  # fmt: skip
         held = self._refit
         if held is None or not _same(held[0], key):
-            leaf_args = [tree.first, tree.count, tree.items, self.points, self.indices,
-                         self.tri, found]  # fmt: skip
-            if tree.parent.shape[0]:  # bottom up (a GPU's tree)
-                steps = [launch(
-                    _refit_points_bottom_up, dim=tree.slots, device=device, record_cmd=True,
-                    inputs=[*leaf_args, tree.skip, tree.parent, tree.arrivals, lowers, uppers],
-                ).launch]  # fmt: skip
-            else:
-                steps = [launch(_refit_points_leaves, dim=tree.slots, device=device,
-                                inputs=[*leaf_args, lowers, uppers], record_cmd=True).launch,
-                         refit_inner(tree, lowers, uppers, record_cmd=True)]  # fmt: skip
+            steps = [launch(
+                _refit_points, dim=tree.slots, device=device, record_cmd=True,
+                inputs=[tree.first, tree.count, tree.items, self.points, self.indices,
+                        self.tri, found, tree.skip, tree.parent, tree.arrivals, lowers, uppers],
+            ).launch]  # fmt: skip
+            if tree.parent.shape[0] == 0:  # no parent links (a CPU's tree): the inner nodes
+                steps.append(refit_inner(tree, lowers, uppers, record_cmd=True))
             held = self._refit = (key, steps)
         for step in held[1]:
             step()

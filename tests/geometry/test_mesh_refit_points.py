@@ -21,7 +21,7 @@ from kdsl.errors import KdslTypeError
 from kdsl.geometry import bvh as bvh_module
 from kdsl.geometry import lbvh
 from kdsl.geometry.device_tree import refit, refit_inner
-from kdsl.geometry.mesh_tree_points import _refit_points_bottom_up, _refit_points_leaves
+from kdsl.geometry.mesh_tree_points import _refit_points
 from tests.geometry.mesh_reference import icosphere
 from tests.geometry.test_mesh_tree_points import _check_copy, _check_queries, move_kernel
 
@@ -140,8 +140,11 @@ def test_refit_after_moves_matches_brute_force(device, bottom_up, leaf_size, num
 @pytest.mark.parametrize("constructor", ["sah", "median"])
 def test_refit_of_host_built_trees(device, constructor):
     pts, faces = icosphere(2, bumps=0.05, seed=4)
-    mesh = wp.Mesh(wp.array(pts, dtype=V3, device=device),
-                   wp.array(faces, dtype=wp.int32, device=device), bvh_constructor=constructor)
+    mesh = wp.Mesh(
+        wp.array(pts, dtype=V3, device=device),
+        wp.array(faces, dtype=wp.int32, device=device),
+        bvh_constructor=constructor,
+    )
     for _ in _moves(mesh, pts, faces, steps=2):
         _check_against_brute_force(mesh, faces)
     mesh.bvh.rebuild("lbvh")  # another tree: the refit's launches are prepared again
@@ -207,14 +210,12 @@ def test_leaf_kernels_on_interp_match_cpu(bottom_up, bottom_up_on_cpu):
     scratch["lower"], scratch["upper"] = 7.0, -7.0
     wp.copy(nodes, wp.array(scratch, dtype=nodes.dtype))
     copy.tri.zero_()
-    leaf_args = [tree.first, tree.count, tree.items, copy.points, copy.indices, copy.tri,
-                 mesh._faces.found]  # fmt: skip
-    if bottom_up:
-        wp.launch(_refit_points_bottom_up, dim=tree.slots, backend="interp",
-                  inputs=[*leaf_args, tree.skip, tree.parent, tree.arrivals, lo, hi])  # fmt: skip
-    else:
-        wp.launch(_refit_points_leaves, dim=tree.slots, backend="interp",
-                  inputs=[*leaf_args, lo, hi])  # fmt: skip
+    none = wp.empty(0, dtype=wp.int32)  # no parent links: the leaves only
+    links = [tree.skip, tree.parent, tree.arrivals] if bottom_up else [none, none, none]
+    wp.launch(_refit_points, dim=tree.slots, backend="interp",
+              inputs=[tree.first, tree.count, tree.items, copy.points, copy.indices, copy.tri,
+                      mesh._faces.found, *links, lo, hi])  # fmt: skip
+    if not bottom_up:
         first = tree.first.numpy()
         assert np.array_equal(nodes.numpy()["lower"][first >= 0], want[0]["lower"][first >= 0])
         refit_inner(tree, lo, hi)
