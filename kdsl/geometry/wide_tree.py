@@ -22,7 +22,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from kdsl.frontend.api import func, kernel, static, tid
+from kdsl.frontend.api import func, inout, kernel, static, tid
 from kdsl.frontend.constants import nan
 from kdsl.geometry.bvh import Bvh
 from kdsl.geometry.mesh_tree_points import TreePoints
@@ -83,76 +83,110 @@ def _area(nodes: array(dtype=BvhNode), n: int) -> float:
 
 
 @func
-def _children(nodes: array(dtype=BvhNode), b: int) -> vec4i:
+def _candidate(
+    nodes: array(dtype=BvhNode), n: int, at: int, kids: inout(vec4i), firsts: inout(vec4i),
+    counts: inout(vec4i), areas: inout(vec4),
+):  # fmt: skip
+    """Binary node ``n`` as a wide node's child ``at``: a wide leaf (``_small``: its
+    faces' first position and count) or a node (count -1, and its box's half area, to
+    pick the next split)."""
+    r = _small(nodes, n)
+    kids[at] = n
+    firsts[at] = r[0]
+    counts[at] = r[1]
+    areas[at] = float32(0.0)
+    if r[1] < 0:
+        areas[at] = _area(nodes, n)
+
+
+@func
+def _children(
+    nodes: array(dtype=BvhNode), b: int, kids: inout(vec4i), firsts: inout(vec4i),
+    counts: inout(vec4i),
+):  # fmt: skip
     """The (up to) four binary nodes under inner node ``b`` that become a wide node's
-    children: ``b``'s two, then the largest (by area) that is not a wide leaf split
-    into its two, until four or only wide leaves (-1: an empty slot)."""
-    c = vec4i(b + 1, _end(nodes, b + 1), -1, -1)
+    children (``kids``, -1: an empty slot): ``b``'s two, then the largest (by area)
+    that is not a wide leaf split into its two, until four or only wide leaves; with
+    each wide leaf's faces (``firsts``, ``counts``; count -1 for a node)."""
+    kids = vec4i(b + 1, _end(nodes, b + 1), -1, -1)
+    areas = vec4(float32(0.0))
+    for j in range(static(2)):
+        _candidate(nodes, kids[j], j, kids, firsts, counts, areas)
     k = 2
     while k < LANES:
         pick = -1
-        pick_area = float32(0.0)
         for j in range(static(LANES)):
-            if j < k and _small(nodes, c[j])[1] < 0:
-                a = _area(nodes, c[j])
-                if pick < 0 or a > pick_area:
-                    pick = j
-                    pick_area = a
+            if j < k and counts[j] < 0 and (pick < 0 or areas[j] > areas[pick]):
+                pick = j
         if pick < 0:
             k = LANES
         else:
-            split = c[pick]
-            c[pick] = split + 1
-            c[k] = _end(nodes, split + 1)
+            split = kids[pick]
+            _candidate(nodes, split + 1, pick, kids, firsts, counts, areas)
+            _candidate(nodes, _end(nodes, split + 1), k, kids, firsts, counts, areas)
             k = k + 1
-    return c
 
 
 @kernel
 def _collapse(
-    nodes: array(dtype=BvhNode), items: array(dtype=int32), queue: array(dtype=int32),
-    child: array(dtype=vec4i), src: array(dtype=vec4i), faces: array(dtype=vec4i),
-    counts: array(dtype=int32),
+    nodes: array(dtype=BvhNode), items: array(dtype=int32), stack: array(dtype=int32),
+    parents: array(dtype=int32), child: array(dtype=vec4i), src: array(dtype=vec4i),
+    faces: array(dtype=vec4i), counts: array(dtype=int32),
 ):  # fmt: skip
-    # One thread: wide node w stands for binary node queue[w]; writes child[w], src[w]
-    # and each wide leaf's faces; counts = (wide nodes, wide leaves, status).
-    num_nodes = 1
+    # One thread, depth first (a subtree's wide nodes and leaves are numbered
+    # consecutively): binary node stack[t] becomes the next wide node, linked into
+    # lane parents[t] % 4 of wide node parents[t] / 4 (-1: the root); writes child[w],
+    # src[w] and each wide leaf's faces; counts = (wide nodes, wide leaves, status).
+    num_nodes = 0
     num_leaves = 0
     status = 0
-    queue[0] = 0
-    w = 0
-    while w < num_nodes:
-        b = queue[w]
-        c = vec4i(b, -1, -1, -1)  # a root of at most four faces: one leaf under the root
-        if _small(nodes, b)[1] < 0:
+    stack[0] = 0
+    parents[0] = -1
+    top = 1
+    while top > 0:
+        top = top - 1
+        b = stack[top]
+        w = num_nodes
+        num_nodes = num_nodes + 1
+        up = parents[top]
+        if up >= 0:
+            link = child[up // LANES]
+            link[up % LANES] = w
+            child[up // LANES] = link
+        kids = vec4i(b, -1, -1, -1)  # a root of at most four faces: one leaf under the root
+        r = _small(nodes, b)
+        firsts = vec4i(r[0], 0, 0, 0)
+        sizes = vec4i(r[1], 0, 0, 0)
+        if r[1] < 0:
             if nodes[b].first >= 0:
                 status = _REFUSED  # a binary leaf of more faces than a wide leaf's lanes
             else:
-                c = _children(nodes, b)
-        kids = vec4i(-1)
+                _children(nodes, b, kids, firsts, sizes)
+        links = vec4i(-1)
         for j in range(static(LANES)):
-            n = c[j]
+            n = kids[j]
             if n >= 0:
-                r = _small(nodes, n)
-                if r[1] >= 0:
+                if sizes[j] >= 0:
                     f = vec4i(-1)
                     for i in range(static(LANES)):
-                        if i < r[1]:
-                            f[i] = items[r[0] + i]
+                        if i < sizes[j]:
+                            f[i] = items[firsts[j] + i]
                     faces[num_leaves] = f
-                    kids[j] = -num_leaves - 1
+                    links[j] = -num_leaves - 1
                     num_leaves = num_leaves + 1
                 elif nodes[n].first >= 0:
                     status = _REFUSED
-                else:
-                    queue[num_nodes] = n
-                    kids[j] = num_nodes
-                    num_nodes = num_nodes + 1
-        child[w] = kids
-        src[w] = c
-        w = w + 1
+        for jj in range(static(LANES)):  # the wide nodes below, lane 0 on top
+            j = LANES - 1 - jj
+            n = kids[j]
+            if n >= 0 and sizes[j] < 0 and nodes[n].first < 0:
+                stack[top] = n
+                parents[top] = w * LANES + j
+                top = top + 1
+        child[w] = links
+        src[w] = kids
         if status != 0:
-            w = num_nodes  # (stop: the mesh walks its binary tree)
+            top = 0  # (stop: the mesh walks its binary tree)
     counts[0] = num_nodes
     counts[1] = num_leaves
     counts[2] = status
@@ -273,13 +307,14 @@ class WideTree:
         dev = self.device
         tris = self.tree_points.indices.shape[0] // 3
         cap = max(tris, 1)  # at most one wide node and one wide leaf per face
-        queue = empty(cap, dtype=int32, device=dev)
+        stack, parents = (empty(cap, dtype=int32, device=dev) for _ in range(2))
         child, src, faces = (empty(cap, dtype=vec4i, device=dev) for _ in range(3))
         counts = empty(3, dtype=int32, device=dev)
         num_nodes = num_leaves = status = 0
         if tris > 0:
             launch(_collapse, dim=1, device=dev,
-                   inputs=[bvh.packed_nodes, bvh.item_order, queue, child, src, faces, counts])  # fmt: skip
+                   inputs=[bvh.packed_nodes, bvh.item_order, stack, parents, child, src, faces,
+                           counts])  # fmt: skip
             num_nodes, num_leaves, status = (int(x) for x in counts.numpy())
         if status != 0:
             num_nodes = num_leaves = 0
