@@ -136,8 +136,20 @@ def source_line(file: str, line: int) -> str | None:
 
 
 def render_loc(loc: Loc, func: str | None = None) -> str:
-    """The ``File ..., line ...`` header, the source line and carets under the span."""
-    where = f'  File "{loc.file}", line {loc.line}, column {loc.col}'
+    """The ``File ..., line ...`` header, the source line and carets under the span;
+    for code inlined from a function, each call it came through after it ("called
+    from", out to the kernel's line)."""
+    text = _render_one(loc, func)
+    caller = getattr(loc, "caller", None)
+    while caller is not None:
+        text += "\n" + _render_one(caller, None, "called from")
+        caller = getattr(caller, "caller", None)
+    return text
+
+
+def _render_one(loc: Loc, func: str | None, lead: str = "") -> str:
+    where = f'  {lead} File "{loc.file}"' if lead else f'  File "{loc.file}"'
+    where += f", line {loc.line}, column {loc.col}"
     if func:
         where += f", in {func}"
     where += ":"

@@ -11,7 +11,7 @@ verifier, folder, interpreter semantics) lives in its ``OpDef`` in the catalog
 from __future__ import annotations
 
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
 from kdsl.ir.types import StructType, Type
@@ -29,9 +29,20 @@ class Loc:
     col: int
     end_line: int | None = None
     end_col: int | None = None
+    #: For code inlined from a function: the call it was inlined through (whose own
+    #: ``caller`` goes on outwards), so an error inside library code can name the
+    #: user's line. Not part of equality, hashing or the text form.
+    caller: Loc | None = field(default=None, compare=False, repr=False)
 
     def __str__(self) -> str:
         return f"{self.file}:{self.line}:{self.col}"
+
+    def called_from(self, site: Loc) -> Loc:
+        """This location seen through one more call, at ``site`` (the outermost so far)."""
+        if site.line <= 0:
+            return self
+        outer = site if self.caller is None else self.caller.called_from(site)
+        return replace(self, caller=outer)
 
 
 UNKNOWN_LOC = Loc("<unknown>", 0, 0)

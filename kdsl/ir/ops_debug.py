@@ -110,9 +110,37 @@ def _record_check_rule(ts: Sequence[Type], attrs: dict[str, Any]) -> list[Type]:
     return []
 
 
+#: What a record's address can be: at least ``RECORD_ID_MIN`` (no mapping lies below
+#: Linux's first 64 KiB), below ``RECORD_ID_END`` (48-bit user space, host and CUDA)
+#: and a multiple of ``RECORD_ALIGN``. ``kd.check_record`` reads a tag only at such an
+#: address, so a small, odd or random id (never an object's) fails without a read.
+RECORD_ID_MIN = 1 << 16
+RECORD_ID_END = 1 << 47
+RECORD_ALIGN = 16
+
+
+def plausible_record_id(address: int) -> bool:
+    """Whether ``address`` may be a record's (see ``RECORD_ID_MIN``): safe to read."""
+    return RECORD_ID_MIN <= address < RECORD_ID_END and address % RECORD_ALIGN == 0
+
+
+#: Whether a host address lies in the memory that holds host records (set by the
+#: runtime, ``kdsl.runtime.objects``, with ``set_host_record_memory``); the interpreter
+#: reads only such addresses, so no id can crash it. None: any plausible id is read.
+_host_record_memory: Callable[[int], bool] | None = None
+
+
+def set_host_record_memory(test: Callable[[int], bool]) -> None:
+    """Give the interpreter's ``kd.check_record`` the test of host record memory."""
+    global _host_record_memory
+    _host_record_memory = test
+
+
 def record_alive(address: int, record: str) -> bool:
     """Whether ``address`` holds a live record of the struct type named ``record``."""
-    if address == 0:
+    if not plausible_record_id(address):
+        return False
+    if _host_record_memory is not None and not _host_record_memory(address):
         return False
     return int.from_bytes(ctypes.string_at(address, 8), "little") == record_tag(record)
 
@@ -127,7 +155,8 @@ CHECK_RECORD = _define_check(
     "kd.check_record",
     "Debug mode: stop with an error when ``id`` is not the id of a live runtime object "
     "whose record is the struct named ``arg`` (0, freed, or never an object's id): the "
-    "record's first word must be that struct's tag (``kdsl.ir.records.record_tag``). "
+    "id must be a plausible address (``plausible_record_id``: otherwise nothing is read) "
+    "and the record's first word that struct's tag (``kdsl.ir.records.record_tag``). "
     "``site`` numbers the check in its module.",
     _record_check_rule, _record_check_interp, 'kd.check_record %0 {arg = "BvhRecord", site = 2}',
 )  # fmt: skip

@@ -16,6 +16,9 @@ gradient function; everything else is still inlined. A function is dropped only
 when no kernel reaches it through calls or through the ``custom_grad`` and
 ``custom_replay`` attributes of a function it reaches.
 
+Each inlined op's location records the call it came through (``Loc.caller``), so an
+error raised inside a library function also shows the caller's line.
+
 Options: ``drop_unused`` (default true), ``keep_custom_grad`` (default false).
 """
 
@@ -25,7 +28,7 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 from kdsl.errors import KdslError
-from kdsl.ir import Module, Operation, Value
+from kdsl.ir import Loc, Module, Operation, Value
 from kdsl.ir.ops_func import CALL
 from kdsl.ir.rewrite import clone_op, insert_before, replace_op
 from kdsl.passes.manager import ModulePass
@@ -38,8 +41,15 @@ def _calls(func: Operation) -> list[Operation]:
 def _inline_call(call: Operation, callee: Operation) -> None:
     body = callee.regions[0].block
     mapping: dict[Value, Value] = dict(zip(body.args, call.operands))
+    seen: dict[int, Loc] = {}  # each callee location, seen through this call
     for op in body.ops[:-1]:
-        insert_before(call, clone_op(op, mapping))
+        new = clone_op(op, mapping)
+        for inner in new.walk():
+            loc = seen.get(id(inner.loc))
+            if loc is None:
+                loc = seen[id(inner.loc)] = inner.loc.called_from(call.loc)
+            inner.loc = loc
+        insert_before(call, new)
     ret = body.ops[-1]
     replace_op(call, [mapping.get(v, v) for v in ret.operands])
 

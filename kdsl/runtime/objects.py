@@ -25,6 +25,7 @@ import numpy as np
 
 from kdsl.errors import KdslLaunchError
 from kdsl.ir import types as T
+from kdsl.ir.ops_debug import plausible_record_id, set_host_record_memory
 from kdsl.ir.records import record_dtype, record_tag
 from kdsl.runtime import alloc
 from kdsl.runtime.array import array
@@ -58,6 +59,9 @@ class _DeviceTable:
             self.slabs.append(slab)
             base, used = slab.ptr, 0
         self.next = (base, used + size)
+        if not plausible_record_id(base + used):  # kd.check_record would refuse its id
+            raise KdslLaunchError(f"an object record at {base + used:#x} on {self.device}: "
+                                  "not an address kd.check_record accepts")  # fmt: skip
         return base + used
 
     def write(self, address: int, data: bytes) -> None:
@@ -77,6 +81,15 @@ class _DeviceTable:
 _tables: dict[str, _DeviceTable] = {}
 _owners: dict[int, tuple[weakref.ref, str, str]] = {}
 _lock = threading.Lock()
+
+
+def _in_host_slabs(address: int) -> bool:
+    """Whether ``address`` lies in a host record slab (readable, whatever it holds)."""
+    table = _tables.get("cpu")
+    return table is not None and any(s.ptr <= address < s.ptr + _SLAB for s in table.slabs)
+
+
+set_host_record_memory(_in_host_slabs)
 
 
 def _table(device: Device) -> _DeviceTable:

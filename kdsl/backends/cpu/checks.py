@@ -28,6 +28,7 @@ from kdsl.errors import KdslCapabilityError
 from kdsl.ir import types as T
 from kdsl.ir.core import Operation
 from kdsl.ir.lowering import LOWERINGS
+from kdsl.ir.ops_debug import RECORD_ALIGN, RECORD_ID_END, RECORD_ID_MIN
 from kdsl.ir.records import record_tag
 
 CPU = LOWERINGS.for_backend("cpu")
@@ -161,8 +162,11 @@ def _check_record(em: Emitter, op: Operation) -> None:
         em.new_block(n) for n in ("record.read", "record.fail", "record.write", "record.stop",
                                   "record.ok")
     )  # fmt: skip
-    B.cbranch(B.icmp_unsigned("!=", rid, _i64(0)), read, fail).set_weights([1000, 1])
-    B.position_at_end(read)  # only a non-null id is read
+    # only a plausible address is read (RECORD_ID_MIN <= rid < RECORD_ID_END, aligned)
+    span = B.icmp_unsigned("<", B.sub(rid, _i64(RECORD_ID_MIN)), _i64(RECORD_ID_END - RECORD_ID_MIN))
+    aligned = B.icmp_unsigned("==", B.and_(rid, _i64(RECORD_ALIGN - 1)), _i64(0))
+    B.cbranch(B.and_(span, aligned), read, fail).set_weights([1000, 1])
+    B.position_at_end(read)
     word = B.load(B.inttoptr(rid, LT.PTR), typ=LT.I64, align=8)
     tag = ir.Constant(LT.I64, record_tag(op.attrs["arg"]))
     B.cbranch(B.icmp_unsigned("==", word, tag), cont, fail).set_weights([1000, 1])

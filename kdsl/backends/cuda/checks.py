@@ -19,6 +19,7 @@ from kdsl.errors import KdslCapabilityError
 from kdsl.ir import types as T
 from kdsl.ir.core import Operation
 from kdsl.ir.lowering import LOWERINGS
+from kdsl.ir.ops_debug import RECORD_ALIGN, RECORD_ID_END, RECORD_ID_MIN
 from kdsl.ir.records import record_tag
 
 CUDA = LOWERINGS.for_backend("cuda")
@@ -91,8 +92,10 @@ def _check_record(em: FuncEmitter, op: Operation) -> None:
     _require_debug(em, op)
     rid = em.get(op.operands[0])
     tag = record_tag(op.attrs["arg"])
-    # ``||`` stops before the read of a null id.
-    em.open(f"if ({rid} == 0ull || *(const unsigned long long *){rid} != {tag}ull) {{")
+    # ``||`` stops before the read of an implausible id (``plausible_record_id``).
+    span = f"({rid} - {RECORD_ID_MIN}ull >= {RECORD_ID_END - RECORD_ID_MIN}ull)"
+    odd = f"({rid} & {RECORD_ALIGN - 1}ull)"
+    em.open(f"if ({span} || {odd} || *(const unsigned long long *){rid} != {tag}ull) {{")
     em.open(f"if ({_claim(R.BOUNDS, op.attrs['site'])}) {{")
     em.line(f"kd_err[{R.BOUNDS_TID}] = {_tid(em)}; kd_err[{R.BOUNDS_IDX}] = (long long){rid};")
     em.close()
