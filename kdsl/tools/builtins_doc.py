@@ -146,15 +146,40 @@ def stdlib_functions() -> dict[str, tuple[str, str, Any]]:
     return out
 
 
+def stdlib_types() -> dict[str, tuple[str, Any]]:
+    """Public stdlib structs by name (module, class): query results and query states, not
+    the objects' records (``...Record``, laid out for the runtime; docs/geometry.md)."""
+    import kdsl.stdlib
+
+    out: dict[str, tuple[str, Any]] = {}
+    for info in sorted(pkgutil.iter_modules(kdsl.stdlib.__path__), key=lambda i: i.name):
+        mod = importlib.import_module(f"kdsl.stdlib.{info.name}")
+        for name in getattr(mod, "__all__", ()):
+            obj = getattr(mod, name)
+            struct = hasattr(obj, "__kdsl_type__") and hasattr(obj.__kdsl_type__, "fields")
+            if struct and not name.endswith("Record"):
+                out[name] = (mod.__name__, obj)
+    return out
+
+
+def _fields(cls: Any) -> str:
+    return ", ".join(f"`{f}: {t}`" for f, t in cls.__kdsl_type__.fields)
+
+
 def _type_name(t: Any) -> str:
     if t is inspect.Parameter.empty:
         return "?"
     return getattr(t, "__name__", None) or str(t)
 
 
+def _param(name: str, q: inspect.Parameter) -> str:
+    text = f"{name}: {_type_name(q.annotation)}"
+    return text if q.default is inspect.Parameter.empty else f"{text} = {q.default!r}"
+
+
 def _overload_signature(name: str, fn: Any) -> str:
     sig = inspect.signature(fn)
-    params = ", ".join(f"{p}: {_type_name(q.annotation)}" for p, q in sig.parameters.items())
+    params = ", ".join(_param(p, q) for p, q in sig.parameters.items())
     ret = sig.return_annotation
     tail = "" if ret is inspect.Signature.empty or ret is None else f" -> {_type_name(ret)}"
     return f"`{name}({params}){tail}`"
@@ -192,6 +217,14 @@ def render() -> str:
             doc = next((o.fn.__doc__ for o in fn.overloads if o.fn.__doc__), None)
             lines.append(f"| `{name}` | {sigs} | {_first_line(doc)} | `{module}` |")
         lines.append("")
+    lines += ["## Library types", "",
+              "Structs the library functions take and return (`wp.<name>`; `wp.<name>()` makes "
+              "an empty one). The query results (`MeshQueryPoint`, `MeshQueryRay`) have "
+              "Warp's fields; the query states are advanced by their `..._next` function "
+              "(their fields are kdsl's own; Warp's are opaque).", "",
+              "| type | fields | description | module |", "| --- | --- | --- | --- |"]  # fmt: skip
+    for name, (module, cls) in sorted(stdlib_types().items()):
+        lines.append(f"| `{name}` | {_fields(cls)} | {_first_line(cls.__doc__)} | `{module}` |")
     return "\n".join(lines).rstrip() + "\n"
 
 

@@ -131,3 +131,13 @@ def test_bvh_query_default_compiles_for_cuda():
     m = _far_ray.build_module()
     run_pipeline(m, DEFAULT_PIPELINE)
     assert nvrtc.compile_source(generate(m, [_far_ray.key]).text, "sm_90").ptx
+
+
+def test_every_builtin_and_query_struct_is_in_the_builtins_page():
+    from kdsl.tools.builtins_doc import DOCS
+
+    page = DOCS.read_text()
+    for name in (*GEOMETRY_BUILTINS, "MeshQueryPoint", "MeshQueryRay", "MeshQueryAABB",
+                 "BvhQuery"):  # fmt: skip
+        assert f"\n| `{name}` |" in page, name
+    assert "mesh_query_point_sign_normal(id: uint64, point: vec3f, max_dist: float, epsilon: float = 0.001)" in page
