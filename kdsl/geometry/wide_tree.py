@@ -8,11 +8,12 @@ it measured faster (docs/performance.md, "CPU closest points: a 4-wide tree"); a
 walks the binary tree. docs/geometry.md ("Wide tree") describes the layout.
 
 The collapse (``rebuild``, after every build of the binary tree) is one kdsl kernel
-run by one thread: from the root, breadth first, each wide node takes its binary
-node's two children and splits the one of largest surface area into its own two,
-until it has four or only leaves are left, where a leaf is any binary subtree of at
-most four faces whose faces are consecutive in the item order (so two small sibling
-leaves share one wide leaf). It writes the topology (``WideNode.child``, ``src``) and
+run by one thread: from the root, depth first (so a subtree's wide nodes, and its
+leaves, are numbered consecutively), each wide node takes its binary node's two
+children and splits the one of largest surface area into its own two, until it has
+four or only leaves are left, where a leaf is any binary subtree of at most four
+faces whose faces are consecutive in the item order (so two small sibling leaves
+share one wide leaf). It writes the topology (``WideNode.child``, ``src``) and
 each wide leaf's faces; ``refit`` (after every refit of the binary tree, so also after
 the points moved) copies each child's box from its binary node and gathers the
 leaves' corners from the points in parallel kernels.
