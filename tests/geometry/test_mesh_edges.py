@@ -1,5 +1,6 @@
 """Mesh edge cases, the out-argument forms (the seed's ``project`` kernel), gradients,
-accessors and bad input."""
+accessors and bad input. The edge cases (docs/geometry.md, "Edge cases") run on
+interp, cpu and cuda."""
 
 from __future__ import annotations
 
@@ -10,14 +11,24 @@ import kdsl as wp
 from kdsl.errors import KdslTypeError
 
 BACKENDS = ["interp", "cpu"]
+#: The edge-case tests also run on a GPU.
+ALL_BACKENDS = [
+    *BACKENDS,
+    pytest.param("cuda", marks=pytest.mark.skipif(not wp.is_cuda_available(), reason="no GPU")),
+]
 V3 = wp.vec3
 # Two triangles sharing the edge (1, 2) in the plane z = 0, and a sliver.
 PTS = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0], [2, 2, 2], [3, 3, 3]], np.float32)
 FACES = np.array([[0, 1, 2], [1, 3, 2], [4, 5, 5]], np.int32)
 
 
-def _mesh(pts=PTS, faces=FACES, **kw):
-    return wp.Mesh(wp.array(pts, dtype=V3), wp.array(faces, dtype=wp.int32), **kw)
+def _dev(backend: str) -> str:
+    return "cuda" if backend == "cuda" else "cpu"
+
+
+def _mesh(pts=PTS, faces=FACES, device="cpu", **kw):
+    return wp.Mesh(wp.array(pts, dtype=V3, device=device),
+                   wp.array(faces, dtype=wp.int32, device=device), **kw)  # fmt: skip
 
 
 # The seed's kernel, unchanged (Warp's blog post, "Meshes").
@@ -42,14 +53,15 @@ def project(
 
 
 def _project(mesh, xs, backend):
-    n = len(xs)
-    pos = wp.full(n, V3(-7.0, -7.0, -7.0), dtype=V3)
-    face = wp.full(n, -7, dtype=int)
-    wp.launch(project, dim=n, inputs=[wp.array(xs, dtype=V3), mesh.id, pos, face], backend=backend)
+    n, dev = len(xs), _dev(backend)
+    pos = wp.full(n, V3(-7.0, -7.0, -7.0), dtype=V3, device=dev)
+    face = wp.full(n, -7, dtype=int, device=dev)
+    wp.launch(project, dim=n, inputs=[wp.array(xs, dtype=V3, device=dev), mesh.id, pos, face],
+              backend=backend, device=dev)  # fmt: skip
     return pos.numpy(), face.numpy()
 
 
-@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("backend", ALL_BACKENDS)
 def test_seed_project_kernel_and_ties(backend):
     xs = np.array(
         [
@@ -63,7 +75,7 @@ def test_seed_project_kernel_and_ties(backend):
         ],
         np.float32,
     )
-    pos, face = _project(_mesh(), xs, backend)
+    pos, face = _project(_mesh(device=_dev(backend)), xs, backend)
     np.testing.assert_array_equal(face, [0, 0, 0, 0, -7, -7, 1])
     np.testing.assert_allclose(
         pos[:4], [[0.2, 0.2, 0], [1, 0, 0], [0.5, 0.5, 0], [0.5, 0.5, 0]], atol=1e-6
@@ -90,8 +102,6 @@ def rays_kernel(
         out_t[i] = hit_t
 
 
-# A separate kernel: calling the out-argument form and a second query in one kernel
-# mixes up their loop-carried values (a frontend bug, reported with issue 15).
 @wp.kernel
 def count_kernel(
     mesh: wp.uint64,
@@ -103,7 +113,7 @@ def count_kernel(
     count[i] = wp.mesh_query_ray_count_intersections(mesh, starts[i], dirs[i])
 
 
-@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("backend", ALL_BACKENDS)
 def test_ray_edge_cases(backend):
     starts = np.array(
         [
@@ -119,15 +129,16 @@ def test_ray_edge_cases(backend):
     dirs = np.array(
         [[0, 0, -1], [0, 0, -1], [1, 0, 0], [0, 0, 1], [0, 0, -1], [0, 0, -1]], np.float32
     )
-    n = len(starts)
+    n, dev = len(starts), _dev(backend)
     face, t, count = (
-        wp.full(n, -1, dtype=int),
-        wp.full(n, -1.0, dtype=float),
-        wp.zeros(n, dtype=int),
+        wp.full(n, -1, dtype=int, device=dev),
+        wp.full(n, -1.0, dtype=float, device=dev),
+        wp.zeros(n, dtype=int, device=dev),
     )
-    mesh, ins = _mesh(), [wp.array(starts, dtype=V3), wp.array(dirs, dtype=V3)]
-    wp.launch(rays_kernel, dim=n, inputs=[mesh.id, *ins, face, t], backend=backend)
-    wp.launch(count_kernel, dim=n, inputs=[mesh.id, *ins, count], backend=backend)
+    mesh = _mesh(device=dev)
+    ins = [wp.array(starts, dtype=V3, device=dev), wp.array(dirs, dtype=V3, device=dev)]
+    wp.launch(rays_kernel, dim=n, inputs=[mesh.id, *ins, face, t], backend=backend, device=dev)
+    wp.launch(count_kernel, dim=n, inputs=[mesh.id, *ins, count], backend=backend, device=dev)
     # through the shared edge: both faces are hit at t = 1, the lowest wins; count sees both
     # (watertight); through a shared vertex likewise; parallel to the faces: a miss; away
     # from them: a miss; NaN: a miss; from on the face: t = 0
@@ -151,12 +162,54 @@ def everything_kernel(mesh: wp.uint64, out: wp.array(dtype=int)):
     out[7] = int(wp.mesh_query_point_sign_normal(mesh, p, 1.0e6).result)
 
 
-@pytest.mark.parametrize("backend", BACKENDS)
+@pytest.mark.parametrize("backend", ALL_BACKENDS)
 def test_empty_mesh_finds_nothing(backend):
-    mesh = wp.Mesh(wp.zeros(0, dtype=V3), wp.zeros(0, dtype=wp.int32))
-    out = wp.full(8, 7, dtype=int)
-    wp.launch(everything_kernel, dim=1, inputs=[mesh.id, out], backend=backend)
+    dev = _dev(backend)
+    mesh = wp.Mesh(wp.zeros(0, dtype=V3, device=dev), wp.zeros(0, dtype=wp.int32, device=dev))
+    out = wp.full(8, 7, dtype=int, device=dev)
+    wp.launch(everything_kernel, dim=1, inputs=[mesh.id, out], backend=backend, device=dev)
     np.testing.assert_array_equal(out.numpy(), 0)
+
+
+@wp.kernel
+def degenerate_kernel(mesh: wp.uint64, radius: wp.array(dtype=float), centers: wp.array(dtype=V3),
+                      hits: wp.array2d(dtype=int), ray: wp.array(dtype=float)):  # fmt: skip
+    i = wp.tid()
+    q = wp.mesh_query_sphere(mesh, centers[i], radius[i])
+    f = 0
+    while wp.mesh_query_next(q, f):
+        hits[i, f] = 1
+    if i == 0:  # down through the zero-area face (a segment) onto face 0
+        start = wp.vec3(0.5, 0.2, 10.0)
+        down = wp.vec3(0.0, 0.0, -1.0)
+        h = wp.mesh_query_ray(mesh, start, down, 1.0e6)
+        ray[0] = float(h.face)
+        ray[1] = h.t
+        ray[2] = float(wp.mesh_query_ray_count_intersections(mesh, start, down))
+
+
+@pytest.mark.parametrize("backend", ALL_BACKENDS)
+def test_degenerate_faces_and_negative_radius(backend):
+    dev = _dev(backend)
+    # face 2 has coincident vertices (a segment), face 3 collinear ones, both zero-area
+    pts = np.concatenate([PTS, [[0, 0.2, 5], [1, 0.2, 5], [2, 0.2, 5]]]).astype(np.float32)
+    faces = np.concatenate([FACES, [[6, 7, 8]]]).astype(np.int32)
+    mesh = _mesh(pts, faces, device=dev)
+    centers = np.array([[0.0, 0.0, 0.0], [2.5, 2.5, 2.6], [2.5, 2.5, 2.6], [1.5, 0.2, 5.05]],
+                       np.float32)  # fmt: skip
+    radius = np.array([-1.0, 0.1, 0.05, 0.1], np.float32)
+    hits = wp.zeros((4, len(faces)), dtype=int, device=dev)
+    ray = wp.zeros(3, dtype=float, device=dev)
+    wp.launch(degenerate_kernel, dim=4, backend=backend, device=dev,
+              inputs=[mesh.id, wp.array(radius, device=dev),
+                      wp.array(centers, dtype=V3, device=dev), hits, ray])  # fmt: skip
+    # a negative radius is 0 (the centre is face 0's vertex; face 1, 0.71 away, is not
+    # within 1 = |radius|); a zero-area face counts by its
+    # longest edge (the segment (2,2,2)-(3,3,3) is 0.082 from the second centre)
+    np.testing.assert_array_equal(hits.numpy(), [[1, 0, 0, 0], [0, 0, 1, 0], [0, 0, 0, 0],
+                                                 [0, 0, 0, 1]])  # fmt: skip
+    # a ray through a zero-area face does not hit it (its determinant is 0)
+    np.testing.assert_allclose(ray.numpy(), [0, 10, 1])
 
 
 @wp.kernel
