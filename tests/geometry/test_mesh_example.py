@@ -54,9 +54,10 @@ def test_generated_sphere(example, capsys):
     assert out["mean_distance"] == pytest.approx(ref.mean(), rel=1e-4)
 
 
-def test_mesh_file_through_trimesh(example, tmp_path, capsys):
+@pytest.mark.parametrize("suffix", ["obj", "ply", "stl"])
+def test_mesh_file_through_trimesh(example, tmp_path, capsys, suffix):
     trimesh = pytest.importorskip("trimesh")
-    path = tmp_path / "box.obj"
+    path = tmp_path / f"box.{suffix}"
     trimesh.creation.box(extents=(1.0, 2.0, 0.5)).export(path)
     out = example.run(str(path), num_points=200)
     printed = capsys.readouterr().out
