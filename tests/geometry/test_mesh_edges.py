@@ -316,6 +316,20 @@ def test_views_without_copies():
     assert mesh.indices.shape == (9,)
 
 
+def test_numpy_and_torch_memory_is_used_in_place():
+    pts, faces = PTS.copy(), FACES.copy()
+    mesh = wp.Mesh(wp.array(pts, copy=False), wp.array(faces, copy=False))  # (n, 3), (m, 3)
+    assert mesh.points.ptr == pts.ctypes.data and mesh.indices.ptr == faces.ctypes.data
+    torch = pytest.importorskip("torch")
+    tp, tf = torch.from_numpy(PTS.copy()), torch.from_numpy(FACES.copy())
+    mesh = wp.Mesh(wp.from_torch(tp), wp.from_torch(tf))
+    assert mesh.points.ptr == tp.data_ptr() and mesh.indices.ptr == tf.data_ptr()
+    tp[:, 2] += 1.0  # moved in place through torch, then refit: the mesh follows
+    mesh.refit()
+    pos, _ = _project(mesh, np.array([[0.2, 0.2, 1.5]], np.float32), "cpu")
+    np.testing.assert_allclose(pos[0], [0.2, 0.2, 1.0], atol=1e-6)
+
+
 @pytest.mark.parametrize(
     "make, match",
     [
