@@ -11,16 +11,7 @@ import pytest
 
 import kdsl as wp
 from kdsl.stdlib.algorithms import SEARCH_DTYPES
-
-BACKENDS = [
-    "interp",
-    "cpu",
-    pytest.param("cuda", marks=pytest.mark.skipif(not wp.is_cuda_available(), reason="no GPU")),
-]
-
-
-def _device(backend: str) -> str:
-    return "cuda" if backend == "cuda" else "cpu"
+from tests.geometry.mesh_targets import BACKENDS, central_differences, device_of
 
 
 def _edge_kernel(V: type, S: type):
@@ -78,7 +69,7 @@ def _segments(rng: np.random.Generator) -> np.ndarray:
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
 def test_closest_point_edge_edge_matches_brute_force(backend, dtype):
     seg = _segments(np.random.default_rng(11)).astype(dtype)
-    dev = _device(backend)
+    dev = device_of(backend)
     V = wp.vec3 if dtype == np.float32 else wp.vec3d
     out = wp.zeros(len(seg), dtype=V, device=dev)
     wp.launch(EDGES[dtype], dim=len(seg), backend=backend, device=dev,
@@ -105,7 +96,7 @@ def edge_distance(p1: wp.array(dtype=wp.vec3), out: wp.array(dtype=float)):
 
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_closest_point_edge_edge_gradient(backend):
-    dev = _device(backend)
+    dev = device_of(backend)
     p0 = np.array([[-1.0, 0.1, -0.3], [-0.5, 0.7, 0.2]], np.float32)
     n = len(p0)
 
@@ -121,12 +112,7 @@ def test_closest_point_edge_edge_gradient(backend):
     with tape:
         wp.launch(edge_distance, dim=n, inputs=[p, out], backend=backend, device=dev)
     tape.backward(grads={out: wp.ones(n, dtype=float, device=dev)})
-    h = 1e-3
-    fd = np.zeros((n, 3))
-    for k in range(3):
-        dp = np.zeros_like(p0)
-        dp[:, k] = h
-        fd[:, k] = (loss(p0 + dp) - loss(p0 - dp)) / (2 * h)
+    fd = central_differences(loss, p0)
     np.testing.assert_allclose(p.grad.numpy(), fd, rtol=1e-2, atol=1e-2)
     assert np.abs(fd).max() > 0.1
 
@@ -182,7 +168,7 @@ def test_intersect_tri_tri_matches_brute_force(backend):
     keep = np.array([m > 1e-6 for _, m in ref])  # answers that rounding cannot flip
     want = np.array([h for h, _ in ref])[keep].astype(int)
     assert 30 < want.sum() < len(want) - 30  # both answers are well represented
-    dev = _device(backend)
+    dev = device_of(backend)
     for kernel, V, dtype in ((tri_tri, wp.vec3d, np.float64), (tri_tri32, wp.vec3, np.float32)):
         out = wp.zeros(len(tris), dtype=int, device=dev)
         wp.launch(kernel, dim=len(tris), backend=backend, device=dev,
@@ -203,7 +189,7 @@ def test_intersect_tri_tri_coplanar_and_touching(backend):
         (a + [[2, 0, z], [3, 0, 1], [3, 1, -1]], 1),  # touching at a shared vertex
     ]
     tris = np.array([c for c, _ in cases], np.float64)
-    dev = _device(backend)
+    dev = device_of(backend)
     out = wp.zeros(len(tris), dtype=int, device=dev)
     wp.launch(tri_tri, dim=len(tris), backend=backend, device=dev,
               inputs=[wp.array(tris, dtype=wp.vec3d, device=dev), out])  # fmt: skip
@@ -237,7 +223,7 @@ def test_lower_bound_every_dtype_and_range(backend, S):
     arr = np.array([1, 3, 3, 7, 9, 12], np_t)
     q = np.array([0, 1, 2, 3, 7, 8, 12, 100], np_t)
     lo, hi = 1, 4
-    dev = _device(backend)
+    dev = device_of(backend)
     out = wp.zeros((len(q), 2), dtype=int, device=dev)
     wp.launch(SEARCH[S], dim=len(q), backend=backend, device=dev,
               inputs=[wp.array(arr, dtype=S, device=dev), wp.array(q, dtype=S, device=dev), lo, hi,

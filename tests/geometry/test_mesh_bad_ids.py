@@ -14,12 +14,8 @@ import pytest
 
 import kdsl as wp
 from kdsl.errors import KdslRuntimeError
+from tests.geometry.mesh_targets import BACKENDS, device_of
 
-BACKENDS = [
-    "interp",
-    "cpu",
-    pytest.param("cuda", marks=pytest.mark.skipif(not wp.is_cuda_available(), reason="no GPU")),
-]
 V3 = wp.vec3
 
 
@@ -41,7 +37,7 @@ def _mesh(device: str) -> wp.Mesh:
 
 
 def _launch(mesh_id: int, backend: str) -> np.ndarray:
-    dev = "cuda" if backend == "cuda" else "cpu"
+    dev = device_of(backend)
     xs = wp.array(np.full((2, 3), 0.2, np.float32), dtype=V3, device=dev)
     face = wp.full(2, -1, dtype=int, device=dev)
     wp.launch(closest_faces, dim=2, inputs=[mesh_id, xs, face], backend=backend, device=dev)
@@ -58,7 +54,7 @@ def _names_the_users_line(err: KdslRuntimeError) -> None:
 
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_a_freed_mesh_id_names_the_kernels_line(backend):
-    mesh = _mesh("cuda" if backend == "cuda" else "cpu")
+    mesh = _mesh(device_of(backend))
     assert list(_launch(mesh.id, backend)) == [0, 0]
     stale = mesh.id
     del mesh

@@ -11,12 +11,8 @@ import pytest
 
 import kdsl as wp
 from tests.geometry.mesh_reference import closest_distances, icosphere, ray_hits, winding_numbers
+from tests.geometry.mesh_targets import BACKENDS, device_of
 
-BACKENDS = [
-    "interp",
-    "cpu",
-    pytest.param("cuda", marks=pytest.mark.skipif(not wp.is_cuda_available(), reason="no GPU")),
-]
 V3 = wp.vec3
 #: The point queries by number: no_sign, point, sign_normal, sign_parity,
 #: sign_winding_number, furthest_point_no_sign.
@@ -67,8 +63,6 @@ def point_forms(
     structs[i, 4] = q.v
 
 
-def _device(backend: str) -> str:
-    return "cuda" if backend == "cuda" else "cpu"
 
 
 @pytest.fixture(scope="module")
@@ -79,7 +73,7 @@ def sphere():
 
 
 def _point_forms(mesh, xs, kind, max_dist, backend):
-    dev = _device(backend)
+    dev = device_of(backend)
     n = len(xs)
     outs, structs = (wp.zeros((n, 5), dtype=float, device=dev) for _ in range(2))
     wp.launch(point_forms, dim=n, backend=backend, device=dev,
@@ -96,7 +90,7 @@ def _position(pts, faces, face, u, v):
 @pytest.mark.parametrize("kind", KINDS)
 def test_out_argument_forms_match_struct_forms_and_brute_force(backend, kind, sphere):
     pts, faces, xs = sphere
-    dev = _device(backend)
+    dev = device_of(backend)
     mesh = wp.Mesh(wp.array(pts, dtype=V3, device=dev), wp.array(faces, dtype=wp.int32, device=dev),
                    support_winding_number=True)  # fmt: skip
     far = kind == 5
@@ -122,7 +116,7 @@ def test_out_argument_forms_match_struct_forms_and_brute_force(backend, kind, sp
 @pytest.mark.parametrize("kind", KINDS)
 def test_a_miss_leaves_the_out_arguments_untouched(backend, kind, sphere):
     pts, faces, _ = sphere
-    dev = _device(backend)
+    dev = device_of(backend)
     mesh = wp.Mesh(wp.array(pts, dtype=V3, device=dev), wp.array(faces, dtype=wp.int32, device=dev))
     xs = np.array([[5.0, 0.0, 0.0], [np.nan, 0.0, 0.0]], np.float32)
     # closest within 0.5 of (5, 0, 0): none; furthest beyond 100: none; NaN: nothing
@@ -163,7 +157,7 @@ def ray_forms(
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_ray_out_form_then_more_queries_in_one_kernel(backend, sphere):
     pts, faces, xs = sphere
-    dev = _device(backend)
+    dev = device_of(backend)
     mesh = wp.Mesh(wp.array(pts, dtype=V3, device=dev), wp.array(faces, dtype=wp.int32, device=dev))
     rng = np.random.default_rng(6)
     starts = np.concatenate([xs, [[5.0, 5.0, 5.0]]]).astype(np.float32)

@@ -10,12 +10,8 @@ import pytest
 
 import kdsl as wp
 from tests.geometry.mesh_reference import icosphere
+from tests.geometry.mesh_targets import BACKENDS, central_differences, device_of
 
-BACKENDS = [
-    "interp",
-    "cpu",
-    pytest.param("cuda", marks=pytest.mark.skipif(not wp.is_cuda_available(), reason="no GPU")),
-]
 V3 = wp.vec3
 #: Query kinds: the six struct forms (no_sign, point, sign_normal, sign_parity,
 #: sign_winding_number, furthest_point_no_sign), then the seeds' out-argument forms of
@@ -67,7 +63,7 @@ LOSSES = [_point_loss(kind) for kind in KINDS]
 @pytest.mark.parametrize("backend", BACKENDS)
 @pytest.mark.parametrize("kind", KINDS)
 def test_point_query_gradient_matches_finite_differences(backend, kind):
-    dev = "cuda" if backend == "cuda" else "cpu"
+    dev = device_of(backend)
     pts, faces = icosphere(1, bumps=0.1, seed=7)
     points = wp.array(pts, dtype=V3, device=dev, requires_grad=True)
     mesh = wp.Mesh(points, wp.array(faces, dtype=wp.int32, device=dev), support_winding_number=True)
@@ -89,12 +85,7 @@ def test_point_query_gradient_matches_finite_differences(backend, kind):
     with tape:
         wp.launch(LOSSES[kind], dim=n, inputs=[mesh.id, xs, out], backend=backend, device=dev)
     tape.backward(grads={out: wp.array(w, dtype=V3, device=dev)})
-    h = 1e-3
-    fd = np.zeros((n, 3))
-    for k in range(3):
-        dx = np.zeros_like(xs0)
-        dx[:, k] = h
-        fd[:, k] = (loss(xs0 + dx) - loss(xs0 - dx)) / (2 * h)
+    fd = central_differences(loss, xs0)
     np.testing.assert_allclose(xs.grad.numpy(), fd, atol=2e-2)
     if kind == 5:  # the furthest point is a vertex: it does not move with the query
         np.testing.assert_array_equal(fd, 0)
