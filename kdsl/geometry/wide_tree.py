@@ -16,7 +16,8 @@ faces whose faces are consecutive in the item order (so two small sibling leaves
 share one wide leaf). It writes the topology (``WideNode.child``, ``src``) and
 each wide leaf's faces; ``refit`` (after every refit of the binary tree, so also after
 the points moved) copies each child's box from its binary node and gathers the
-leaves' corners from the points in parallel kernels.
+leaves' corners from the mesh's vertex copy in item order (``TreePoints.tri``, where
+a leaf's faces are consecutive) in parallel kernels.
 """
 
 from __future__ import annotations
@@ -130,14 +131,15 @@ def _children(
 
 @kernel
 def _collapse(
-    nodes: array(dtype=BvhNode), items: array(dtype=int32), stack: array(dtype=int32),
+    nodes: array(dtype=BvhNode), stack: array(dtype=int32),
     parents: array(dtype=int32), child: array(dtype=vec4i), src: array(dtype=vec4i),
-    faces: array(dtype=vec4i), counts: array(dtype=int32),
+    spans: array(dtype=vec2i), counts: array(dtype=int32),
 ):  # fmt: skip
     # One thread, depth first (a subtree's wide nodes and leaves are numbered
     # consecutively): binary node stack[t] becomes the next wide node, linked into
     # lane parents[t] % 4 of wide node parents[t] / 4 (-1: the root); writes child[w],
-    # src[w] and each wide leaf's faces; counts = (wide nodes, wide leaves, status).
+    # src[w] and each wide leaf's faces (spans: first position in the items, count);
+    # counts = (wide nodes, wide leaves, status).
     num_nodes = 0
     num_leaves = 0
     status = 0
@@ -168,11 +170,7 @@ def _collapse(
             n = kids[j]
             if n >= 0:
                 if sizes[j] >= 0:
-                    f = vec4i(-1)
-                    for i in range(static(LANES)):
-                        if i < sizes[j]:
-                            f[i] = items[firsts[j] + i]
-                    faces[num_leaves] = f
+                    spans[num_leaves] = vec2i(firsts[j], sizes[j])
                     links[j] = -num_leaves - 1
                     num_leaves = num_leaves + 1
                 elif nodes[n].first >= 0:
@@ -246,25 +244,27 @@ def _refit_nodes(bnodes: array(dtype=BvhNode), nodes: array(dtype=WideNode)):
 
 @kernel
 def _gather_leaves(
-    points: array(dtype=vec3), indices: array(dtype=int32), faces: array(dtype=vec4i),
+    tri: array(dtype=vec3), items: array(dtype=int32), spans: array(dtype=vec2i),
     leaves: array(dtype=WideLeaf),
 ):  # fmt: skip
-    # Leaf k's lanes: its faces' corners (zero in an empty lane) and numbers (-1 for an
-    # empty lane or a sliver). The indices were checked by the mesh's face-box kernel.
+    # Leaf k's lanes: the corners of the faces at its item positions, read from the
+    # mesh's vertex copy in item order (consecutive: no index loads; zero in an empty
+    # lane), and the faces' numbers (-1 for an empty lane or a sliver).
     k = tid()
-    f = faces[k]
+    span = spans[k]
     lf = WideLeaf()
     lf.face = vec4i(-1)
     for i in range(static(LANES)):
         a = vec3(float32(0.0))
         b = vec3(float32(0.0))
         c = vec3(float32(0.0))
-        if f[i] >= 0:
-            a = points[indices[f[i] * 3]]
-            b = points[indices[f[i] * 3 + 1]]
-            c = points[indices[f[i] * 3 + 2]]
+        if i < span[1]:
+            at = span[0] + i
+            a = tri[at * 3]
+            b = tri[at * 3 + 1]
+            c = tri[at * 3 + 2]
             if not is_sliver(a, b, c):
-                lf.face[i] = f[i]
+                lf.face[i] = items[at]
         lf.ax[i] = a[0]
         lf.ay[i] = a[1]
         lf.az[i] = a[2]
@@ -285,8 +285,9 @@ def wants_wide_tree(device: Any, leaf_size: int) -> bool:
 
 class WideTree:
     """A mesh's 4-wide tree (``kdsl.stdlib.mesh_wide.WideRecord``; ``id`` for the mesh's
-    record). ``tree_points`` is the mesh's ``TreePoints``, whose ``points`` and
-    ``indices`` the leaves are gathered from. ``rebuild(bvh)`` collapses the binary
+    record). ``tree_points`` is the mesh's ``TreePoints``, whose vertex copy (``tri``,
+    in the BVH's item order, written before the wide tree is) the leaves are gathered
+    from. ``rebuild(bvh)`` collapses the binary
     tree again (after it was built), ``refit(bvh)`` refreshes the boxes and corners
     (after it was refit)."""
 
@@ -296,7 +297,7 @@ class WideTree:
         self._record = ObjectRecord(self, WideRecord.__kdsl_type__, "mesh wide tree", device)
         self.nodes: array | None = None
         self.leaves: array | None = None
-        self._faces: array | None = None
+        self._spans: array | None = None
 
     @property
     def id(self) -> int:
@@ -309,23 +310,23 @@ class WideTree:
         tris = self.tree_points.indices.shape[0] // 3
         cap = max(tris, 1)  # at most one wide node and one wide leaf per face
         stack, parents = (empty(cap, dtype=int32, device=dev) for _ in range(2))
-        child, src, faces = (empty(cap, dtype=vec4i, device=dev) for _ in range(3))
+        child, src = (empty(cap, dtype=vec4i, device=dev) for _ in range(2))
+        spans = empty(cap, dtype=vec2i, device=dev)
         counts = empty(3, dtype=int32, device=dev)
         num_nodes = num_leaves = status = 0
         if tris > 0:
             launch(_collapse, dim=1, device=dev,
-                   inputs=[bvh.packed_nodes, bvh.item_order, stack, parents, child, src, faces,
-                           counts])  # fmt: skip
+                   inputs=[bvh.packed_nodes, stack, parents, child, src, spans, counts])  # fmt: skip
             num_nodes, num_leaves, status = (int(x) for x in counts.numpy())
         if status != 0:
             num_nodes = num_leaves = 0
         self.nodes = empty(num_nodes, dtype=WideNode, device=dev)
         self.leaves = empty(num_leaves, dtype=WideLeaf, device=dev)
-        self._faces = clone(faces[:num_leaves])
+        self._spans = clone(spans[:num_leaves])
         if num_nodes:
             launch(_init_nodes, dim=num_nodes, device=dev,
                    inputs=[child[:num_nodes], src[:num_nodes], bvh.packed_nodes, self.nodes])  # fmt: skip
-        self._gather()
+        self._gather(bvh)
         self._record.write({"nodes": self.nodes, "leaves": self.leaves, "fallback": status})
 
     def refit(self, bvh: Bvh) -> None:
@@ -333,10 +334,9 @@ class WideTree:
         if self.nodes.shape[0]:
             launch(_refit_nodes, dim=self.nodes.shape[0], device=self.device,
                    inputs=[bvh.packed_nodes, self.nodes])  # fmt: skip
-        self._gather()
+        self._gather(bvh)
 
-    def _gather(self) -> None:
+    def _gather(self, bvh: Bvh) -> None:
         if self.leaves.shape[0]:
-            tp = self.tree_points
             launch(_gather_leaves, dim=self.leaves.shape[0], device=self.device,
-                   inputs=[tp.points, tp.indices, self._faces, self.leaves])  # fmt: skip
+                   inputs=[self.tree_points.tri, bvh.item_order, self._spans, self.leaves])  # fmt: skip
