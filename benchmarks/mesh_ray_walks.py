@@ -523,6 +523,29 @@ def lib_rays(mesh: wp.uint64, alt: wp.array(dtype=BvhNode), start: wp.array(dtyp
         t[i] = q.t
 
 
+@wp.kernel(enable_backward=False)
+def _node_count(mesh: wp.uint64, out: wp.array(dtype=wp.int32)):
+    rec = wp.object_record(mesh, MeshRecord)
+    out[0] = wp.object_record(rec.bvh, BvhRecord).nodes.shape[0]
+
+
+@wp.kernel(enable_backward=False)
+def _copy_nodes(mesh: wp.uint64, out: wp.array(dtype=BvhNode)):
+    i = wp.tid()
+    rec = wp.object_record(mesh, MeshRecord)
+    out[i] = wp.object_record(rec.bvh, BvhRecord).nodes[i]
+
+
+def packed_nodes(mesh: wp.Mesh, dev: str) -> np.ndarray:
+    """The packed nodes of ``mesh``'s BVH, read through its record (a NumPy structured
+    array)."""
+    n = wp.zeros(1, dtype=wp.int32, device=dev)
+    wp.launch(_node_count, 1, [mesh.id, n], device=dev)
+    out = wp.zeros(int(n.numpy()[0]), dtype=BvhNode, device=dev)
+    wp.launch(_copy_nodes, out.shape[0], [mesh.id, out], device=dev)
+    return out.numpy()
+
+
 def right_linked(nodes: np.ndarray) -> np.ndarray:
     """A copy of packed nodes (a ``BvhNode`` structured array) whose inner nodes'
     ``first`` is minus their right child's index (the left child is the next node)."""
@@ -598,7 +621,7 @@ def main(argv: list[str] | None = None) -> int:
     n = len(data["ray_start"])
     mesh = wp.Mesh(wp.array(data["points"], dtype=wp.vec3, device=dev),
                    wp.array(data["faces"].reshape(-1), dtype=wp.int32, device=dev))  # fmt: skip
-    alt = wp.array(right_linked(mesh.bvh.packed_nodes.numpy()), dtype=BvhNode, device=dev)
+    alt = wp.array(right_linked(packed_nodes(mesh, dev)), dtype=BvhNode, device=dev)
     s = wp.array(data["ray_start"], dtype=wp.vec3, device=dev)
     d = wp.array(data["ray_dir"], dtype=wp.vec3, device=dev)
     rows: list[dict] = []
