@@ -334,3 +334,39 @@ def test_refit_follows_new_box_arrays():
         bvh.refit()
     bvh.rebuild()
     check_tree(bvh, 10, 1)
+
+
+@cuda
+@pytest.mark.parametrize("constructor", CONSTRUCTORS)
+def test_every_query_kind_and_group_roots_on_cuda(constructor):
+    dev = "cuda:0"
+    n, m = 400, 64
+    lo, hi = random_boxes(n, seed=21)
+    groups = np.random.default_rng(22).integers(0, 3, n).astype(np.int32)
+    lo64, hi64 = lo.astype(np.float64), hi.astype(np.float64)
+    rng = np.random.default_rng(23)
+    qc = rng.random((m, 3)).astype(np.float32)
+    start = (rng.random((m, 3)) * 1.4 - 0.2).astype(np.float32)
+    d = rng.normal(size=(m, 3)).astype(np.float32)
+
+    def v3(a):
+        return wp.array(a, dtype=wp.vec3, device=dev)
+
+    for g in (None, groups):
+        bvh = make_bvh(lo, hi, constructor, 2, g, device=dev)
+        got = run_query(ray_hits, m, [bvh.id, v3(start), v3(d), 0.3], "cuda", dev)
+        assert got == [brute_ray(lo64, hi64, start[i], d[i], 0.3) for i in range(m)]
+        got = run_query(sphere_hits, m, [bvh.id, v3(qc), 0.06], "cuda", dev)
+        assert got == [brute_sphere(lo64, hi64, qc[i], 0.06) for i in range(m)]
+        got = run_query(capsule_hits, m, [bvh.id, v3(start), v3(d), 0.02, 0.2], "cuda", dev)
+        want = [brute_ray(lo64 - 0.02, hi64 + 0.02, start[i], d[i], 0.2, True) for i in range(m)]
+        assert got == want
+    roots = wp.zeros(4, dtype=int, device=dev)
+    wp.launch(group_roots, dim=4, inputs=[bvh.id, wp.array([0, 1, 2, 3], dtype=int, device=dev),
+                                          roots], device=dev)  # fmt: skip
+    r = roots.numpy()
+    assert r[3] == -1
+    for k in range(3):
+        got = run_query(aabb_hits, 1, [bvh.id, v3([[-1, -1, -1]]), v3([[2, 2, 2]]), int(r[k])],
+                        "cuda", dev)  # fmt: skip
+        assert got == [set(np.flatnonzero(groups == k).tolist())]
