@@ -367,6 +367,6 @@ def test_every_query_kind_and_group_roots_on_cuda(constructor):
     r = roots.numpy()
     assert r[3] == -1
     for k in range(3):
-        got = run_query(aabb_hits, 1, [bvh.id, v3([[-1, -1, -1]]), v3([[2, 2, 2]]), int(r[k])],
-                        "cuda", dev)  # fmt: skip
+        args = [bvh.id, v3([[-1, -1, -1]]), v3([[2, 2, 2]]), int(r[k])]
+        got = hit_sets(launch_hits(wp, aabb_hits, 1, args, max_hits=n, device=dev, backend="cuda"))
         assert got == [set(np.flatnonzero(groups == k).tolist())]
