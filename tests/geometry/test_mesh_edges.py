@@ -330,6 +330,18 @@ def test_numpy_and_torch_memory_is_used_in_place():
     np.testing.assert_allclose(pos[0], [0.2, 0.2, 1.0], atol=1e-6)
 
 
+@pytest.mark.skipif(not wp.is_cuda_available(), reason="no GPU")
+def test_cupy_memory_is_used_in_place():
+    cp = pytest.importorskip("cupy")
+    pts, faces = cp.asarray(PTS), cp.asarray(FACES)
+    mesh = wp.Mesh(wp.from_dlpack(pts), wp.from_dlpack(faces))
+    assert mesh.points.ptr == pts.data.ptr and mesh.indices.ptr == faces.data.ptr
+    assert mesh.device == "cuda:0"
+    pos, face = _project(mesh, np.array([[0.2, 0.2, 1.5]], np.float32), "cuda")
+    np.testing.assert_allclose(pos[0], [0.2, 0.2, 0.0], atol=1e-6)
+    assert face[0] == 0
+
+
 @pytest.mark.parametrize(
     "make, match",
     [
