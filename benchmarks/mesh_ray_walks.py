@@ -58,6 +58,8 @@ from bench_geometry_mesh import MAX_T, RAY_DISAGREEMENT, workload
 STACK = 32
 #: The variants: name -> ``variant_kernel``'s keywords (its defaults: the library's walk).
 VARIANTS = {
+    "old_lib": {"walk": "old_lib"},
+    "old_lib_zero": {"walk": "old_lib", "fill": "zero"},
     "copy_zero": {"fill": "zero"},
     "copy_empty": {},
     "copy_param": {"param": True},
@@ -137,6 +139,134 @@ def fast_ray(dir: wp.vec3) -> bool:
     """Whether every direction component is large enough for ``slab_fast``."""
     m = wp.min(wp.min(wp.abs(dir[0]), wp.abs(dir[1])), wp.abs(dir[2]))
     return m >= 1.0e-30
+
+
+@wp.func
+def root_range(bvh: BvhRecord, root: int) -> wp.vec2i:
+    start = root
+    if start < 0:
+        start = bvh.root
+    if start < 0:
+        return wp.vec2i(0, 0)
+    return wp.vec2i(start, bvh.skip[start])
+
+
+@wp.func
+def wait(nodes: wp.array(dtype=wp.int32), keys: wp.array(dtype=wp.float32), count: int,
+         node: int, key: float) -> int:  # fmt: skip
+    if count < STACK:
+        nodes[count] = node
+        keys[count] = key
+    return count + 1
+
+
+@wp.func
+def next_ray_leaf(bvh: BvhRecord, node: int, stop: int, start: wp.vec3, inv: wp.vec3,
+                  max_t: float) -> wp.vec3i:  # fmt: skip
+    n = node
+    while n < stop:
+        nd = bvh.nodes[n]
+        if ray_box_enter(nd.lower, nd.upper, start, inv) <= max_t:
+            if nd.first >= 0:
+                return wp.vec3i(nd.first, nd.next, n + 1)
+            n = n + 1
+        else:
+            n = skip_of(nd, n)
+    return wp.vec3i(0, 0, stop)
+
+
+def _old_lib_walk(fill: str):
+    """The library's search before session 11's change (commit 6850bcd), with its
+    stackless fallback; ``fill``: its stacks from ``wp.zeros`` or ``wp.ext.empty``."""
+    zero = fill == "zero"
+
+    @wp.func
+    def walk(id: wp.uint64, alt: wp.array(dtype=BvhNode), start: wp.vec3, dir: wp.vec3,
+             max_t: float) -> int:  # fmt: skip
+        root = -1
+        rec = wp.object_record(id, MeshRecord)
+        bvh = wp.object_record(rec.bvh, BvhRecord)
+        shear = ray_shear(dir)
+        inv = wp.vec3(safe_inverse(dir[0]), safe_inverse(dir[1]), safe_inverse(dir[2]))
+        hit = Hit()
+        hit.t = max_t
+        hit.face = -1
+        hit.slot = -1
+        span = root_range(bvh, root)
+        if wp.static(zero):
+            nodes = wp.zeros(STACK, dtype=wp.int32)
+            enters = wp.zeros(STACK, dtype=wp.float32)
+        else:
+            nodes = wp.ext.empty(STACK, dtype=wp.int32)
+            enters = wp.ext.empty(STACK, dtype=wp.float32)
+        count = 0
+        sweep = span[1]  # the stackless pass's next node: none until the stack overflows
+        node = span[0]
+        active = False  # ``node`` (packed as ``nd``) is to be visited
+        nd = BvhNode()
+        if span[0] < span[1]:
+            nd = bvh.nodes[node]
+            active = ray_box_enter(nd.lower, nd.upper, start, inv) <= hit.t
+        while active or sweep < span[1]:
+            first = 0  # the leaf to test: its items [first, first + items)
+            items = 0
+            if active:
+                # Down the nearer children to a leaf (or to where both children are
+                # missed), then the leaf's faces: "while-while", as the closest point.
+                at_leaf = nd.first >= 0
+                inner = not at_leaf
+                while inner:
+                    near = node + 1
+                    near_nd = bvh.nodes[near]
+                    far = skip_of(near_nd, near)
+                    far_nd = bvh.nodes[far]
+                    t_near = ray_box_enter(near_nd.lower, near_nd.upper, start, inv)
+                    t_far = ray_box_enter(far_nd.lower, far_nd.upper, start, inv)
+                    near_in = t_near <= hit.t  # (false for NaN: a missed box)
+                    far_in = t_far <= hit.t
+                    if far_in and (not near_in or t_far < t_near):  # the far child first
+                        near_in = far_in
+                        far_in = t_near <= hit.t
+                        tmp = near
+                        near = far
+                        far = tmp
+                        tmp_nd = near_nd
+                        near_nd = far_nd
+                        far_nd = tmp_nd
+                        tmp_t = t_near
+                        t_near = t_far
+                        t_far = tmp_t
+                    inner = False
+                    if near_in:  # visit it now (its node is loaded); the other waits
+                        if far_in:
+                            count = wait(nodes, enters, count, far, t_far)
+                            if count > STACK:  # full: a stackless pass once it is empty
+                                count = STACK
+                                sweep = span[0]
+                        node = near
+                        nd = near_nd
+                        at_leaf = nd.first >= 0
+                        inner = not at_leaf
+                if at_leaf:
+                    first = nd.first
+                    items = nd.next
+            else:  # after an overflow, the stackless pass: its next leaf
+                step = next_ray_leaf(bvh, sweep, span[1], start, inv, hit.t)
+                sweep = step[2]
+                first = step[0]
+                items = step[1]
+            hit = leaf_hits(rec, bvh, first, items, shear, start, hit)
+            # the nearest waiting node not beyond the hit found so far
+            active = False
+            while count > 0 and not active:
+                count = count - 1
+                if enters[count] <= hit.t:
+                    node = nodes[count]
+                    nd = bvh.nodes[node]
+                    active = True
+        return hit.slot
+
+    return walk
 
 
 def _node_source(param: bool):
@@ -486,11 +616,14 @@ def finish(id: wp.uint64, slot: int, start: wp.vec3, dir: wp.vec3) -> wp.vec2:
 def variant_kernel(walk: str = "skip", fill: str = "empty", fast: bool = False,
                    recheck: bool = True, keep: bool = False, spec_right: bool = False,
                    while_while: bool = True, param: bool = False):  # fmt: skip
-    """The kernel of one variant: ``face[i]``, ``t[i]`` of ray ``i``. ``walk``: "skip"
-    (the library's), "spec" or "payload"; ``param``: the skip and spec walks read the
+    """The kernel of one variant: ``face[i]``, ``t[i]`` of ray ``i``. ``walk``: "old_lib"
+    (the library's before session 11's change), "skip" (a copy of it without the
+    stackless fallback), "spec" or "payload"; ``param``: the skip and spec walks read the
     nodes from the kernel's ``alt`` parameter (global loads) rather than through the
     BVH's record (generic loads); the rest: see the walks."""
-    if walk == "skip":
+    if walk == "old_lib":
+        search = _old_lib_walk(fill)
+    elif walk == "skip":
         search = _skip_walk(fill, fast, keep, param)
     elif walk == "spec":
         search = _spec_walk(fast, spec_right, param)
