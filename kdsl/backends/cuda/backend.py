@@ -9,7 +9,7 @@ from __future__ import annotations
 import ctypes
 import functools
 import os
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 from kdsl.backends import checks_common
@@ -144,7 +144,7 @@ class CudaBackend(Backend):
         """The module at ``stage``. "cuda-c" needs no GPU; "ptx" needs NVRTC only."""
         from kdsl.backends.cuda.lower import generate
 
-        src = generate(module, kernel_names(module), debug=checked).text
+        src = generate(module, kernel_names(module), checked, max_registers(options)).text
         if stage == "cuda-c":
             return src
         arch = options.get("arch") or current_arch()
@@ -284,8 +284,21 @@ def _source(job: Job) -> Any:
     if gen is None:  # the code generator is imported here: a cache hit never needs it
         from kdsl.backends.cuda.lower import generate
 
-        gen = job.notes["cuda-c"] = generate(job.module, [job.symbol], debug=job.checked)
+        gen = generate(job.module, [job.symbol], job.checked, max_registers(job.options))
+        job.notes["cuda-c"] = gen
     return gen
+
+
+def max_registers(options: Mapping[str, Any]) -> int | None:
+    """The kernel option ``cuda_max_registers`` (Warp's: the most registers a thread of
+    the kernel may use, ``__maxnreg__``), or None; anything but a positive int is a
+    ``KdslError``."""
+    n = options.get("cuda_max_registers")
+    if n is None:
+        return None
+    if isinstance(n, bool) or not isinstance(n, int) or n < 1:
+        raise KdslError(f"kernel option cuda_max_registers must be a positive int, not {n!r}")
+    return n
 
 
 _API: tuple[Any, Any] | None = None

@@ -54,8 +54,13 @@ class CudaSource:
     fast_entries: dict[str, str] = field(default_factory=dict)
 
 
-def generate(module: Module, kernels: list[str], debug: bool = False) -> CudaSource:
-    """The CUDA C unit holding ``kernels`` (and their callees); see the module docstring."""
+def generate(
+    module: Module, kernels: list[str], debug: bool = False, max_registers: int | None = None
+) -> CudaSource:
+    """The CUDA C unit holding ``kernels`` (and their callees); see the module docstring.
+    ``max_registers`` (the kernel option ``cuda_max_registers``, Warp's): each entry is
+    declared ``__maxnreg__(max_registers)`` instead of ``__launch_bounds__(BLOCK)``
+    (CUDA takes one or the other)."""
     # The op table (every op's emitter, about 5 ms to import) only when code is generated:
     # a cache hit names its kernel (``entry_name``) without it.
     from kdsl.backends.cuda.ops import TABLE
@@ -67,11 +72,11 @@ def generate(module: Module, kernels: list[str], debug: bool = False) -> CudaSou
     fast = {}
     for k in kernels:
         entries[k] = src.func_name(k)
-        bodies.append(_kernel(src, module.get_func(k)))
+        bodies.append(_kernel(src, module.get_func(k), max_registers=max_registers))
         plan = fast_plan(module, k, debug)
         if plan is not None:
             fast[k] = fast_entry_name(k)
-            bodies.append(_kernel(src, module.get_func(k), plan, fast[k]))
+            bodies.append(_kernel(src, module.get_func(k), plan, fast[k], max_registers))
     funcs: list[tuple[str, str, list]] = []
     done: set[str] = set()
     while len(done) < len(src.funcs_todo):
@@ -109,8 +114,9 @@ def _params(em: FuncEmitter, func: Operation) -> list[str]:
 
 
 def _kernel(
-    src: Source, func: Operation, plan: FastPlan | None = None, name: str | None = None
-) -> tuple[str, list]:
+    src: Source, func: Operation, plan: FastPlan | None = None, name: str | None = None,
+    max_registers: int | None = None,
+) -> tuple[str, list]:  # fmt: skip
     """The head and body lines of kernel ``func``: its general entry, or with ``plan``
     its fast entry ``name`` (``variants``)."""
     em = FuncEmitter(src, func, is_kernel=True)
@@ -129,8 +135,11 @@ def _kernel(
     else:
         _linear_prologue(em, nds)
     em.lower_block(func.regions[0].block)
+    bound = (
+        f"__launch_bounds__({BLOCK})" if max_registers is None else f"__maxnreg__({max_registers})"
+    )
     head = (
-        f'extern "C" __global__ void __launch_bounds__({BLOCK}) '
+        f'extern "C" __global__ void {bound} '
         f"{name or src.func_name(func.attrs['sym_name'])}({', '.join(params)})"
     )
     return head, em.lines
