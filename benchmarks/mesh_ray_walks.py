@@ -60,6 +60,10 @@ STACK = 32
 VARIANTS = {
     "old_lib": {"walk": "old_lib"},
     "old_lib_zero": {"walk": "old_lib", "fill": "zero"},
+    "prefetch": {"walk": "prefetch"},
+    "lib_r64": {"walk": "lib", "regs": 64},
+    "old_lib_r64": {"walk": "old_lib", "regs": 64},
+    "prefetch_r64": {"walk": "prefetch", "regs": 64},
     "copy_zero": {"fill": "zero"},
     "copy_empty": {},
     "copy_param": {"param": True},
@@ -263,6 +267,111 @@ def _old_lib_walk(fill: str):
                 if enters[count] <= hit.t:
                     node = nodes[count]
                     nd = bvh.nodes[node]
+                    active = True
+        return hit.slot
+
+    return walk
+
+
+@wp.func
+def wait_links(nodes: wp.array(dtype=wp.int32), keys: wp.array(dtype=wp.float32),
+               links: wp.array(dtype=wp.vec3i), count: int, node: int, key: float,
+               nd: BvhNode, right: int) -> int:  # fmt: skip
+    if count < STACK:
+        nodes[count] = node
+        keys[count] = key
+        links[count] = wp.vec3i(nd.first, nd.next, right)
+    return count + 1
+
+
+def _prefetch_walk():
+    """The library's layout, a level waiting for one load: an inner node is carried
+    with its right child (read from the record's ``skip`` array: the right child of
+    ``n`` is ``skip[n + 1]``), and a level loads its two children's nodes and their
+    right children (``skip`` of the node after each) at once; a waiting node keeps its
+    ``first``, ``next`` and right child, so a pop loads nothing. With the library's
+    stackless fallback: a candidate for the library."""
+
+    @wp.func
+    def walk(id: wp.uint64, alt: wp.array(dtype=BvhNode), start: wp.vec3, dir: wp.vec3,
+             max_t: float) -> int:  # fmt: skip
+        rec = wp.object_record(id, MeshRecord)
+        bvh = wp.object_record(rec.bvh, BvhRecord)
+        shear = ray_shear(dir)
+        inv = wp.vec3(safe_inverse(dir[0]), safe_inverse(dir[1]), safe_inverse(dir[2]))
+        hit = Hit()
+        hit.t = max_t
+        hit.face = -1
+        hit.slot = -1
+        span = root_range(bvh, -1)
+        nodes = wp.ext.empty(STACK, dtype=wp.int32)
+        enters = wp.ext.empty(STACK, dtype=wp.float32)
+        links = wp.ext.empty(STACK, dtype=wp.vec3i)
+        last = bvh.skip.shape[0] - 1
+        count = 0
+        sweep = span[1]
+        node = span[0]
+        active = False
+        first = 0
+        items = 0
+        right = 0  # the right child of ``node`` while it is an inner node
+        if span[0] < span[1]:
+            nd = bvh.nodes[node]
+            active = ray_box_enter(nd.lower, nd.upper, start, inv) <= hit.t
+            first = nd.first
+            items = nd.next
+            right = bvh.skip[wp.min(node + 1, last)]
+        while active or sweep < span[1]:
+            if active:
+                while first < 0:
+                    left = node + 1
+                    left_nd = bvh.nodes[left]
+                    right_nd = bvh.nodes[right]
+                    left_right = bvh.skip[wp.min(left + 1, last)]
+                    right_right = bvh.skip[wp.min(right + 1, last)]
+                    t_left = ray_box_enter(left_nd.lower, left_nd.upper, start, inv)
+                    t_right = ray_box_enter(right_nd.lower, right_nd.upper, start, inv)
+                    left_in = t_left <= hit.t
+                    right_in = t_right <= hit.t
+                    go_right = right_in and (not left_in or t_right < t_left)
+                    if left_in and right_in:
+                        if go_right:
+                            count = wait_links(nodes, enters, links, count, left, t_left,
+                                               left_nd, left_right)  # fmt: skip
+                        else:
+                            count = wait_links(nodes, enters, links, count, right, t_right,
+                                               right_nd, right_right)  # fmt: skip
+                        if count > STACK:
+                            count = STACK
+                            sweep = span[0]
+                    if go_right:
+                        node = right
+                        first = right_nd.first
+                        items = right_nd.next
+                        right = right_right
+                    elif left_in:
+                        node = left
+                        first = left_nd.first
+                        items = left_nd.next
+                        right = left_right
+                    else:
+                        first = 0
+                        items = 0
+            else:
+                step = next_ray_leaf(bvh, sweep, span[1], start, inv, hit.t)
+                sweep = step[2]
+                first = step[0]
+                items = step[1]
+            hit = leaf_hits(rec, bvh, first, items, shear, start, hit)
+            active = False
+            while count > 0 and not active:
+                count = count - 1
+                if enters[count] <= hit.t:
+                    node = nodes[count]
+                    link = links[count]
+                    first = link[0]
+                    items = link[1]
+                    right = link[2]
                     active = True
         return hit.slot
 
@@ -615,14 +724,21 @@ def finish(id: wp.uint64, slot: int, start: wp.vec3, dir: wp.vec3) -> wp.vec2:
 
 def variant_kernel(walk: str = "skip", fill: str = "empty", fast: bool = False,
                    recheck: bool = True, keep: bool = False, spec_right: bool = False,
-                   while_while: bool = True, param: bool = False):  # fmt: skip
-    """The kernel of one variant: ``face[i]``, ``t[i]`` of ray ``i``. ``walk``: "old_lib"
-    (the library's before session 11's change), "skip" (a copy of it without the
-    stackless fallback), "spec" or "payload"; ``param``: the skip and spec walks read the
-    nodes from the kernel's ``alt`` parameter (global loads) rather than through the
-    BVH's record (generic loads); the rest: see the walks."""
+                   while_while: bool = True, param: bool = False,
+                   regs: int | None = None):  # fmt: skip
+    """The kernel of one variant: ``face[i]``, ``t[i]`` of ray ``i``. ``walk``: "lib"
+    (``mesh_query_ray``), "old_lib" (the library's search before session 11's change),
+    "skip" (a copy of it without the stackless fallback), "spec", "prefetch" or
+    "payload"; ``param``: the skip and spec walks read the nodes from the kernel's
+    ``alt`` parameter (global loads) rather than through the BVH's record (generic
+    loads); ``regs``: the kernel option ``cuda_max_registers``; the rest: see the walks."""
+    options = {} if regs is None else {"cuda_max_registers": regs}
+    if walk == "lib":
+        return wp.kernel(_lib_rays, enable_backward=False, **options)
     if walk == "old_lib":
         search = _old_lib_walk(fill)
+    elif walk == "prefetch":
+        search = _prefetch_walk()
     elif walk == "skip":
         search = _skip_walk(fill, fast, keep, param)
     elif walk == "spec":
@@ -630,7 +746,7 @@ def variant_kernel(walk: str = "skip", fill: str = "empty", fast: bool = False,
     else:
         search = _payload_walk(fast, recheck, while_while)
 
-    @wp.kernel(enable_backward=False)
+    @wp.kernel(enable_backward=False, **options)
     def rays(mesh: wp.uint64, alt: wp.array(dtype=BvhNode), start: wp.array(dtype=wp.vec3),
              d: wp.array(dtype=wp.vec3), face: wp.array(dtype=wp.int32),
              t: wp.array(dtype=float)):  # fmt: skip
@@ -643,10 +759,9 @@ def variant_kernel(walk: str = "skip", fill: str = "empty", fast: bool = False,
     return rays
 
 
-@wp.kernel(enable_backward=False)
-def lib_rays(mesh: wp.uint64, alt: wp.array(dtype=BvhNode), start: wp.array(dtype=wp.vec3),
-             d: wp.array(dtype=wp.vec3), face: wp.array(dtype=wp.int32),
-             t: wp.array(dtype=float)):  # fmt: skip
+def _lib_rays(mesh: wp.uint64, alt: wp.array(dtype=BvhNode), start: wp.array(dtype=wp.vec3),
+              d: wp.array(dtype=wp.vec3), face: wp.array(dtype=wp.int32),
+              t: wp.array(dtype=float)):  # fmt: skip
     i = wp.tid()
     q = wp.mesh_query_ray(mesh, start[i], d[i], MAX_T)
     face[i] = -1
@@ -654,6 +769,9 @@ def lib_rays(mesh: wp.uint64, alt: wp.array(dtype=BvhNode), start: wp.array(dtyp
     if q.result:
         face[i] = q.face
         t[i] = q.t
+
+
+lib_rays = wp.kernel(_lib_rays, enable_backward=False)
 
 
 @wp.kernel(enable_backward=False)
