@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from kdsl.errors import KdslError, KdslTypeError
-from kdsl.geometry.device_tree import DeviceTree, node_views, pack_nodes, refit, upload_tree
+from kdsl.geometry.device_tree import DeviceTree, node_views, pack_nodes, refit_steps, upload_tree
 from kdsl.geometry.lbvh import build_lbvh
 from kdsl.geometry.median import build_median
 from kdsl.geometry.sah import build_sah
@@ -19,6 +19,7 @@ from kdsl.ir import types as T
 from kdsl.runtime.alloc import empty
 from kdsl.runtime.array import array
 from kdsl.runtime.objects import ObjectRecord
+from kdsl.runtime.stream import current_stream
 from kdsl.stdlib.bvh import BvhNode, BvhRecord
 
 VEC3 = T.VectorType(3, T.F32)
@@ -107,6 +108,8 @@ class Bvh:
         self.leaf_size = int(leaf_size)
         self.constructor = _constructor(constructor, self.device)
         self._record = ObjectRecord(self, BvhRecord.__kdsl_type__, "bvh", self.device)
+        #: (what they were prepared for, the prepared refit launches): ``_refit_steps``.
+        self._refit_held: tuple | None = None
         self.rebuild()
 
     @property
@@ -152,7 +155,8 @@ class Bvh:
             pack_nodes(tree, self._views)
         self._bounds = [self._views[0], self._views[2]]
         if not tree.bounded:
-            refit(self._tree, self.lowers, self.uppers, self._bounds[0], self._bounds[1])
+            for step in self._refit_steps():
+                step()
         self._write_record()
 
     def _check_current_boxes(self) -> None:
@@ -187,7 +191,19 @@ class Bvh:
                     f"({self._recorded[0].shape[0]}, now {self.lowers.shape[0]}); call rebuild()"
                 )
             self._write_record()
-        refit(self._tree, self.lowers, self.uppers, self._bounds[0], self._bounds[1])
+        for step in self._refit_steps():
+            step()
+
+    def _refit_steps(self, found: array | None = None) -> list:
+        """The refit's launches (``device_tree.refit_steps``), prepared once per tree, box
+        arrays, ``found`` and stream."""
+        stream = None if self.device.is_cpu else current_stream(self.device)
+        key = (self._tree, self._nodes, self.lowers, self.uppers, found, stream)
+        held = self._refit_held
+        if held is None or any(a is not b for a, b in zip(held[0], key)):
+            steps = refit_steps(self._tree, self.lowers, self.uppers, self._nodes, found)
+            held = self._refit_held = (key, steps)
+        return held[1]
 
 
 #: The constructor a BVH gets without ``constructor=``, per device kind: the one that

@@ -9,19 +9,24 @@ are ``n + 1`` and ``skip[n + 1]``, so the tree needs no child arrays. The arrays
 unused slots marked ``first = UNUSED``, which every kernel here skips, so none needs
 the node count on the host.
 
-``refit`` runs as kdsl kernels on the device. On a GPU it is one launch, bottom up as
-Karras and Apetrei build theirs: a thread per leaf writes the union of its items' boxes,
-then climbs (``store_leaf``); at each parent it fences and bumps the parent's arrival
-counter, and the second child's thread to arrive (it fences again, so it sees the first
-child's bounds) writes the parent's union and climbs on, while the first stops. The
-climb is a chain of dependent memory round trips as long as the tree is deep, so each
-step does few: the links it needs next (the sibling, the grandparent) are read before
-the counter, the arriving thread keeps its own union in registers and reads only its
-sibling's bounds, and the counters are never reset: the second arrival is the one that
-finds an odd count, so a refit adds two to each inner node's counter and leaves them
-all even (no memset, no reset store). On a CPU, after the leaves, one thread walks the
-inner nodes in reverse preorder (children before parents), which beats atomics on a
-few cores.
+``refit`` runs as kdsl kernels on the device and writes the packed nodes
+(``BvhNode``) whole. On a GPU it is one launch, bottom up as Karras and Apetrei build
+theirs: a thread per leaf writes the union of its items' boxes, then climbs; at each
+parent it fences and bumps the parent's arrival counter, and the second child's thread
+to arrive (it fences again, so it sees the first child's bounds) writes the parent's
+union and climbs on, while the first stops. The climb is a chain of dependent memory
+round trips as long as the tree is deep (24 levels for the benchmark's 200k faces), so
+each step does few: the links it needs next (the sibling, the grandparent, the parent's
+``skip``) are read before the counter, the arriving thread keeps its own union in
+registers and reads only its sibling, a packed node in two 16-byte loads, and writes
+the parent whole in two 16-byte stores; the counters are never reset: the second
+arrival is the one that finds an odd count, so a refit adds two to each inner node's
+counter and leaves them all even (no memset, no reset store). On the H200 this took
+the refit of the benchmark mesh's tree from 0.052 to 0.040 ms (session 11,
+docs/performance.md). On a CPU, after the leaves, one thread walks the inner nodes in
+reverse preorder (children before parents), which beats atomics on a few cores. A
+refit can be made conditional on counters on the device (``refit_steps``' ``found``):
+a mesh's refit is issued before the host knows whether its points are good.
 """
 
 from __future__ import annotations
@@ -39,6 +44,7 @@ from kdsl.runtime.alloc import empty, zeros
 from kdsl.runtime.array import array
 from kdsl.runtime.carve import carve
 from kdsl.runtime.launch import launch
+from kdsl.stdlib.bvh import BvhNode
 from kdsl.types import int32, vec3
 
 #: ``first`` of a node slot past a tree's last node (an lbvh tree has ``2n - 1`` slots
@@ -158,42 +164,13 @@ def _leaf_bounds(
 
 
 @func
-def _climb(
-    n: int, lo: vec3, hi: vec3, skip: array(dtype=int32), parent: array(dtype=int32),
-    arrivals: array(dtype=int32), lowers: array(dtype=vec3), uppers: array(dtype=vec3),
-):  # fmt: skip
-    """Climb from node ``n``, whose bounds ``lo``/``hi`` this thread has just written:
-    at each parent, the second child's thread to arrive (the one that finds an odd
-    count) writes the parent's union and climbs on (see the module docstring)."""
-    p = parent[n]
-    while p >= 0:
-        s = p + 1  # the sibling: the parent's other child
-        if s == n:
-            s = skip[s]
-        up = parent[p]  # (read now: not behind the counter)
-        thread_fence()  # publish this child's bounds before its arrival
-        if (atomic_add(arrivals, p, 1) & 1) == 0:
-            return  # the sibling's thread, arriving second, completes ``p``
-        thread_fence()  # see the sibling's bounds, published before its arrival
-        lo = vmin(lo, lowers[s])
-        hi = vmax(hi, uppers[s])
-        lowers[p] = lo
-        uppers[p] = hi
-        n = p
-        p = up
-
-
-@func
-def store_leaf(
-    n: int, lo: vec3, hi: vec3, skip: array(dtype=int32), parent: array(dtype=int32),
-    arrivals: array(dtype=int32), lowers: array(dtype=vec3), uppers: array(dtype=vec3),
-):  # fmt: skip
-    """Write leaf ``n``'s bounds; then, when the tree has parent links (``parent`` not
-    empty: the bottom-up refit), climb from it (see the module docstring)."""
-    lowers[n] = lo
-    uppers[n] = hi
-    if parent.shape[0] > 0:
-        _climb(n, lo, hi, skip, parent, arrivals, lowers, uppers)
+def _any_set(found: array(dtype=int32)) -> bool:
+    """Whether any of ``found``'s (few) counters is not zero."""
+    hit = False
+    for k in range(found.shape[0]):
+        if found[k] != 0:
+            hit = True
+    return hit
 
 
 @kernel
@@ -201,17 +178,38 @@ def _refit_leaves(
     first: array(dtype=int32), count: array(dtype=int32), items: array(dtype=int32),
     item_lowers: array(dtype=vec3), item_uppers: array(dtype=vec3),
     skip: array(dtype=int32), parent: array(dtype=int32), arrivals: array(dtype=int32),
-    lowers: array(dtype=vec3), uppers: array(dtype=vec3),
+    found: array(dtype=int32), nodes: array(dtype=BvhNode),
 ):  # fmt: skip
-    # Thread n: leaf n's bounds from its items' boxes, then (with parents) the climb.
+    # Thread n: leaf n's bounds from its items' boxes, then, when the tree has parent
+    # links, the climb (see the module docstring). Nothing when ``found`` has a count.
     n = tid()
     f = first[n]
-    if f < 0:
+    if f < 0 or _any_set(found):
         return
     lo = vec3()
     hi = vec3()
-    _leaf_bounds(f, count[n], items, item_lowers, item_uppers, lo, hi)
-    store_leaf(n, lo, hi, skip, parent, arrivals, lowers, uppers)
+    c = count[n]
+    _leaf_bounds(f, c, items, item_lowers, item_uppers, lo, hi)
+    nodes[n] = BvhNode(lo, f, hi, c)  # (whole: two 16-byte stores; the links as they are)
+    if parent.shape[0] == 0:
+        return
+    p = parent[n]
+    while p >= 0:
+        s = p + 1  # the sibling: the parent's other child
+        if s == n:
+            s = skip[s]
+        up = parent[p]  # (the links read now: not behind the counter)
+        next_p = skip[p]
+        thread_fence()  # publish this child's bounds before its arrival
+        if (atomic_add(arrivals, p, 1) & 1) == 0:
+            return  # the sibling's thread, arriving second, completes ``p``
+        thread_fence()  # see the sibling's bounds, published before its arrival
+        sibling = nodes[s]  # (two 16-byte loads)
+        lo = vmin(lo, sibling.lower)
+        hi = vmax(hi, sibling.upper)
+        nodes[p] = BvhNode(lo, -1, hi, next_p)
+        n = p
+        p = up
 
 
 @kernel
@@ -240,40 +238,46 @@ def pack_nodes(tree: DeviceTree, views: tuple) -> None:
 @kernel
 def _refit_inner_reverse_preorder(
     slots: int32, first: array(dtype=int32), skip: array(dtype=int32),
-    lowers: array(dtype=vec3), uppers: array(dtype=vec3),
+    found: array(dtype=int32), nodes: array(dtype=BvhNode),
 ):  # fmt: skip
     # One thread: in reverse preorder every node comes after its children.
+    if _any_set(found):
+        return
     for k in range(slots):
         n = slots - 1 - k
         if first[n] == -1:  # an inner node (not an unused slot)
-            a = n + 1
-            b = skip[a]
-            lowers[n] = vmin(lowers[a], lowers[b])
-            uppers[n] = vmax(uppers[a], uppers[b])
+            a = nodes[n + 1]
+            b = nodes[skip[n + 1]]
+            nodes[n] = BvhNode(vmin(a.lower, b.lower), -1, vmax(a.upper, b.upper), skip[n])
 
 
-def refit_inner(tree: DeviceTree, lowers: array, uppers: array,
-                record_cmd: bool = False) -> Callable[[], object] | None:  # fmt: skip
-    """Write the inner nodes' bounds from their children's, after the leaves': one thread
-    in reverse preorder (a CPU's way; see the module docstring). ``record_cmd``: return
-    the launch prepared (a callable), not run."""
-    cmd = launch(_refit_inner_reverse_preorder, dim=1, device=lowers.device,
-                 inputs=[tree.slots, tree.first, tree.skip, lowers, uppers],
-                 record_cmd=record_cmd)  # fmt: skip
-    return cmd.launch if record_cmd else None
-
-
-def refit(tree: DeviceTree, item_lowers: array, item_uppers: array, lowers: array,
-          uppers: array) -> None:  # fmt: skip
-    """Write the node bounds of ``tree`` over the item boxes into ``lowers``/``uppers``:
-    bottom up where the tree has ``parent`` links (on a GPU), else leaves then a
-    sequential pass (see the module docstring)."""
+def refit_steps(tree: DeviceTree, item_lowers: array, item_uppers: array, nodes: array,
+                found: array | None = None) -> list[Callable[[], object]]:  # fmt: skip
+    """The prepared launches (callables) that write the bounds of ``tree``'s packed nodes
+    ``nodes`` (``BvhNode``, links already packed) over the item boxes: bottom up where the
+    tree has ``parent`` links (on a GPU), else the leaves then a sequential pass (see the
+    module docstring). With ``found`` (a few int32 counters on the device, written
+    before the steps run), they write nothing when one is not zero."""
     if tree.slots == 0:
-        return
-    launch(
-        _refit_leaves, dim=tree.slots, device=item_lowers.device,
+        return []
+    device = item_lowers.device
+    if found is None:
+        found = tree.parent[:0]
+    steps = [launch(
+        _refit_leaves, dim=tree.slots, device=device, record_cmd=True,
         inputs=[tree.first, tree.count, tree.items, item_lowers, item_uppers, tree.skip,
-                tree.parent, tree.arrivals, lowers, uppers],
-    )  # fmt: skip
+                tree.parent, tree.arrivals, found, nodes],
+    ).launch]  # fmt: skip
     if tree.parent.shape[0] == 0:
-        refit_inner(tree, lowers, uppers)
+        steps.append(launch(
+            _refit_inner_reverse_preorder, dim=1, device=device, record_cmd=True,
+            inputs=[tree.slots, tree.first, tree.skip, found, nodes],
+        ).launch)  # fmt: skip
+    return steps
+
+
+def refit(tree: DeviceTree, item_lowers: array, item_uppers: array, nodes: array) -> None:
+    """Write the bounds of ``tree``'s packed nodes over the item boxes once (see
+    ``refit_steps``)."""
+    for step in refit_steps(tree, item_lowers, item_uppers, nodes):
+        step()

@@ -160,10 +160,12 @@ class Mesh:
         """Update the face boxes and the BVH's bounds from the current points (the tree
         keeps its shape: rebuild with ``mesh.bvh.rebuild()`` after large motions). An
         index out of range or a non-finite point is an error, and the BVH keeps its
-        bounds. The check, the edge sum and the BVH's refit are issued before the host
-        waits for the check's answers (the refit reads them on the device)."""
-        self._faces.start(self._points, self.indices)
-        self.bvh.refit_points(self._faces.found)
+        bounds (the faces' boxes and the vertex copy are rewritten for the faces whose
+        indices are in range). The check, which writes the boxes and the copy, the edge
+        sum and the BVH's refit are issued before the host waits for the check's answers
+        (the refit reads them on the device)."""
+        self._faces.start(self._points, self.indices, gather=True)  # (writes the copy too)
+        self.bvh.refit_checked(self._faces.found)
         self._raise_if_bad()
         if self._wide is not None:
             self._wide.refit(self.bvh)

@@ -26,10 +26,16 @@ def boxes(rng, n, device):
 
 
 def node_bounds(tree, lo, hi):
-    out_lo = wp.empty(tree.num_nodes, dtype=wp.vec3, device=lo.device)
-    out_hi = wp.empty(tree.num_nodes, dtype=wp.vec3, device=lo.device)
-    refit(tree, lo, hi, out_lo, out_hi)
-    return out_lo.numpy(), out_hi.numpy()
+    nodes = wp.empty(tree.slots, dtype=BvhNode, device=lo.device)
+    pack_nodes(tree, node_views(nodes))
+    refit(tree, lo, hi, nodes)
+    got = nodes.numpy()[: tree.num_nodes]
+    packed = wp.empty(tree.slots, dtype=BvhNode, device=lo.device)
+    pack_nodes(tree, node_views(packed))  # the refit writes the links as they were
+    want = packed.numpy()[: tree.num_nodes]
+    np.testing.assert_array_equal(got["first"], want["first"])
+    np.testing.assert_array_equal(got["next"], want["next"])
+    return got["lower"], got["upper"]
 
 
 @pytest.mark.parametrize("device", ["cpu", pytest.param("cuda:0", marks=cuda)])

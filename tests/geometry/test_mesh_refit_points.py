@@ -1,13 +1,14 @@
-"""A mesh's ``refit()`` in one pass over the BVH's leaves (``MeshBvh.refit_points``):
-each leaf copies its faces' corners in item order and bounds them, then the inner
-nodes follow (bottom up through the arrival counters, a GPU's way, or one thread in
-reverse preorder, a CPU's). Checked after every vertex moved against a float64 brute
-force (each node's box is the union of its faces' corners, the vertex copy holds the
-corners in item order, the queries find the brute force's answers) and bit for bit
-against the generic refit over the face boxes plus the gather; with groups, several
-leaf sizes and constructors, degenerate and empty meshes; a refit that finds a bad
-point keeps the bounds and the copy. The bottom-up kernels run on the CPU's threads
-here too; interp runs both leaf kernels; cuda on the GPU machine."""
+"""A mesh's ``refit()``: its checking kernel takes the faces in the BVH's item order and
+writes their boxes, edge lengths and the vertex copy (``MeshRecord.tri``) from one read
+of their corners, and the BVH's refit (``device_tree``: bottom up through parity arrival
+counters, a GPU's way, or the leaves then one thread in reverse preorder, a CPU's; whole
+packed nodes) is issued before the host has the check's answers and writes nothing when
+they are set. Checked after every vertex moved against a float64 brute force (each
+node's box is the union of its faces' corners, the copy holds the corners in item order,
+the queries find the brute force's answers), with groups, several leaf sizes and
+constructors, degenerate and empty meshes; a refit that finds a bad point or index
+keeps the bounds. The bottom-up kernel runs on the CPU's threads here too; interp runs
+the check and both refit kernels; cuda on the GPU machine."""
 
 from __future__ import annotations
 
@@ -20,8 +21,8 @@ import kdsl as wp
 from kdsl.errors import KdslTypeError
 from kdsl.geometry import bvh as bvh_module
 from kdsl.geometry import lbvh
-from kdsl.geometry.device_tree import refit, refit_inner
-from kdsl.geometry.mesh_tree_points import _refit_points
+from kdsl.geometry.device_tree import _refit_inner_reverse_preorder, _refit_leaves
+from kdsl.geometry.mesh_refit import _checked_face_boxes
 from tests.geometry.mesh_reference import icosphere
 from tests.geometry.test_mesh_tree_points import _check_copy, _check_queries, move_kernel
 
@@ -78,18 +79,6 @@ def _check_against_brute_force(mesh, faces: np.ndarray) -> None:
         assert np.all(c >= got_lo[n]) and np.all(c <= got_hi[n])
 
 
-def _generic_refit(mesh):
-    """The node bounds the generic refit over the mesh's face boxes gives."""
-    tree = mesh.bvh._tree
-    lo = wp.empty(tree.slots, dtype=V3, device=mesh.device)
-    hi = wp.empty(tree.slots, dtype=V3, device=mesh.device)
-    if tree.arrivals.shape[0]:
-        tree.arrivals.zero_()  # (any even counts do; zero is one)
-    refit(tree, mesh._faces.lowers, mesh._faces.uppers, lo, hi)
-    m = tree.num_nodes
-    return lo.numpy()[:m], hi.numpy()[:m]
-
-
 def _moves(mesh, pts, faces, steps=3):
     """Move every vertex (in place, then by assignment), refit, yield after each."""
     dev = mesh.device
@@ -125,10 +114,9 @@ def test_refit_after_moves_matches_brute_force(device, bottom_up, leaf_size, num
     assert bool(mesh.bvh._tree.parent.shape[0]) == (bottom_up or device != "cpu")
     for _ in _moves(mesh, pts, faces):
         _check_against_brute_force(mesh, faces)
-        want_lo, want_hi = _generic_refit(mesh)  # the same bits as boxes-then-refit
-        got_lo, got_hi = _node_bounds(mesh)
-        np.testing.assert_array_equal(got_lo, want_lo)
-        np.testing.assert_array_equal(got_hi, want_hi)
+        moved = mesh.points.numpy()[faces]  # the faces' boxes, as the check writes them
+        np.testing.assert_array_equal(mesh._faces.lowers.numpy(), moved.min(axis=1))
+        np.testing.assert_array_equal(mesh._faces.uppers.numpy(), moved.max(axis=1))
     arrivals = mesh.bvh._tree.arrivals.numpy()
     assert not (arrivals & 1).any()  # ready for the next refit
     backend = "cuda" if device != "cpu" else "cpu"
@@ -176,49 +164,64 @@ def test_meshes_without_faces_refit(device, bottom_up_on_cpu):
 
 @pytest.mark.parametrize("device", DEVICES)
 @pytest.mark.parametrize("bottom_up", [False, True])
-def test_a_bad_point_keeps_the_bounds_and_the_copy(device, bottom_up, request):
+def test_a_bad_point_or_index_keeps_the_bounds(device, bottom_up, request):
     if bottom_up and device == "cpu":
         request.getfixturevalue("bottom_up_on_cpu")
     pts, faces = icosphere(1, bumps=0.05, seed=2)
     points = wp.array(pts, dtype=V3, device=device)
-    mesh = wp.Mesh(points, wp.array(faces, dtype=wp.int32, device=device))
-    before = (mesh.bvh._nodes.numpy().tobytes(), mesh._tree_points.tri.numpy().tobytes())
+    indices = wp.array(faces, dtype=wp.int32, device=device)
+    mesh = wp.Mesh(points, indices)
+    before = mesh.bvh._nodes.numpy().tobytes()
     bad = pts * 2.0
     bad[4, 2] = np.inf
     wp.copy(points, wp.array(bad, dtype=V3, device=device))
     with pytest.raises(KdslTypeError, match="point 4 is not finite"):
         mesh.refit()
-    assert (mesh.bvh._nodes.numpy().tobytes(), mesh._tree_points.tri.numpy().tobytes()) == before
+    assert mesh.bvh._nodes.numpy().tobytes() == before
+    # the copy is rewritten for the faces whose indices are good (a documented choice)
+    items = mesh.bvh.item_order.numpy()
+    np.testing.assert_array_equal(mesh._tree_points.tri.numpy(), bad[faces[items]].reshape(-1, 3))
+    wrong = faces.copy()
+    wrong[3, 1] = len(pts) + 7  # an index changed in place after construction
+    wp.copy(mesh.indices, wp.array(wrong.ravel(), dtype=wp.int32, device=device))
+    with pytest.raises(KdslTypeError, match=f"out of range: {len(pts) + 7}"):
+        mesh.refit()  # (nothing out of range is read)
+    assert mesh.bvh._nodes.numpy().tobytes() == before
+    wp.copy(mesh.indices, wp.array(faces.ravel(), dtype=wp.int32, device=device))
     wp.copy(points, wp.array(pts * 2.0, dtype=V3, device=device))
-    mesh.refit()  # the counters were left ready: a good refit after a bad one
+    mesh.refit()  # the counters were left ready: a good refit after bad ones
     _check_against_brute_force(mesh, faces)
 
 
 @pytest.mark.parametrize("bottom_up", [False, True])
-def test_leaf_kernels_on_interp_match_cpu(bottom_up, bottom_up_on_cpu):
+def test_refit_kernels_on_interp_match_cpu(bottom_up, bottom_up_on_cpu):
     """The refit's kernels run by the interpreter (the mesh's arrays on the CPU): the
-    same bounds and copy as the cpu backend's."""
+    same face boxes, copy and node bounds as the cpu backend's."""
     pts, faces = icosphere(1, bumps=0.1, seed=6)
     mesh = wp.Mesh(wp.array(pts * 1.5, dtype=V3), wp.array(faces, dtype=wp.int32),
                    bvh_leaf_size=2)  # fmt: skip
     mesh.refit()
-    want = (mesh.bvh._nodes.numpy().copy(), mesh._tree_points.tri.numpy().copy())
-    tree, copy = mesh.bvh._tree, mesh._tree_points
-    lo, hi = mesh.bvh._bounds
+    boxes, copy, tree = mesh._faces, mesh._tree_points, mesh.bvh._tree
     nodes = mesh.bvh._nodes
+    want = (nodes.numpy().copy(), copy.tri.numpy().copy(), boxes.lowers.numpy().copy())
     scratch = nodes.numpy()
     scratch["lower"], scratch["upper"] = 7.0, -7.0
     wp.copy(nodes, wp.array(scratch, dtype=nodes.dtype))
     copy.tri.zero_()
+    boxes.lowers.zero_()
+    n_pts, n_tris = len(pts), len(faces)
+    wp.launch(_checked_face_boxes, dim=max(n_pts, n_tris), backend="interp",
+              inputs=[copy.points, copy.indices, n_pts, n_tris, boxes.lowers, boxes.uppers,
+                      boxes.edges, boxes.found, copy.items, copy.tri])  # fmt: skip
     none = wp.empty(0, dtype=wp.int32)  # no parent links: the leaves only
-    links = [tree.skip, tree.parent, tree.arrivals] if bottom_up else [none, none, none]
-    wp.launch(_refit_points, dim=tree.slots, backend="interp",
-              inputs=[tree.first, tree.count, tree.items, copy.points, copy.indices, copy.tri,
-                      mesh._faces.found, *links, lo, hi])  # fmt: skip
+    links = [tree.skip, tree.parent, tree.arrivals] if bottom_up else [tree.skip, none, none]
+    wp.launch(_refit_leaves, dim=tree.slots, backend="interp",
+              inputs=[tree.first, tree.count, tree.items, boxes.lowers, boxes.uppers, *links,
+                      boxes.found, nodes])  # fmt: skip
     if not bottom_up:
-        first = tree.first.numpy()
-        assert np.array_equal(nodes.numpy()["lower"][first >= 0], want[0]["lower"][first >= 0])
-        refit_inner(tree, lo, hi)
+        wp.launch(_refit_inner_reverse_preorder, dim=1, backend="interp",
+                  inputs=[tree.slots, tree.first, tree.skip, boxes.found, nodes])  # fmt: skip
     m = tree.num_nodes
     np.testing.assert_array_equal(nodes.numpy()[:m], want[0][:m])
     np.testing.assert_array_equal(copy.tri.numpy(), want[1])
+    np.testing.assert_array_equal(boxes.lowers.numpy(), want[2])
