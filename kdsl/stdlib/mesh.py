@@ -565,14 +565,15 @@ def _ray_leaf(
 @func
 def _wait_node(
     nodes: wp.array(dtype=wp.int32), keys: wp.array(dtype=wp.float32),
-    packed: wp.array(dtype=wp.vec2i), count: int, node: int, key: float, nd: BvhNode,
+    links: wp.array(dtype=wp.vec3i), count: int, node: int, key: float, nd: BvhNode,
+    right: int,
 ) -> int:  # fmt: skip
-    """``_wait`` that also keeps the node's ``first`` and ``next`` (``packed``), so that
-    taking it off the stack loads nothing."""
+    """``_wait`` that also keeps the node's ``first``, ``next`` and right child
+    (``links``), so that taking it off the stack loads nothing."""
     if count < WALK_STACK:
         nodes[count] = node
         keys[count] = key
-        packed[count] = wp.vec2i(nd.first, nd.next)
+        links[count] = wp.vec3i(nd.first, nd.next, right)
     return count + 1
 
 
@@ -582,16 +583,17 @@ def _ray_closest_slot(id: wp.uint64, start: wp.vec3, dir: wp.vec3, max_t: float,
     ``0 <= t < max_t`` (lowest face among equal ``t``), or -1.
 
     Front to back: at an inner node the child the ray enters first is visited next and
-    the other waits on a small stack with its entry ``t`` (and its ``first``/``next``:
-    taking it off loads nothing), dropped when a hit nearer than that is found
-    meanwhile. A level's node loads are issued together: an inner node's right child is
-    named by its left child (``skip``), so the left child is loaded one level ahead, with
-    the right child of the level above (the left child's left child is the node after
-    it); a level then waits for one load, not two (measured on an H200: 8% faster,
-    docs/performance.md "Mesh rays on the GPU, session 11"). A tree deeper than the
-    stack (``WALK_STACK``) overflows into a stackless pass over the whole range,
-    bounded by the hit found so far, in the same loop (one leaf test site): the answer
-    never depends on the order."""
+    the other waits on a small stack with its entry ``t``, dropped when a hit nearer
+    than that is found meanwhile. A level waits for one load: an inner node is carried
+    with its right child, which the BVH's ``skip`` array names (the right child of
+    ``n`` is ``skip[n + 1]``, where the left child's subtree ends), so a level loads
+    both children's nodes and both their right children at once (the packed nodes name
+    only ``skip`` of the node itself, so the right child would otherwise wait for the
+    left child's load); a waiting node keeps its ``first``, ``next`` and right child,
+    so taking it off the stack loads nothing (docs/performance.md, "Mesh rays on the
+    GPU, session 11"). A tree deeper than the stack (``WALK_STACK``) overflows into a
+    stackless pass over the whole range, bounded by the hit found so far, in the same
+    loop (one leaf test site): the answer never depends on the order."""
     rec = wp.object_record(id, MeshRecord)
     bvh = wp.object_record(rec.bvh, BvhRecord)
     shear = ray_shear(dir)
@@ -603,32 +605,31 @@ def _ray_closest_slot(id: wp.uint64, start: wp.vec3, dir: wp.vec3, max_t: float,
     span = _root_range(bvh, root)
     nodes = wp.ext.empty(WALK_STACK, dtype=wp.int32)  # pushed before popped: no zero fill
     enters = wp.ext.empty(WALK_STACK, dtype=wp.float32)
-    packed = wp.ext.empty(WALK_STACK, dtype=wp.vec2i)
+    links = wp.ext.empty(WALK_STACK, dtype=wp.vec3i)
+    last = bvh.skip.shape[0] - 1  # (``skip`` of a leaf's successor: read, never used)
     count = 0
     sweep = span[1]  # the stackless pass's next node: none until the stack overflows
     node = span[0]
     active = False  # ``node`` is to be visited; ``first``, ``items``: its packed fields
     first = 0
     items = 0
+    right = 0  # the right child of ``node`` while it is an inner node
     if span[0] < span[1]:
         nd = bvh.nodes[node]
         active = ray_box_enter(nd.lower, nd.upper, start, inv) <= hit.t
         first = nd.first
         items = nd.next
-    left_nd = BvhNode()  # the left child of ``node`` while it is an inner node
+        right = bvh.skip[wp.min(node + 1, last)]
     while active or sweep < span[1]:
         if active:
             # Down the nearer children to a leaf (or to where both children are
             # missed), then the leaf's faces: "while-while", as the closest point.
-            if first < 0:
-                left_nd = bvh.nodes[node + 1]
             while first < 0:
                 left = node + 1
-                right = _skip(left_nd, left)
+                left_nd = bvh.nodes[left]
                 right_nd = bvh.nodes[right]
-                # The left child's left child (an inner node's subtree holds 3 nodes or
-                # more, so it exists; when the left child is a leaf it is the right one).
-                ahead = bvh.nodes[node + 2]
+                left_right = bvh.skip[wp.min(left + 1, last)]  # used when they are inner
+                right_right = bvh.skip[wp.min(right + 1, last)]
                 t_left = ray_box_enter(left_nd.lower, left_nd.upper, start, inv)
                 t_right = ray_box_enter(right_nd.lower, right_nd.upper, start, inv)
                 left_in = t_left <= hit.t  # (false for NaN: a missed box)
@@ -636,9 +637,11 @@ def _ray_closest_slot(id: wp.uint64, start: wp.vec3, dir: wp.vec3, max_t: float,
                 go_right = right_in and (not left_in or t_right < t_left)
                 if left_in and right_in:  # the other one waits
                     if go_right:
-                        count = _wait_node(nodes, enters, packed, count, left, t_left, left_nd)
+                        count = _wait_node(nodes, enters, links, count, left, t_left, left_nd,
+                                           left_right)  # fmt: skip
                     else:
-                        count = _wait_node(nodes, enters, packed, count, right, t_right, right_nd)
+                        count = _wait_node(nodes, enters, links, count, right, t_right,
+                                           right_nd, right_right)  # fmt: skip
                     if count > WALK_STACK:  # full: a stackless pass once it is empty
                         count = WALK_STACK
                         sweep = span[0]
@@ -646,13 +649,12 @@ def _ray_closest_slot(id: wp.uint64, start: wp.vec3, dir: wp.vec3, max_t: float,
                     node = right
                     first = right_nd.first
                     items = right_nd.next
-                    if first < 0:
-                        left_nd = bvh.nodes[right + 1]
+                    right = right_right
                 elif left_in:
                     node = left
                     first = left_nd.first
                     items = left_nd.next
-                    left_nd = ahead
+                    right = left_right
                 else:  # both missed: no leaf to test
                     first = 0
                     items = 0
@@ -668,8 +670,10 @@ def _ray_closest_slot(id: wp.uint64, start: wp.vec3, dir: wp.vec3, max_t: float,
             count = count - 1
             if enters[count] <= hit.t:
                 node = nodes[count]
-                first = packed[count][0]
-                items = packed[count][1]
+                link = links[count]
+                first = link[0]
+                items = link[1]
+                right = link[2]
                 active = True
     return hit.slot
 
