@@ -156,29 +156,36 @@ def test_cpu_promotes_a_constant_indexed_local_array(cpu_backend):
 # --- the adjoint ---------------------------------------------------------------------
 
 
-@wp.kernel
-def scaled_by_count(x: wp.array(dtype=float), y: wp.array(dtype=float)):
-    # The local int stack takes no gradient; the gradient of x flows around it.
-    i = wp.tid()
-    s = wp.zeros(4, dtype=int)
-    n = 0
-    for k in range(4):
-        if k <= i:
-            s[n] = k
-            n += 1
-    c = 0
-    while n > 0:
-        n -= 1
-        c += s[n]
-    y[i] = x[i] * float(c)
+def _scaled_by_count(local):
+    """The kernel below with its stack made by ``local`` (``wp.zeros`` or ``wp.ext.empty``:
+    the stack is written before it is read, so both give the same answers)."""
+
+    @wp.kernel
+    def scaled_by_count(x: wp.array(dtype=float), y: wp.array(dtype=float)):
+        # The local int stack takes no gradient; the gradient of x flows around it.
+        i = wp.tid()
+        s = local(4, dtype=int)
+        n = 0
+        for k in range(4):
+            if k <= i:
+                s[n] = k
+                n += 1
+        c = 0
+        while n > 0:
+            n -= 1
+            c += s[n]
+        y[i] = x[i] * float(c)
+
+    return scaled_by_count
 
 
-def test_adjoint_around_local_arrays(backend):
+@pytest.mark.parametrize("local", [wp.zeros, wp.ext.empty], ids=["zeros", "ext.empty"])
+def test_adjoint_around_local_arrays(backend, local):
     x = wp.array(np.array([1.0, 2.0, 3.0], np.float32), requires_grad=True)
     y = wp.zeros(3, dtype=float, requires_grad=True)
     tape = wp.Tape()
     with tape:
-        wp.launch(scaled_by_count, 3, [x, y], backend=backend)
+        wp.launch(_scaled_by_count(local), 3, [x, y], backend=backend)
     tape.backward(grads={y: wp.array(np.ones(3, np.float32))})
     np.testing.assert_array_equal(y.numpy(), [0.0, 2.0, 9.0])
     np.testing.assert_array_equal(x.grad.numpy(), [0.0, 1.0, 3.0])

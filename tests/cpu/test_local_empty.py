@@ -1,7 +1,7 @@
 """``kdsl.ext.empty(shape, dtype)``: a thread-local array without the zero fill
 (``kd.local_array`` with ``fill = "none"``), on interp and cpu (and cuda: compile-only
 through NVRTC here, run on a GPU when one is present), its poison pattern on interp, the
-IR text form, and its errors."""
+IR text form, and its errors. The adjoint around one: tests/cpu/test_local_arrays.py."""
 
 from __future__ import annotations
 
@@ -130,34 +130,6 @@ def test_zeros_beside_empty(backend):
     out = wp.zeros(2, dtype=float)
     wp.launch(fresh_each_run, 2, [out], backend=backend)
     np.testing.assert_array_equal(out.numpy(), [3.0, 3.0])
-
-
-@wp.kernel
-def scaled_by_count(x: wp.array(dtype=float), y: wp.array(dtype=float)):
-    # An int stack beside a differentiated value: the adjoint replays its writes.
-    i = wp.tid()
-    s = wp.ext.empty(4, dtype=int)
-    n = 0
-    for k in range(4):
-        if k <= i:
-            s[n] = k
-            n += 1
-    c = 0
-    while n > 0:
-        n -= 1
-        c += s[n]
-    y[i] = x[i] * float(c)
-
-
-def test_adjoint_around_an_empty_array(backend):
-    x = wp.array(np.array([1.0, 2.0, 3.0], np.float32), requires_grad=True)
-    y = wp.zeros(3, dtype=float, requires_grad=True)
-    tape = wp.Tape()
-    with tape:
-        wp.launch(scaled_by_count, 3, [x, y], backend=backend)
-    tape.backward(grads={y: wp.array(np.ones(3, np.float32))})
-    np.testing.assert_array_equal(y.numpy(), [0.0, 2.0, 9.0])
-    np.testing.assert_array_equal(x.grad.numpy(), [0.0, 1.0, 3.0])
 
 
 # --- the IR and the lowerings ------------------------------------------------------------
