@@ -195,12 +195,6 @@ def _collapse(
 def _lane_boxes(nd: WideNode, bnodes: array(dtype=BvhNode)) -> WideNode:
     """``nd`` with each child's box copied from its binary node (NaN: an empty slot)."""
     out = nd
-    lo_x = vec4(float32(0.0))
-    lo_y = vec4(float32(0.0))
-    lo_z = vec4(float32(0.0))
-    hi_x = vec4(float32(0.0))
-    hi_y = vec4(float32(0.0))
-    hi_z = vec4(float32(0.0))
     for i in range(static(LANES)):
         lo = vec3(float32(nan))
         hi = vec3(float32(nan))
@@ -209,18 +203,12 @@ def _lane_boxes(nd: WideNode, bnodes: array(dtype=BvhNode)) -> WideNode:
             b = bnodes[s]
             lo = b.lower
             hi = b.upper
-        lo_x[i] = lo[0]
-        lo_y[i] = lo[1]
-        lo_z[i] = lo[2]
-        hi_x[i] = hi[0]
-        hi_y[i] = hi[1]
-        hi_z[i] = hi[2]
-    out.lo_x = lo_x
-    out.lo_y = lo_y
-    out.lo_z = lo_z
-    out.hi_x = hi_x
-    out.hi_y = hi_y
-    out.hi_z = hi_z
+        out.lo_x[i] = lo[0]
+        out.lo_y[i] = lo[1]
+        out.lo_z[i] = lo[2]
+        out.hi_x[i] = hi[0]
+        out.hi_y[i] = hi[1]
+        out.hi_z[i] = hi[2]
     return out
 
 

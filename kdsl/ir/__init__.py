@@ -15,6 +15,7 @@ from kdsl.ir import (
     ops_pointer,
     ops_print,
     ops_scf,
+    ops_target,
     ops_vec,
     records,
     types,

@@ -56,7 +56,7 @@ from kdsl.stdlib.mesh_primitives import (
     safe_inverse,
     triangle_solid_angle,
 )
-from kdsl.stdlib.mesh_wide import WIDE_OVERFLOW, wide_closest_face
+from kdsl.stdlib.mesh_wide import WIDE_OVERFLOW, wide_closest_face, wide_furthest_face
 from kdsl.stdlib.random import rand_init, randf
 
 __kdsl_group__ = "geometry"
@@ -282,7 +282,8 @@ def _closest_face(id: wp.uint64, point: wp.vec3, max_dist: float) -> int:
     is inlined once: the answer never depends on the order.
 
     A mesh with a 4-wide tree (the CPU's, ``kdsl.geometry.wide_tree``) is walked there
-    instead, with the same answer; this walk then runs only when that one cannot."""
+    instead, with the same answer; this walk then runs only when that one cannot (and
+    only the backends that take the wide walk compile it: ``kdsl.ir.ops_target``)."""
     rec = wp.object_record(id, MeshRecord)
     if rec.wide != wp.uint64(0):
         wide = wide_closest_face(rec.wide, point, max_dist)
@@ -384,8 +385,13 @@ def _next_near_leaf(
 @func
 def _furthest_face(id: wp.uint64, point: wp.vec3, min_dist: float) -> int:
     """The face whose furthest vertex from ``point`` is furthest, strictly beyond
-    ``min_dist`` (lowest index among ties; slivers left out), or -1."""
+    ``min_dist`` (lowest index among ties; slivers left out), or -1 (through the
+    4-wide tree where the mesh has one, as ``_closest_face``)."""
     rec = wp.object_record(id, MeshRecord)
+    if rec.wide != wp.uint64(0):
+        wide = wide_furthest_face(rec.wide, point, min_dist)
+        if wide != WIDE_OVERFLOW:
+            return wide
     bvh = wp.object_record(rec.bvh, BvhRecord)
     best = min_dist * min_dist
     if min_dist < 0.0:

@@ -33,6 +33,18 @@ def closest_kernel(mesh: wp.uint64, xs: wp.array(dtype=V3), max_dist: float,
 
 
 @wp.kernel
+def furthest_kernel(mesh: wp.uint64, xs: wp.array(dtype=V3), min_dist: float,
+                    face: wp.array(dtype=int), dist: wp.array(dtype=float)):  # fmt: skip
+    i = wp.tid()
+    q = wp.mesh_query_furthest_point_no_sign(mesh, xs[i], min_dist)
+    face[i] = -1
+    dist[i] = -1.0
+    if q.result:
+        face[i] = q.face
+        dist[i] = wp.length(wp.mesh_eval_position(mesh, q.face, q.u, q.v) - xs[i])
+
+
+@wp.kernel
 def signed_kernel(mesh: wp.uint64, xs: wp.array(dtype=V3), sign: wp.array(dtype=float)):
     i = wp.tid()
     sign[i] = wp.mesh_query_point(mesh, xs[i], 1.0e6).sign
@@ -56,6 +68,24 @@ def _closest(mesh, xs, backend="cpu", max_dist=1.0e6):
     wp.launch(closest_kernel, dim=n, backend=backend,
               inputs=[mesh.id, wp.array(xs, dtype=V3), max_dist, face, dist])  # fmt: skip
     return face.numpy(), dist.numpy()
+
+
+def _furthest(mesh, xs, backend="cpu", min_dist=0.0):
+    n = len(xs)
+    face, dist = wp.zeros(n, dtype=int), wp.zeros(n, dtype=float)
+    wp.launch(furthest_kernel, dim=n, backend=backend,
+              inputs=[mesh.id, wp.array(xs, dtype=V3), min_dist, face, dist])  # fmt: skip
+    return face.numpy(), dist.numpy()
+
+
+def _furthest_reference(pts, faces, xs):
+    """Float64 distance from each query to the furthest vertex of a non-sliver face."""
+    tri = pts.astype(np.float64)[faces]
+    e0, e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0], tri[:, 2] - tri[:, 1]
+    with np.errstate(invalid="ignore"):
+        keep = np.linalg.norm(np.cross(e0, e1), axis=1) / ((e0**2 + e1**2 + e2**2).sum(1)) >= 1e-6
+    corners = tri[keep].reshape(-1, 3)
+    return np.array([np.linalg.norm(corners - x, axis=1).max() for x in xs.astype(np.float64)])
 
 
 def _queries(pts, n, seed=0):
@@ -100,6 +130,28 @@ def test_wide_walk_answers_as_the_binary_walk_and_the_brute_force(
     finite = np.isfinite(xs).all(1)
     ref = closest_distances(pts, faces, xs[finite])
     np.testing.assert_allclose(d_wide[finite], ref, rtol=1e-5, atol=1e-6)
+
+
+@pytest.mark.parametrize("backend", HOST_BACKENDS)
+@pytest.mark.parametrize("constructor,leaf_size", [("lbvh", 4), ("median", 2)])
+def test_wide_furthest_point_answers_as_the_binary_walk_and_the_brute_force(
+    backend, constructor, leaf_size, monkeypatch
+):
+    pts, faces = _adversarial()
+    xs = _queries(pts, 40 if backend == "interp" else 300, seed=5)
+    xs = np.vstack([xs, [[np.nan, 0, 0]]]).astype(np.float32)
+    kw = {"bvh_constructor": constructor, "bvh_leaf_size": leaf_size}
+    wide = _mesh(pts, faces, True, monkeypatch, **kw)
+    binary = _mesh(pts, faces, False, monkeypatch, **kw)
+    f_wide, d_wide = _furthest(wide, xs, backend)
+    f_bin, d_bin = _furthest(binary, xs, backend)
+    np.testing.assert_array_equal(f_wide, f_bin)
+    np.testing.assert_array_equal(d_wide, d_bin)
+    assert f_wide[-1] == -1  # the NaN point finds nothing
+    np.testing.assert_allclose(d_wide[:-1], _furthest_reference(pts, faces, xs[:-1]), rtol=1e-5)
+    # min_dist beyond every face: nothing; a negative one: every face counts
+    assert (_furthest(wide, xs[:4], backend, min_dist=100.0)[0] == -1).all()
+    np.testing.assert_array_equal(_furthest(wide, xs[:4], backend, min_dist=-1.0)[0], f_bin[:4])
 
 
 def test_ties_go_to_the_lowest_face(monkeypatch):

@@ -7,7 +7,17 @@ an op missing from the table is reported as a capability error naming the op.
 
 from __future__ import annotations
 
-from kdsl.backends.cpu import arith, checks, control, local, mathops, memory, printing, vector
+from kdsl.backends.cpu import (
+    arith,
+    checks,
+    control,
+    local,
+    mathops,
+    memory,
+    printing,
+    target,  # kd.target_has's lowering
+    vector,
+)
 from kdsl.backends.cpu import pointer as array_from_ptr  # kd.array_from_ptr's lowering
 from kdsl.backends.cpu.emitter import Lowering
 from kdsl.ir.lowering import LOWERINGS
@@ -24,5 +34,6 @@ __all__ = [
     "array_from_ptr",
     "memory",
     "printing",
+    "target",
     "vector",
 ]
