@@ -218,51 +218,6 @@ def _push_children(
 
 
 @func
-def wide_closest_face(id: wp.uint64, point: wp.vec3, max_dist: float) -> int:
-    """The face closest to ``point`` at a distance strictly below ``max_dist`` (lowest
-    index among ties; slivers left out), or -1, by the 4-wide tree ``id``
-    (``WideRecord``); ``WIDE_OVERFLOW`` when the walk cannot answer (see the module
-    docstring).
-
-    Each step takes an entry off the stack, dropped when its box lies beyond the
-    closest distance found meanwhile: a leaf is tested, a node's four child boxes are
-    measured, the children within that distance sorted by it and pushed far to near,
-    so the nearest comes off next."""
-    if not target_has_wide_tree():  # (a constant: the backend compiles one path)
-        return WIDE_OVERFLOW
-    w = wp.object_record(id, WideRecord)
-    if w.fallback != 0:
-        return WIDE_OVERFLOW
-    best_d = max_dist * max_dist
-    best_f = -1
-    # Written before read (no zero fill); the last entry takes the children not pushed.
-    refs = wp.ext.empty(WIDE_STACK + 1, dtype=wp.int32)
-    keys = wp.ext.empty(WIDE_STACK + 1, dtype=wp.float32)
-    count = 0
-    if w.nodes.shape[0] > 0:
-        refs[0] = 0  # the root, at distance 0 (its children are tested against the bound)
-        keys[0] = 0.0
-        count = 1
-    while count > 0:
-        count = count - 1
-        ref = refs[count]
-        if keys[count] <= best_d:
-            if ref < 0:
-                _wide_leaf(w.leaves[-ref - 1], point, best_d, best_f)
-            elif count > WIDE_STACK - 4:
-                return WIDE_OVERFLOW
-            else:
-                nd = w.nodes[ref]
-                d = wide_box_distances(nd, point)
-                # (One test of the four lanes: it also lets LLVM compute the four
-                # distances as one vector, its SLP vectorizer's seed.)
-                near = (d[0] <= best_d) | (d[1] <= best_d) | (d[2] <= best_d) | (d[3] <= best_d)
-                if near:
-                    count = _push_children(refs, keys, count, d, nd.child, best_d)
-    return best_f
-
-
-@func
 def _wide_leaf_far(lf: WideLeaf, p: wp.vec3, best_d: inout(wp.float32), best_f: inout(wp.int32)):
     """``_wide_leaf`` for the furthest point: a face's distance is its furthest
     vertex's (the binary walk's ``furthest_point_to_triangle``, whose vertex is exactly
@@ -286,6 +241,88 @@ def _wide_leaf_far(lf: WideLeaf, p: wp.vec3, best_d: inout(wp.float32), best_f: 
 
 
 @func
+def _far_box_distances(nd: WideNode, p: wp.vec3) -> wp.vec4:
+    """The negated squared distances from ``p`` to the furthest corners of the node's
+    four child boxes (NaN for an empty slot)."""
+    d = wp.vec4(0.0)
+    for i in range(wp.static(4)):
+        d[i] = -box_furthest_distance_sq(
+            wp.vec3(nd.lo_x[i], nd.lo_y[i], nd.lo_z[i]),
+            wp.vec3(nd.hi_x[i], nd.hi_y[i], nd.hi_z[i]), p,
+        )  # fmt: skip
+        d[i] = d[i] if nd.src[i] >= 0 else wp.nan  # (a NaN box's furthest corner is not)
+    return d
+
+
+@func
+def _wide_walk(id: wp.uint64, point: wp.vec3, dist: float, far: bool) -> int:
+    """``wide_closest_face`` (``far`` False) or ``wide_furthest_face`` (True; ``far`` is
+    a literal at both calls, so each inlined copy keeps one path). The furthest walk
+    runs on negated distances: a box's key is minus its furthest corner's distance, the
+    bound minus the furthest face's, so both walks drop an entry whose key exceeds the
+    bound and take the smallest key first."""
+    if not target_has_wide_tree():  # (a constant: the backend compiles one path)
+        return WIDE_OVERFLOW
+    w = wp.object_record(id, WideRecord)
+    if w.fallback != 0:
+        return WIDE_OVERFLOW
+    best_d = dist * dist
+    sign = 1.0
+    if far:
+        sign = -1.0
+        if dist < 0.0:
+            best_d = -1.0
+    best_f = -1
+    # Written before read (no zero fill); the last entry takes the children not pushed.
+    refs = wp.ext.empty(WIDE_STACK + 1, dtype=wp.int32)
+    keys = wp.ext.empty(WIDE_STACK + 1, dtype=wp.float32)
+    count = 0
+    if w.nodes.shape[0] > 0:
+        refs[0] = 0  # the root: its children are tested against the bound
+        keys[0] = -wp.inf
+        count = 1
+    while count > 0:
+        count = count - 1
+        ref = refs[count]
+        bound = sign * best_d
+        if keys[count] <= bound:
+            if ref < 0:
+                if far:
+                    _wide_leaf_far(w.leaves[-ref - 1], point, best_d, best_f)
+                else:
+                    _wide_leaf(w.leaves[-ref - 1], point, best_d, best_f)
+            elif count > WIDE_STACK - 4:
+                return WIDE_OVERFLOW
+            else:
+                nd = w.nodes[ref]
+                d = wp.vec4(0.0)
+                if far:
+                    d = _far_box_distances(nd, point)
+                else:
+                    d = wide_box_distances(nd, point)
+                # (One test of the four lanes: it also lets LLVM compute the four
+                # distances as one vector, its SLP vectorizer's seed.)
+                near = (d[0] <= bound) | (d[1] <= bound) | (d[2] <= bound) | (d[3] <= bound)
+                if near:
+                    count = _push_children(refs, keys, count, d, nd.child, bound)
+    return best_f
+
+
+@func
+def wide_closest_face(id: wp.uint64, point: wp.vec3, max_dist: float) -> int:
+    """The face closest to ``point`` at a distance strictly below ``max_dist`` (lowest
+    index among ties; slivers left out), or -1, by the 4-wide tree ``id``
+    (``WideRecord``); ``WIDE_OVERFLOW`` when the walk cannot answer (see the module
+    docstring).
+
+    Each step takes an entry off the stack, dropped when its box lies beyond the
+    closest distance found meanwhile: a leaf is tested, a node's four child boxes are
+    measured, the children within that distance sorted by it and pushed far to near,
+    so the nearest comes off next."""
+    return _wide_walk(id, point, max_dist, False)
+
+
+@func
 def wide_furthest_face(id: wp.uint64, point: wp.vec3, min_dist: float) -> int:
     """The face whose furthest vertex from ``point`` is furthest, strictly beyond
     ``min_dist`` (lowest index among ties; slivers left out), or -1, by the 4-wide
@@ -293,42 +330,5 @@ def wide_furthest_face(id: wp.uint64, point: wp.vec3, min_dist: float) -> int:
 
     ``wide_closest_face`` turned around: an entry is dropped when its box's furthest
     corner lies nearer than the furthest face found, and the children are pushed near
-    to far, by their negated distances, so the furthest comes off next."""
-    if not target_has_wide_tree():
-        return WIDE_OVERFLOW
-    w = wp.object_record(id, WideRecord)
-    if w.fallback != 0:
-        return WIDE_OVERFLOW
-    best_d = min_dist * min_dist
-    if min_dist < 0.0:
-        best_d = -1.0
-    best_f = -1
-    refs = wp.ext.empty(WIDE_STACK + 1, dtype=wp.int32)
-    keys = wp.ext.empty(WIDE_STACK + 1, dtype=wp.float32)  # negated distances
-    count = 0
-    if w.nodes.shape[0] > 0:
-        refs[0] = 0
-        keys[0] = -wp.inf  # the root: its children are tested against the bound
-        count = 1
-    while count > 0:
-        count = count - 1
-        ref = refs[count]
-        if keys[count] <= -best_d:
-            if ref < 0:
-                _wide_leaf_far(w.leaves[-ref - 1], point, best_d, best_f)
-            elif count > WIDE_STACK - 4:
-                return WIDE_OVERFLOW
-            else:
-                nd = w.nodes[ref]
-                d = wp.vec4(0.0)
-                for i in range(wp.static(4)):  # (an empty slot's NaN box is no distance)
-                    d[i] = -box_furthest_distance_sq(
-                        wp.vec3(nd.lo_x[i], nd.lo_y[i], nd.lo_z[i]),
-                        wp.vec3(nd.hi_x[i], nd.hi_y[i], nd.hi_z[i]), point,
-                    )  # fmt: skip
-                    d[i] = d[i] if nd.src[i] >= 0 else wp.nan
-                bound = -best_d
-                far = (d[0] <= bound) | (d[1] <= bound) | (d[2] <= bound) | (d[3] <= bound)
-                if far:
-                    count = _push_children(refs, keys, count, d, nd.child, bound)
-    return best_f
+    to far, so the furthest comes off next."""
+    return _wide_walk(id, point, min_dist, True)
