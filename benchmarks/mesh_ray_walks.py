@@ -2,30 +2,29 @@
 side as user ``@func`` code, for A/B timing against the standard library and Warp.
 
     python benchmarks/mesh_ray_walks.py [--tris 200000] [--rays 1000000] [--reps 20]
-        [--device cuda:0] [--variants lib,copy_zero,...] [--no-warp] [--json PATH]
+        [--device cuda:0] [--variants old_lib,payload,...] [--no-warp] [--json PATH]
 
 Each variant is a kernel that answers ``mesh_query_ray(mesh, start, dir, 1e6)`` for one
 ray per thread on the bumpy cube-sphere of ``bench_geometry_mesh.workload`` and writes
-the face and ``t``; its search differs from the standard library's
-(``kdsl.stdlib.mesh._ray_closest_slot``) in one or more knobs:
+the face and ``t``; ``lib`` (always run) calls the library. The variants (``VARIANTS``):
 
-- ``fill``: the stacks made with ``wp.zeros`` (filled: the library before session 11)
-  or ``wp.ext.empty`` (not filled);
-- ``fast``: the slab test without the box padding (Warp's form, plus the library's
-  exit slack) for rays with no tiny direction component; the padded
-  ``ray_box_enter`` otherwise (the padding only matters for a zero component);
+- ``old_lib``: the library's search before session 11's change (each level waited for
+  the left child's load to learn the right child, ``skip``, then loaded that), with its
+  stacks from ``wp.ext.empty``; ``old_lib_zero``: from ``wp.zeros`` (zero-filled);
 - ``payload``: Warp's stack discipline on nodes whose ``first`` holds minus the right
   child's index (``right_linked``, built here on the host from the packed nodes): an
   inner node names both children, so their two loads are independent, and a stack
   entry carries a node's payload (children, or a leaf's range), so a pop loads no node;
-- ``recheck``: a stack entry keeps its entry ``t`` and is dropped when a nearer hit was
-  found meanwhile (the library's rule); without it a popped node is visited anyway
-  (Warp's).
+- ``*_r64``: the kernel compiled with ``cuda_max_registers=64`` (4 blocks of 256 threads
+  per H200 multiprocessor instead of 3).
 
-Every kernel recomputes the hit after the search as the library does (so the times
-compare searches). Times are the minimum over ``--reps`` launches after a warm-up.
-Answers are checked: every variant's faces and ``t`` must equal the library's exactly
-(same tie rule), and the library's hit/miss must agree with Warp's on all but
+Session 11's first round (docs/performance.md, "Mesh rays on the GPU, session 11") also
+ran copies without the stackless fallback, an unpadded slab test, kept pops, global
+loads and the left child loaded a level ahead: ``git show 6850bcd:benchmarks/mesh_ray_walks.py``.
+Every kernel but ``lib`` recomputes the hit after the search as the library does (so
+the times compare searches). Times are the minimum over ``--reps`` launches after a
+warm-up. Answers are checked: every variant's faces and ``t`` must equal the library's
+exactly (same tie rule), and the library's hit/miss must agree with Warp's on all but
 ``RAY_DISAGREEMENT`` of the rays. The table prints ms per launch and the ratio to
 Warp's time (> 1: faster than Warp).
 """
@@ -44,7 +43,6 @@ import kdsl as wp
 from kdsl.stdlib.bvh import BvhNode, BvhRecord
 from kdsl.stdlib.mesh import MeshRecord
 from kdsl.stdlib.mesh_primitives import (
-    BOX_EXIT_SLACK,
     RayShear,
     intersect_ray_triangle,
     ray_box_enter,
@@ -60,22 +58,9 @@ STACK = 32
 VARIANTS = {
     "old_lib": {"walk": "old_lib"},
     "old_lib_zero": {"walk": "old_lib", "fill": "zero"},
-    "prefetch": {"walk": "prefetch"},
+    "payload": {"walk": "payload"},
     "lib_r64": {"walk": "lib", "regs": 64},
     "old_lib_r64": {"walk": "old_lib", "regs": 64},
-    "prefetch_r64": {"walk": "prefetch", "regs": 64},
-    "copy_zero": {"fill": "zero"},
-    "copy_empty": {},
-    "copy_param": {"param": True},
-    "copy_fast": {"fast": True},
-    "copy_keep": {"keep": True},
-    "spec_left": {"walk": "spec"},
-    "spec_both": {"walk": "spec", "spec_right": True},
-    "spec_left_param": {"walk": "spec", "param": True},
-    "payload": {"walk": "payload"},
-    "payload_fast": {"walk": "payload", "fast": True},
-    "payload_fast_norecheck": {"walk": "payload", "fast": True, "recheck": False},
-    "payload_fast_ifif": {"walk": "payload", "fast": True, "while_while": False},
 }
 
 
@@ -84,33 +69,6 @@ class Hit:
     t: wp.float32
     face: wp.int32
     slot: wp.int32
-
-
-@wp.func
-def slab_fast(lo: wp.vec3, hi: wp.vec3, start: wp.vec3, inv: wp.vec3) -> float:
-    """Entry ``t`` of the ray into ``[lo, hi]`` or NaN: the slab test without padding,
-    exit grown by the library's ``BOX_EXIT_SLACK`` (Ize's robust slab test: conservative
-    for finite ``inv``), entry shrunk by as much."""
-    t0 = wp.cw_mul(lo - start, inv)
-    t1 = wp.cw_mul(hi - start, inv)
-    near = wp.max(wp.max(wp.min(t0[0], t1[0]), wp.min(t0[1], t1[1])), wp.min(t0[2], t1[2]))
-    far = wp.min(wp.min(wp.max(t0[0], t1[0]), wp.max(t0[1], t1[1])), wp.max(t0[2], t1[2]))
-    far = far * BOX_EXIT_SLACK
-    if near <= far and far >= 0.0:
-        # Entry moved earlier by the same relative slack: a box entered exactly at the
-        # hit found so far is still visited (the lowest face among equal ``t`` wins).
-        return near - wp.abs(near) * (BOX_EXIT_SLACK - 1.0)
-    return wp.nan
-
-
-def _enter(fast_form: bool):
-    @wp.func
-    def enter(lo: wp.vec3, hi: wp.vec3, start: wp.vec3, inv: wp.vec3, fast: bool) -> float:
-        if wp.static(fast_form) and fast:
-            return slab_fast(lo, hi, start, inv)
-        return ray_box_enter(lo, hi, start, inv)
-
-    return enter
 
 
 @wp.func
@@ -136,13 +94,6 @@ def skip_of(nd: BvhNode, node: int) -> int:
     if nd.first < 0:
         return nd.next
     return node + 1
-
-
-@wp.func
-def fast_ray(dir: wp.vec3) -> bool:
-    """Whether every direction component is large enough for ``slab_fast``."""
-    m = wp.min(wp.min(wp.abs(dir[0]), wp.abs(dir[1])), wp.abs(dir[2]))
-    return m >= 1.0e-30
 
 
 @wp.func
@@ -273,24 +224,11 @@ def _old_lib_walk(fill: str):
     return walk
 
 
-@wp.func
-def wait_links(nodes: wp.array(dtype=wp.int32), keys: wp.array(dtype=wp.float32),
-               links: wp.array(dtype=wp.vec3i), count: int, node: int, key: float,
-               nd: BvhNode, right: int) -> int:  # fmt: skip
-    if count < STACK:
-        nodes[count] = node
-        keys[count] = key
-        links[count] = wp.vec3i(nd.first, nd.next, right)
-    return count + 1
-
-
-def _prefetch_walk():
-    """The library's layout, a level waiting for one load: an inner node is carried
-    with its right child (read from the record's ``skip`` array: the right child of
-    ``n`` is ``skip[n + 1]``), and a level loads its two children's nodes and their
-    right children (``skip`` of the node after each) at once; a waiting node keeps its
-    ``first``, ``next`` and right child, so a pop loads nothing. With the library's
-    stackless fallback: a candidate for the library."""
+def _payload_walk():
+    """Warp's discipline on right-linked nodes (``alt``, ``right_linked``): a node is
+    carried as its payload ``(a, b)``: an inner node's children ``(a, -b)``, a leaf's
+    items ``[a, a + b)``; a stack entry is a payload and its entry ``t``. Both children
+    of a level load at once; a pop loads nothing."""
 
     @wp.func
     def walk(id: wp.uint64, alt: wp.array(dtype=BvhNode), start: wp.vec3, dir: wp.vec3,
@@ -299,221 +237,6 @@ def _prefetch_walk():
         bvh = wp.object_record(rec.bvh, BvhRecord)
         shear = ray_shear(dir)
         inv = wp.vec3(safe_inverse(dir[0]), safe_inverse(dir[1]), safe_inverse(dir[2]))
-        hit = Hit()
-        hit.t = max_t
-        hit.face = -1
-        hit.slot = -1
-        span = root_range(bvh, -1)
-        nodes = wp.ext.empty(STACK, dtype=wp.int32)
-        enters = wp.ext.empty(STACK, dtype=wp.float32)
-        links = wp.ext.empty(STACK, dtype=wp.vec3i)
-        last = bvh.skip.shape[0] - 1
-        count = 0
-        sweep = span[1]
-        node = span[0]
-        active = False
-        first = 0
-        items = 0
-        right = 0  # the right child of ``node`` while it is an inner node
-        if span[0] < span[1]:
-            nd = bvh.nodes[node]
-            active = ray_box_enter(nd.lower, nd.upper, start, inv) <= hit.t
-            first = nd.first
-            items = nd.next
-            right = bvh.skip[wp.min(node + 1, last)]
-        while active or sweep < span[1]:
-            if active:
-                while first < 0:
-                    left = node + 1
-                    left_nd = bvh.nodes[left]
-                    right_nd = bvh.nodes[right]
-                    left_right = bvh.skip[wp.min(left + 1, last)]
-                    right_right = bvh.skip[wp.min(right + 1, last)]
-                    t_left = ray_box_enter(left_nd.lower, left_nd.upper, start, inv)
-                    t_right = ray_box_enter(right_nd.lower, right_nd.upper, start, inv)
-                    left_in = t_left <= hit.t
-                    right_in = t_right <= hit.t
-                    go_right = right_in and (not left_in or t_right < t_left)
-                    if left_in and right_in:
-                        if go_right:
-                            count = wait_links(nodes, enters, links, count, left, t_left,
-                                               left_nd, left_right)  # fmt: skip
-                        else:
-                            count = wait_links(nodes, enters, links, count, right, t_right,
-                                               right_nd, right_right)  # fmt: skip
-                        if count > STACK:
-                            count = STACK
-                            sweep = span[0]
-                    if go_right:
-                        node = right
-                        first = right_nd.first
-                        items = right_nd.next
-                        right = right_right
-                    elif left_in:
-                        node = left
-                        first = left_nd.first
-                        items = left_nd.next
-                        right = left_right
-                    else:
-                        first = 0
-                        items = 0
-            else:
-                step = next_ray_leaf(bvh, sweep, span[1], start, inv, hit.t)
-                sweep = step[2]
-                first = step[0]
-                items = step[1]
-            hit = leaf_hits(rec, bvh, first, items, shear, start, hit)
-            active = False
-            while count > 0 and not active:
-                count = count - 1
-                if enters[count] <= hit.t:
-                    node = nodes[count]
-                    link = links[count]
-                    first = link[0]
-                    items = link[1]
-                    right = link[2]
-                    active = True
-        return hit.slot
-
-    return walk
-
-
-def _node_source(param: bool):
-    """``(load, count_nodes)``: a walk's node reads, through the BVH's record or
-    (``param``) from the kernel's ``alt`` parameter."""
-
-    @wp.func
-    def load(bvh: BvhRecord, alt: wp.array(dtype=BvhNode), i: int) -> BvhNode:
-        if wp.static(param):
-            return alt[i]
-        return bvh.nodes[i]
-
-    @wp.func
-    def count_nodes(bvh: BvhRecord, alt: wp.array(dtype=BvhNode)) -> int:
-        if wp.static(param):
-            return alt.shape[0]
-        return bvh.nodes.shape[0]
-
-    return load, count_nodes
-
-
-def _skip_walk(fill: str, fast_form: bool, keep: bool = False, param: bool = False):
-    """The library's walk (node indices and entry ``t`` on the stack; the far child
-    found through the near child's ``skip``), with the stack fill and slab form given.
-    ``keep``: a stack entry also keeps the node's ``first`` and ``next``, so a pop loads
-    no node (the library's layout otherwise)."""
-    enter = _enter(fast_form)
-    load, _count = _node_source(param)
-    zero = fill == "zero"
-
-    @wp.func
-    def walk(id: wp.uint64, alt: wp.array(dtype=BvhNode), start: wp.vec3, dir: wp.vec3,
-             max_t: float) -> int:  # fmt: skip
-        rec = wp.object_record(id, MeshRecord)
-        bvh = wp.object_record(rec.bvh, BvhRecord)
-        shear = ray_shear(dir)
-        inv = wp.vec3(safe_inverse(dir[0]), safe_inverse(dir[1]), safe_inverse(dir[2]))
-        fast = fast_ray(dir)
-        hit = Hit()
-        hit.t = max_t
-        hit.face = -1
-        hit.slot = -1
-        if wp.static(zero):
-            nodes = wp.zeros(STACK, dtype=wp.int32)
-            enters = wp.zeros(STACK, dtype=wp.float32)
-        else:
-            nodes = wp.ext.empty(STACK, dtype=wp.int32)
-            enters = wp.ext.empty(STACK, dtype=wp.float32)
-        firsts = wp.ext.empty(STACK, dtype=wp.int32)
-        nexts = wp.ext.empty(STACK, dtype=wp.int32)
-        count = 0
-        lost = False
-        node = bvh.root
-        active = False
-        nd = BvhNode()
-        if node >= 0:
-            nd = load(bvh, alt, node)
-            active = enter(nd.lower, nd.upper, start, inv, fast) <= hit.t
-        while active:
-            first = 0
-            items = 0
-            at_leaf = nd.first >= 0
-            inner = not at_leaf
-            while inner:
-                near = node + 1
-                near_nd = load(bvh, alt, near)
-                far = skip_of(near_nd, near)
-                far_nd = load(bvh, alt, far)
-                t_near = enter(near_nd.lower, near_nd.upper, start, inv, fast)
-                t_far = enter(far_nd.lower, far_nd.upper, start, inv, fast)
-                near_in = t_near <= hit.t
-                far_in = t_far <= hit.t
-                if far_in and (not near_in or t_far < t_near):
-                    near_in = far_in
-                    far_in = t_near <= hit.t
-                    tmp = near
-                    near = far
-                    far = tmp
-                    tmp_nd = near_nd
-                    near_nd = far_nd
-                    far_nd = tmp_nd
-                    tmp_t = t_near
-                    t_near = t_far
-                    t_far = tmp_t
-                inner = False
-                if near_in:
-                    if far_in:
-                        if count < STACK:
-                            nodes[count] = far
-                            enters[count] = t_far
-                            if wp.static(keep):
-                                firsts[count] = far_nd.first
-                                nexts[count] = far_nd.next
-                            count = count + 1
-                        else:
-                            lost = True
-                    node = near
-                    nd = near_nd
-                    at_leaf = nd.first >= 0
-                    inner = not at_leaf
-            if at_leaf:
-                first = nd.first
-                items = nd.next
-            hit = leaf_hits(rec, bvh, first, items, shear, start, hit)
-            active = False
-            while count > 0 and not active:
-                count = count - 1
-                if enters[count] <= hit.t:
-                    node = nodes[count]
-                    if wp.static(keep):
-                        nd.first = firsts[count]
-                        nd.next = nexts[count]
-                    else:
-                        nd = load(bvh, alt, node)
-                    active = True
-        if lost:
-            return -2
-        return hit.slot
-
-    return walk
-
-
-def _payload_walk(fast_form: bool, recheck: bool, while_while: bool = True):
-    """Warp's discipline on right-linked nodes (``alt``): a node is carried as its
-    payload ``(a, b)``: an inner node's children ``(a, -b)``, a leaf's items
-    ``[a, a + b)``; a stack entry is a payload (and its entry ``t`` with ``recheck``).
-    ``while_while``: descend to a leaf in an inner loop (the library's form); else one
-    node per iteration of the outer loop (Warp's "if-if")."""
-    enter = _enter(fast_form)
-
-    @wp.func
-    def walk(id: wp.uint64, alt: wp.array(dtype=BvhNode), start: wp.vec3, dir: wp.vec3,
-             max_t: float) -> int:  # fmt: skip
-        rec = wp.object_record(id, MeshRecord)
-        bvh = wp.object_record(rec.bvh, BvhRecord)
-        shear = ray_shear(dir)
-        inv = wp.vec3(safe_inverse(dir[0]), safe_inverse(dir[1]), safe_inverse(dir[2]))
-        fast = fast_ray(dir)
         hit = Hit()
         hit.t = max_t
         hit.face = -1
@@ -529,7 +252,7 @@ def _payload_walk(fast_form: bool, recheck: bool, while_while: bool = True):
         b = 0
         if root >= 0:
             nd = alt[root]
-            active = enter(nd.lower, nd.upper, start, inv, fast) <= hit.t
+            active = ray_box_enter(nd.lower, nd.upper, start, inv) <= hit.t
             a = nd.first
             b = nd.next
             if nd.first < 0:
@@ -540,8 +263,8 @@ def _payload_walk(fast_form: bool, recheck: bool, while_while: bool = True):
             while descend:  # an inner node: both children, loaded independently
                 left = alt[a]
                 right = alt[-b]
-                t_l = enter(left.lower, left.upper, start, inv, fast)
-                t_r = enter(right.lower, right.upper, start, inv, fast)
+                t_l = ray_box_enter(left.lower, left.upper, start, inv)
+                t_r = ray_box_enter(right.lower, right.upper, start, inv)
                 l_in = t_l <= hit.t
                 r_in = t_r <= hit.t
                 # payloads of the two children
@@ -560,8 +283,7 @@ def _payload_walk(fast_form: bool, recheck: bool, while_while: bool = True):
                         if count < STACK:
                             sa[count] = la
                             sb[count] = lb
-                            if wp.static(recheck):
-                                st[count] = t_l
+                            st[count] = t_l
                             count = count + 1
                         else:
                             lost = True
@@ -572,8 +294,7 @@ def _payload_walk(fast_form: bool, recheck: bool, while_while: bool = True):
                         if count < STACK:
                             sa[count] = ra
                             sb[count] = rb
-                            if wp.static(recheck):
-                                st[count] = t_r
+                            st[count] = t_r
                             count = count + 1
                         else:
                             lost = True
@@ -581,125 +302,16 @@ def _payload_walk(fast_form: bool, recheck: bool, while_while: bool = True):
                     b = lb
                 else:
                     b = 0  # both missed: nothing to test
-                descend = wp.static(while_while) and b < 0
+                descend = b < 0
             if b >= 0:  # at a leaf (b = 0: both children missed): its faces, then a pop
                 hit = leaf_hits(rec, bvh, a, b, shear, start, hit)
                 active = False
                 while count > 0 and not active:
                     count = count - 1
-                    take = True
-                    if wp.static(recheck):
-                        take = st[count] <= hit.t
-                    if take:
+                    if st[count] <= hit.t:
                         a = sa[count]
                         b = sb[count]
                         active = True
-        if lost:
-            return -2
-        return hit.slot
-
-    return walk
-
-
-def _spec_walk(fast_form: bool, spec_right: bool, param: bool = False):
-    """The library's layout with the node loads of a level issued together: at an inner
-    node ``c`` whose left child ``L = c + 1`` is loaded, the right child (``c + 2`` or
-    ``L.next``) and ``L``'s left child ``c + 2`` (and with ``spec_right`` the right
-    child's left child) are loaded at once, so a level costs one load latency instead
-    of two (the library's: ``L``, then the right child it names). A stack entry keeps
-    the node's ``first``/``next``; a pop loads only the node's left child."""
-    enter = _enter(fast_form)
-    load, count_nodes = _node_source(param)
-
-    @wp.func
-    def walk(id: wp.uint64, alt: wp.array(dtype=BvhNode), start: wp.vec3, dir: wp.vec3,
-             max_t: float) -> int:  # fmt: skip
-        rec = wp.object_record(id, MeshRecord)
-        bvh = wp.object_record(rec.bvh, BvhRecord)
-        shear = ray_shear(dir)
-        inv = wp.vec3(safe_inverse(dir[0]), safe_inverse(dir[1]), safe_inverse(dir[2]))
-        fast = fast_ray(dir)
-        hit = Hit()
-        hit.t = max_t
-        hit.face = -1
-        hit.slot = -1
-        nodes = wp.ext.empty(STACK, dtype=wp.int32)
-        enters = wp.ext.empty(STACK, dtype=wp.float32)
-        firsts = wp.ext.empty(STACK, dtype=wp.int32)
-        nexts = wp.ext.empty(STACK, dtype=wp.int32)
-        last = count_nodes(bvh, alt) - 1
-        count = 0
-        lost = False
-        c = bvh.root
-        active = False
-        cf = 0  # the current node's first and next
-        cn = 0
-        lnd = BvhNode()  # its left child, loaded when it is inner
-        if c >= 0:
-            nd = load(bvh, alt, c)
-            active = enter(nd.lower, nd.upper, start, inv, fast) <= hit.t
-            cf = nd.first
-            cn = nd.next
-        while active:
-            if cf < 0:
-                lnd = load(bvh, alt, c + 1)
-            while cf < 0:
-                left = c + 1
-                right = c + 2
-                if lnd.first < 0:
-                    right = lnd.next
-                rnd = load(bvh, alt, right)
-                llnd = load(bvh, alt, wp.min(c + 2, last))
-                rlnd = lnd
-                if wp.static(spec_right):
-                    rlnd = load(bvh, alt, wp.min(right + 1, last))
-                t_l = enter(lnd.lower, lnd.upper, start, inv, fast)
-                t_r = enter(rnd.lower, rnd.upper, start, inv, fast)
-                l_in = t_l <= hit.t
-                r_in = t_r <= hit.t
-                go_right = r_in and (not l_in or t_r < t_l)
-                # the far child waits (when entered)
-                if (go_right and l_in) or (not go_right and l_in and r_in):
-                    if count < STACK:
-                        if go_right:
-                            nodes[count] = left
-                            enters[count] = t_l
-                            firsts[count] = lnd.first
-                            nexts[count] = lnd.next
-                        else:
-                            nodes[count] = right
-                            enters[count] = t_r
-                            firsts[count] = rnd.first
-                            nexts[count] = rnd.next
-                        count = count + 1
-                    else:
-                        lost = True
-                if go_right:
-                    c = right
-                    cf = rnd.first
-                    cn = rnd.next
-                    if cf < 0:
-                        if wp.static(spec_right):
-                            lnd = rlnd
-                        else:
-                            lnd = load(bvh, alt, right + 1)
-                elif l_in:
-                    c = left
-                    cf = lnd.first
-                    cn = lnd.next
-                    lnd = llnd
-                else:
-                    cf = 0  # both missed: an empty leaf
-                    cn = 0
-            hit = leaf_hits(rec, bvh, cf, cn, shear, start, hit)
-            active = False
-            while count > 0 and not active:
-                count = count - 1
-                if enters[count] <= hit.t:
-                    c = nodes[count]
-                    cf = firsts[count]
-                    cn = nexts[count]
-                    active = True
         if lost:
             return -2
         return hit.slot
@@ -722,29 +334,15 @@ def finish(id: wp.uint64, slot: int, start: wp.vec3, dir: wp.vec3) -> wp.vec2:
     return wp.vec2(h[0], float(face))
 
 
-def variant_kernel(walk: str = "skip", fill: str = "empty", fast: bool = False,
-                   recheck: bool = True, keep: bool = False, spec_right: bool = False,
-                   while_while: bool = True, param: bool = False,
-                   regs: int | None = None):  # fmt: skip
+def variant_kernel(walk: str, fill: str = "empty", regs: int | None = None):
     """The kernel of one variant: ``face[i]``, ``t[i]`` of ray ``i``. ``walk``: "lib"
-    (``mesh_query_ray``), "old_lib" (the library's search before session 11's change),
-    "skip" (a copy of it without the stackless fallback), "spec", "prefetch" or
-    "payload"; ``param``: the skip and spec walks read the nodes from the kernel's
-    ``alt`` parameter (global loads) rather than through the BVH's record (generic
-    loads); ``regs``: the kernel option ``cuda_max_registers``; the rest: see the walks."""
+    (``mesh_query_ray``), "old_lib" (the library's search before session 11's change;
+    ``fill``: its stacks from ``wp.zeros`` or ``wp.ext.empty``) or "payload";
+    ``regs``: the kernel option ``cuda_max_registers``."""
     options = {} if regs is None else {"cuda_max_registers": regs}
     if walk == "lib":
         return wp.kernel(_lib_rays, enable_backward=False, **options)
-    if walk == "old_lib":
-        search = _old_lib_walk(fill)
-    elif walk == "prefetch":
-        search = _prefetch_walk()
-    elif walk == "skip":
-        search = _skip_walk(fill, fast, keep, param)
-    elif walk == "spec":
-        search = _spec_walk(fast, spec_right, param)
-    else:
-        search = _payload_walk(fast, recheck, while_while)
+    search = _old_lib_walk(fill) if walk == "old_lib" else _payload_walk()
 
     @wp.kernel(enable_backward=False, **options)
     def rays(mesh: wp.uint64, alt: wp.array(dtype=BvhNode), start: wp.array(dtype=wp.vec3),
