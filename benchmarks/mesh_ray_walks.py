@@ -2,15 +2,12 @@
 side as user ``@func`` code, for A/B timing against the standard library and Warp.
 
     python benchmarks/mesh_ray_walks.py [--tris 200000] [--rays 1000000] [--reps 20]
-        [--device cuda:0] [--variants old_lib,payload,...] [--no-warp] [--json PATH]
+        [--device cuda:0] [--variants payload,lib_r64] [--no-warp] [--json PATH]
 
 Each variant is a kernel that answers ``mesh_query_ray(mesh, start, dir, 1e6)`` for one
 ray per thread on the bumpy cube-sphere of ``bench_geometry_mesh.workload`` and writes
 the face and ``t``; ``lib`` (always run) calls the library. The variants (``VARIANTS``):
 
-- ``old_lib``: the library's search before session 11's change (each level waited for
-  the left child's load to learn the right child, ``skip``, then loaded that), with its
-  stacks from ``wp.ext.empty``; ``old_lib_zero``: from ``wp.zeros`` (zero-filled);
 - ``payload``: Warp's stack discipline on nodes whose ``first`` holds minus the right
   child's index (``right_linked``, built here on the host from the packed nodes): an
   inner node names both children, so their two loads are independent, and a stack
@@ -18,9 +15,11 @@ the face and ``t``; ``lib`` (always run) calls the library. The variants (``VARI
 - ``*_r64``: the kernel compiled with ``cuda_max_registers=64`` (4 blocks of 256 threads
   per H200 multiprocessor instead of 3).
 
-Session 11's first round (docs/performance.md, "Mesh rays on the GPU, session 11") also
-ran copies without the stackless fallback, an unpadded slab test, kept pops, global
-loads and the left child loaded a level ahead: ``git show 6850bcd:benchmarks/mesh_ray_walks.py``.
+Session 11 (docs/performance.md, "Mesh rays on the GPU, session 11") also ran the
+session-10 search filled and not (``old_lib``, ``git show
+f8cbe2b:benchmarks/mesh_ray_walks.py``) and copies without the stackless fallback, an
+unpadded slab test, kept pops, global loads and the left child loaded a level ahead
+(``git show 6850bcd:benchmarks/mesh_ray_walks.py``).
 Every kernel but ``lib`` recomputes the hit after the search as the library does (so
 the times compare searches). Times are the minimum over ``--reps`` launches after a
 warm-up. Answers are checked: every variant's faces and ``t`` must equal the library's
@@ -56,11 +55,8 @@ from bench_geometry_mesh import MAX_T, RAY_DISAGREEMENT, workload
 STACK = 32
 #: The variants: name -> ``variant_kernel``'s keywords (its defaults: the library's walk).
 VARIANTS = {
-    "old_lib": {"walk": "old_lib"},
-    "old_lib_zero": {"walk": "old_lib", "fill": "zero"},
     "payload": {"walk": "payload"},
     "lib_r64": {"walk": "lib", "regs": 64},
-    "old_lib_r64": {"walk": "old_lib", "regs": 64},
 }
 
 
@@ -90,138 +86,16 @@ def leaf_hits(rec: MeshRecord, bvh: BvhRecord, first: int, count: int, shear: Ra
 
 
 @wp.func
-def skip_of(nd: BvhNode, node: int) -> int:
-    if nd.first < 0:
-        return nd.next
-    return node + 1
-
-
-@wp.func
-def root_range(bvh: BvhRecord, root: int) -> wp.vec2i:
-    start = root
-    if start < 0:
-        start = bvh.root
-    if start < 0:
-        return wp.vec2i(0, 0)
-    return wp.vec2i(start, bvh.skip[start])
-
-
-@wp.func
-def wait(nodes: wp.array(dtype=wp.int32), keys: wp.array(dtype=wp.float32), count: int,
-         node: int, key: float) -> int:  # fmt: skip
+def push(sa: wp.array(dtype=wp.int32), sb: wp.array(dtype=wp.int32),
+         st: wp.array(dtype=wp.float32), count: int, a: int, b: int, t: float) -> int:  # fmt: skip
+    """Payload ``(a, b)`` entered at ``t`` onto the stack of ``count`` entries: the new
+    count (``STACK + 1``: full, the entry is lost and the walk answers -2)."""
     if count < STACK:
-        nodes[count] = node
-        keys[count] = key
-    return count + 1
-
-
-@wp.func
-def next_ray_leaf(bvh: BvhRecord, node: int, stop: int, start: wp.vec3, inv: wp.vec3,
-                  max_t: float) -> wp.vec3i:  # fmt: skip
-    n = node
-    while n < stop:
-        nd = bvh.nodes[n]
-        if ray_box_enter(nd.lower, nd.upper, start, inv) <= max_t:
-            if nd.first >= 0:
-                return wp.vec3i(nd.first, nd.next, n + 1)
-            n = n + 1
-        else:
-            n = skip_of(nd, n)
-    return wp.vec3i(0, 0, stop)
-
-
-def _old_lib_walk(fill: str):
-    """The library's search before session 11's change (commit 6850bcd), with its
-    stackless fallback; ``fill``: its stacks from ``wp.zeros`` or ``wp.ext.empty``."""
-    zero = fill == "zero"
-
-    @wp.func
-    def walk(id: wp.uint64, alt: wp.array(dtype=BvhNode), start: wp.vec3, dir: wp.vec3,
-             max_t: float) -> int:  # fmt: skip
-        root = -1
-        rec = wp.object_record(id, MeshRecord)
-        bvh = wp.object_record(rec.bvh, BvhRecord)
-        shear = ray_shear(dir)
-        inv = wp.vec3(safe_inverse(dir[0]), safe_inverse(dir[1]), safe_inverse(dir[2]))
-        hit = Hit()
-        hit.t = max_t
-        hit.face = -1
-        hit.slot = -1
-        span = root_range(bvh, root)
-        if wp.static(zero):
-            nodes = wp.zeros(STACK, dtype=wp.int32)
-            enters = wp.zeros(STACK, dtype=wp.float32)
-        else:
-            nodes = wp.ext.empty(STACK, dtype=wp.int32)
-            enters = wp.ext.empty(STACK, dtype=wp.float32)
-        count = 0
-        sweep = span[1]  # the stackless pass's next node: none until the stack overflows
-        node = span[0]
-        active = False  # ``node`` (packed as ``nd``) is to be visited
-        nd = BvhNode()
-        if span[0] < span[1]:
-            nd = bvh.nodes[node]
-            active = ray_box_enter(nd.lower, nd.upper, start, inv) <= hit.t
-        while active or sweep < span[1]:
-            first = 0  # the leaf to test: its items [first, first + items)
-            items = 0
-            if active:
-                # Down the nearer children to a leaf (or to where both children are
-                # missed), then the leaf's faces: "while-while", as the closest point.
-                at_leaf = nd.first >= 0
-                inner = not at_leaf
-                while inner:
-                    near = node + 1
-                    near_nd = bvh.nodes[near]
-                    far = skip_of(near_nd, near)
-                    far_nd = bvh.nodes[far]
-                    t_near = ray_box_enter(near_nd.lower, near_nd.upper, start, inv)
-                    t_far = ray_box_enter(far_nd.lower, far_nd.upper, start, inv)
-                    near_in = t_near <= hit.t  # (false for NaN: a missed box)
-                    far_in = t_far <= hit.t
-                    if far_in and (not near_in or t_far < t_near):  # the far child first
-                        near_in = far_in
-                        far_in = t_near <= hit.t
-                        tmp = near
-                        near = far
-                        far = tmp
-                        tmp_nd = near_nd
-                        near_nd = far_nd
-                        far_nd = tmp_nd
-                        tmp_t = t_near
-                        t_near = t_far
-                        t_far = tmp_t
-                    inner = False
-                    if near_in:  # visit it now (its node is loaded); the other waits
-                        if far_in:
-                            count = wait(nodes, enters, count, far, t_far)
-                            if count > STACK:  # full: a stackless pass once it is empty
-                                count = STACK
-                                sweep = span[0]
-                        node = near
-                        nd = near_nd
-                        at_leaf = nd.first >= 0
-                        inner = not at_leaf
-                if at_leaf:
-                    first = nd.first
-                    items = nd.next
-            else:  # after an overflow, the stackless pass: its next leaf
-                step = next_ray_leaf(bvh, sweep, span[1], start, inv, hit.t)
-                sweep = step[2]
-                first = step[0]
-                items = step[1]
-            hit = leaf_hits(rec, bvh, first, items, shear, start, hit)
-            # the nearest waiting node not beyond the hit found so far
-            active = False
-            while count > 0 and not active:
-                count = count - 1
-                if enters[count] <= hit.t:
-                    node = nodes[count]
-                    nd = bvh.nodes[node]
-                    active = True
-        return hit.slot
-
-    return walk
+        sa[count] = a
+        sb[count] = b
+        st[count] = t
+        return count + 1
+    return STACK + 1
 
 
 def _payload_walk():
@@ -280,28 +154,19 @@ def _payload_walk():
                     rb = right.first
                 if r_in and (not l_in or t_r < t_l):  # the right child first
                     if l_in:
-                        if count < STACK:
-                            sa[count] = la
-                            sb[count] = lb
-                            st[count] = t_l
-                            count = count + 1
-                        else:
-                            lost = True
+                        count = push(sa, sb, st, count, la, lb, t_l)
                     a = ra
                     b = rb
                 elif l_in:
                     if r_in:
-                        if count < STACK:
-                            sa[count] = ra
-                            sb[count] = rb
-                            st[count] = t_r
-                            count = count + 1
-                        else:
-                            lost = True
+                        count = push(sa, sb, st, count, ra, rb, t_r)
                     a = la
                     b = lb
                 else:
                     b = 0  # both missed: nothing to test
+                if count > STACK:
+                    lost = True
+                    count = STACK
                 descend = b < 0
             if b >= 0:  # at a leaf (b = 0: both children missed): its faces, then a pop
                 hit = leaf_hits(rec, bvh, a, b, shear, start, hit)
@@ -334,15 +199,14 @@ def finish(id: wp.uint64, slot: int, start: wp.vec3, dir: wp.vec3) -> wp.vec2:
     return wp.vec2(h[0], float(face))
 
 
-def variant_kernel(walk: str, fill: str = "empty", regs: int | None = None):
+def variant_kernel(walk: str, regs: int | None = None):
     """The kernel of one variant: ``face[i]``, ``t[i]`` of ray ``i``. ``walk``: "lib"
-    (``mesh_query_ray``), "old_lib" (the library's search before session 11's change;
-    ``fill``: its stacks from ``wp.zeros`` or ``wp.ext.empty``) or "payload";
-    ``regs``: the kernel option ``cuda_max_registers``."""
+    (``mesh_query_ray``) or "payload"; ``regs``: the kernel option
+    ``cuda_max_registers``."""
     options = {} if regs is None else {"cuda_max_registers": regs}
     if walk == "lib":
         return wp.kernel(_lib_rays, enable_backward=False, **options)
-    search = _old_lib_walk(fill) if walk == "old_lib" else _payload_walk()
+    search = _payload_walk()
 
     @wp.kernel(enable_backward=False, **options)
     def rays(mesh: wp.uint64, alt: wp.array(dtype=BvhNode), start: wp.array(dtype=wp.vec3),
