@@ -22,28 +22,35 @@ def backend(request, cpu_backend):
     return request.param
 
 
-@wp.kernel
-def stack_digits(n: wp.array(dtype=int), out: wp.array(dtype=int)):
-    # Push the decimal digits of n[i] on a local stack, pop them back into a number.
-    i = wp.tid()
-    stack = wp.zeros(DEPTH, dtype=int)
-    top = 0
-    x = n[i]
-    while x > 0:
-        stack[top] = x % 10
-        top += 1
-        x = x // 10
-    r = 0
-    while top > 0:
-        top -= 1
-        r = r * 10 + stack[top]
-    out[i] = r
+def make_stack_digits(local):
+    """A kernel that pushes the decimal digits of ``n[i]`` on a stack made by ``local``
+    (``wp.zeros`` or ``wp.ext.empty``: written before it is read, so either works) and
+    pops them back into a number."""
+
+    @wp.kernel
+    def stack_digits(n: wp.array(dtype=int), out: wp.array(dtype=int)):
+        i = wp.tid()
+        stack = local(DEPTH, dtype=int)
+        top = 0
+        x = n[i]
+        while x > 0:
+            stack[top] = x % 10
+            top += 1
+            x = x // 10
+        r = 0
+        while top > 0:
+            top -= 1
+            r = r * 10 + stack[top]
+        out[i] = r
+
+    return stack_digits
 
 
-def test_stack_push_pop(backend):
+@pytest.mark.parametrize("local", [wp.zeros, wp.ext.empty], ids=["zeros", "ext.empty"])
+def test_stack_push_pop(backend, local):
     n = np.array([0, 7, 12, 345, 1000, 98765], dtype=np.int32)
     out = wp.zeros(len(n), dtype=int)
-    wp.launch(stack_digits, len(n), [wp.array(n), out], backend=backend)
+    wp.launch(make_stack_digits(local), len(n), [wp.array(n), out], backend=backend)
     np.testing.assert_array_equal(out.numpy(), n)  # pop order undoes push order
 
 

@@ -1,7 +1,8 @@
 """``kdsl.ext.empty(shape, dtype)``: a thread-local array without the zero fill
 (``kd.local_array`` with ``fill = "none"``), on interp and cpu (and cuda: compile-only
 through NVRTC here, run on a GPU when one is present), its poison pattern on interp, the
-IR text form, and its errors. The adjoint around one: tests/cpu/test_local_arrays.py."""
+IR text form, and its errors. The adjoint around one and a stack's pushes and pops:
+tests/cpu/test_local_arrays.py."""
 
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ from kdsl.compiler import lower
 from kdsl.errors import KdslError, KdslTypeError
 from kdsl.ir import parse_module, print_module
 from kdsl.ir.ops_local import POISON_BYTE
+from tests.cpu.test_local_arrays import make_stack_digits
 
 BACKENDS = ["interp", "cpu"]
 POISON_I32 = int(np.full(4, POISON_BYTE, np.uint8).view(np.int32)[0])
@@ -24,29 +26,8 @@ def backend(request, cpu_backend):
     return request.param
 
 
-@wp.kernel
-def stack_digits(n: wp.array(dtype=int), out: wp.array(dtype=int)):
-    # A stack pushed before it is popped: no element is read before it is written.
-    i = wp.tid()
-    stack = wp.ext.empty(8, dtype=int)
-    top = 0
-    x = n[i]
-    while x > 0:
-        stack[top] = x % 10
-        top += 1
-        x = x // 10
-    r = 0
-    while top > 0:
-        top -= 1
-        r = r * 10 + stack[top]
-    out[i] = r
-
-
-def test_stack_push_pop(backend):
-    n = np.array([0, 7, 12, 345, 1000, 98765], dtype=np.int32)
-    out = wp.zeros(len(n), dtype=int)
-    wp.launch(stack_digits, len(n), [wp.array(n), out], backend=backend)
-    np.testing.assert_array_equal(out.numpy(), n)
+#: A stack pushed before it is popped: no element is read before it is written.
+stack_digits = make_stack_digits(wp.ext.empty)
 
 
 @wp.func
