@@ -50,7 +50,7 @@ from kdsl.stdlib.mesh_primitives import (
 )
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_geometry_mesh import MAX_T, RAY_DISAGREEMENT, workload
+from bench_geometry_mesh import MAX_T, RAY_DISAGREEMENT, mesh_kernels, workload
 
 STACK = 32
 #: The variants: name -> ``variant_kernel``'s keywords (its defaults: the library's walk).
@@ -204,8 +204,8 @@ def variant_kernel(walk: str, regs: int | None = None):
     (``mesh_query_ray``) or "payload"; ``regs``: the kernel option
     ``cuda_max_registers``."""
     options = {} if regs is None else {"cuda_max_registers": regs}
-    if walk == "lib":
-        return wp.kernel(_lib_rays, enable_backward=False, **options)
+    if walk == "lib":  # the mesh benchmark's ray kernel (one source for kdsl and Warp)
+        return wp.kernel(mesh_kernels(wp)[1].fn, enable_backward=False, **options)
     search = _payload_walk()
 
     @wp.kernel(enable_backward=False, **options)
@@ -219,21 +219,6 @@ def variant_kernel(walk: str, regs: int | None = None):
         t[i] = r[0]
 
     return rays
-
-
-def _lib_rays(mesh: wp.uint64, alt: wp.array(dtype=BvhNode), start: wp.array(dtype=wp.vec3),
-              d: wp.array(dtype=wp.vec3), face: wp.array(dtype=wp.int32),
-              t: wp.array(dtype=float)):  # fmt: skip
-    i = wp.tid()
-    q = wp.mesh_query_ray(mesh, start[i], d[i], MAX_T)
-    face[i] = -1
-    t[i] = 0.0
-    if q.result:
-        face[i] = q.face
-        t[i] = q.t
-
-
-lib_rays = wp.kernel(_lib_rays, enable_backward=False)
 
 
 @wp.kernel(enable_backward=False)
@@ -289,17 +274,7 @@ def _warp_side(data: dict, device: str, reps: int):
     warp.config.quiet = True
     warp.init()
 
-    @warp.kernel
-    def wrays(mesh: warp.uint64, start: warp.array(dtype=warp.vec3),
-              d: warp.array(dtype=warp.vec3), face: warp.array(dtype=warp.int32),
-              t: warp.array(dtype=float)):  # fmt: skip
-        i = warp.tid()
-        q = warp.mesh_query_ray(mesh, start[i], d[i], MAX_T)
-        face[i] = -1
-        t[i] = 0.0
-        if q.result:
-            face[i] = q.face
-            t[i] = q.t
+    wrays = mesh_kernels(warp)[1]
 
     pts = warp.array(data["points"], dtype=warp.vec3, device=device)
     idx = warp.array(data["faces"].reshape(-1), dtype=warp.int32, device=device)
@@ -344,7 +319,7 @@ def main(argv: list[str] | None = None) -> int:
         secs, wface, wt, _keep = _warp_side(data, dev, args.reps)
         warp_row = {"variant": "warp", "ms": secs * 1e3}
         answers["warp"] = (wface, wt)
-    kernels = {"lib": lib_rays}
+    kernels = {"lib": variant_kernel("lib")}
     for name in [v for v in args.variants.split(",") if v]:
         kernels[name] = variant_kernel(**VARIANTS[name])
     for name, k in kernels.items():
@@ -352,7 +327,12 @@ def main(argv: list[str] | None = None) -> int:
         t = wp.zeros(n, dtype=float, device=dev)
 
         def run(k=k, face=face, t=t):
-            wp.launch(k, n, [mesh.id, alt, s, d, face, t], device=dev)
+            args = (
+                [mesh.id, s, d, face, t]
+                if k.arg_names[1] == "start"
+                else [mesh.id, alt, s, d, face, t]
+            )
+            wp.launch(k, n, args, device=dev)
 
         secs = _time(run, args.reps, lambda: wp.synchronize_device(dev))
         answers[name] = (face.numpy(), t.numpy())
