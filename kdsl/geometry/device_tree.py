@@ -164,7 +164,7 @@ def _leaf_bounds(
 
 
 @func
-def _any_set(found: array(dtype=int32)) -> bool:
+def any_set(found: array(dtype=int32)) -> bool:
     """Whether any of ``found``'s (few) counters is not zero."""
     hit = False
     for k in range(found.shape[0]):
@@ -184,7 +184,7 @@ def _refit_leaves(
     # links, the climb (see the module docstring). Nothing when ``found`` has a count.
     n = tid()
     f = first[n]
-    if f < 0 or _any_set(found):
+    if f < 0 or any_set(found):
         return
     lo = vec3()
     hi = vec3()
@@ -241,7 +241,7 @@ def _refit_inner_reverse_preorder(
     found: array(dtype=int32), nodes: array(dtype=BvhNode),
 ):  # fmt: skip
     # One thread: in reverse preorder every node comes after its children.
-    if _any_set(found):
+    if any_set(found):
         return
     for k in range(slots):
         n = slots - 1 - k

@@ -160,12 +160,12 @@ class Mesh:
         """Update the face boxes and the BVH's bounds from the current points (the tree
         keeps its shape: rebuild with ``mesh.bvh.rebuild()`` after large motions). An
         index out of range or a non-finite point is an error, and the BVH keeps its
-        bounds (the faces' boxes and the vertex copy are rewritten for the faces whose
-        indices are in range). The check, which writes the boxes and the copy, the edge
-        sum and the BVH's refit are issued before the host waits for the check's answers
-        (the refit reads them on the device)."""
-        self._faces.start(self._points, self.indices, gather=True)  # (writes the copy too)
+        bounds and the vertex copy. The check, the edge sum, the BVH's refit and the
+        copy's gather are issued before the host waits for the check's answers (the
+        refit and the gather read them on the device)."""
+        self._faces.start(self._points, self.indices)
         self.bvh.refit_checked(self._faces.found)
+        self._tree_points.write()  # (nothing either when the check found something)
         self._raise_if_bad()
         if self._wide is not None:
             self._wide.refit(self.bvh)

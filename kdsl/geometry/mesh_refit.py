@@ -12,8 +12,9 @@ pinned memory, behind an event: ``host_read``) and the edge sum (``ChunkSum``: k
 kernels, skipped on the device when the check found something, so the sum is left as
 it was); ``finish`` waits for the read only. A construction issues its BVH build
 between the two, so the host never waits for the build; a refit issues the BVH's refit
-between them too (``MeshBvh.refit_points``, which reads the answers on the device and
-keeps the bounds when the points are bad), then waits and raises.
+between them too (``MeshBvh.refit_checked`` and the gather of the vertex copy, which
+read the answers on the device and write nothing when they are set), then waits and
+raises.
 """
 
 from __future__ import annotations
@@ -42,45 +43,35 @@ _TOP = 2**31 - 1
 def _checked_face_boxes(
     points: array(dtype=vec3), indices: array(dtype=int32), num_points: int32,
     num_tris: int32, lowers: array(dtype=vec3), uppers: array(dtype=vec3),
-    edges: array(dtype=float32), first_bad: array(dtype=int32), items: array(dtype=int32),
-    tri: array(dtype=vec3),
+    edges: array(dtype=float32), first_bad: array(dtype=int32),
 ):  # fmt: skip
-    # Thread i checks point i (``first_bad[1]``: the first non-finite one) and a face's
+    # Thread i checks point i (``first_bad[1]``: the first non-finite one) and face i's
     # three indices (``first_bad[0]``: the first position out of range), each counter
-    # keeping the largest ``_TOP - position``, and writes the face's box and edge lengths
-    # (zeros for a face with a bad index: nothing out of range is read). The face is
-    # face i, or with ``items`` (a refit's: the BVH's item order), face ``items[i]``,
-    # whose corners also go to the vertex copy ``tri[3 i ..]`` (``TreePoints``).
+    # keeping the largest ``_TOP - position``, and writes face
+    # i's box and edge lengths (zeros for a face with a bad index: nothing out of range
+    # is read).
     i = tid()
     if i < num_points and not isfinite(points[i]):
         atomic_max(first_bad, 1, _TOP - i)
     if i >= num_tris:
         return
-    f = i
-    gather = items.shape[0] > 0
-    if gather:
-        f = items[i]
     bad = -1
     for k in range(3):
-        v = indices[f * 3 + k]
+        v = indices[i * 3 + k]
         if bad < 0 and (v < 0 or v >= num_points):
-            bad = f * 3 + k
+            bad = i * 3 + k
     if bad >= 0:
         atomic_max(first_bad, 0, _TOP - bad)
-        lowers[f] = vec3()
-        uppers[f] = vec3()
-        edges[f] = 0.0
+        lowers[i] = vec3()
+        uppers[i] = vec3()
+        edges[i] = 0.0
         return
-    a = points[indices[f * 3]]
-    b = points[indices[f * 3 + 1]]
-    c = points[indices[f * 3 + 2]]
-    lowers[f] = vmin(vmin(a, b), c)
-    uppers[f] = vmax(vmax(a, b), c)
-    edges[f] = length(b - a) + length(c - a) + length(c - b)
-    if gather:
-        tri[i * 3] = a
-        tri[i * 3 + 1] = b
-        tri[i * 3 + 2] = c
+    a = points[indices[i * 3]]
+    b = points[indices[i * 3 + 1]]
+    c = points[indices[i * 3 + 2]]
+    lowers[i] = vmin(vmin(a, b), c)
+    uppers[i] = vmax(vmax(a, b), c)
+    edges[i] = length(b - a) + length(c - a) + length(c - b)
 
 
 class FaceBoxes:
@@ -91,8 +82,8 @@ class FaceBoxes:
     faces)``; 0.0 with no faces); ``none``, an empty vec3 array (a mesh's missing
     velocities); and ``found``, the check's two counters, which hold "nothing found"
     (zero) between calls (a call that finds something zeroes them again), so a call
-    fills nothing; kernels issued behind a check may read them (``MeshBvh.refit_points``
-    writes nothing when they are set). Also ``tree_points``, the mesh's vertex copy in
+    fills nothing; kernels issued behind a check may read them (a mesh's BVH refit and
+    vertex copy write nothing when they are set). Also ``tree_points``, the mesh's vertex copy in
     tree order (``TreePoints``: ``3 * faces`` vec3, not zeroed, and its prepared
     launches), which comes back with the boxes when they are recycled. The check's launch is prepared per
     points and indices arrays (and stream), the sum's once (and replayed as a graph on a
@@ -108,42 +99,35 @@ class FaceBoxes:
             (0, vec3, m), (12 * m, vec3, m), (0, vec3, 0), (24 * m, float32, m),
             (28 * m, float32, 1), (4 * floats, int32, 2), (4 * floats + 8, float32, scratch),
         ])  # fmt: skip
-        self.tree_points = TreePoints(empty(3 * num_tris, dtype=vec3, device=device))
+        self.tree_points = TreePoints(empty(3 * num_tris, dtype=vec3, device=device), self.found)
         self._read = IntsReader(self.found)
         #: The edge sum's prepared launches and the stream they run on.
         self._sum: StepGraph | None = None
-        #: Per mode (gathering or not): (points, indices, items, stream) of the prepared
-        #: check, and the check.
-        self._check: dict[bool, tuple] = {}
-        self._no_items = self.found[:0]
+        #: (points, indices, stream) of the prepared check, and the check.
+        self._check: tuple | None = None
         self._pending = False
         #: Whether the last ``start`` was finished (one cut short may leave a counter set).
         self.clean = True
 
-    def start(self, points: array, indices: array, gather: bool = False) -> None:
+    def start(self, points: array, indices: array) -> None:
         """Issue the check of the mesh, the writes of its faces' boxes and edge lengths,
         the read back of the check's answers and the edge sum; ``finish`` waits for the
-        answers. Nothing waits here. With ``gather`` (a refit's: ``tree_points.items``
-        set), the check also writes the vertex copy, reading each face's corners once."""
+        answers. Nothing waits here."""
         num_points, num_tris = points.shape[0], self.lowers.shape[0]
         if max(num_points, num_tris) == 0:
             return
         self.clean = False
         device = points.device
         stream = None if device.is_cpu else current_stream(device)
-        copy = self.tree_points
-        gather = gather and copy.items is not None
-        items = copy.items if gather else self._no_items
-        key = (points, indices, items, stream)
-        held = self._check.get(gather)
-        if held is None or any(a is not b for a, b in zip(held[0], key)):
+        held = self._check
+        if held is None or held[0] is not points or held[1] is not indices or held[2] is not stream:
             check = launch(
                 _checked_face_boxes, dim=max(num_points, num_tris), device=device,
                 inputs=[points, indices, num_points, num_tris, self.lowers, self.uppers,
-                        self.edges, self.found, items, copy.tri], record_cmd=True,
+                        self.edges, self.found], record_cmd=True,
             ).launch  # fmt: skip
-            held = self._check[gather] = (key, check)
-        held[1]()
+            held = self._check = (points, indices, stream, check)
+        held[3]()
         self._read.start()  # the answers only: not behind the sum
         if num_tris:
             total = self._sum

@@ -7,8 +7,8 @@ item position's triangle as three consecutive vec3 (``tri[3 k .. 3 k + 2]`` are 
 corners of face ``items[k]``, in the face's index order): a leaf's triangles are then
 ``9 * count`` consecutive floats, read without the index loads, and a query loads the
 face number ``items[k]`` only when that face would be its answer. It costs 36 bytes
-a face (7.2 MB for 200k faces) and one gather launch after every build and rebuild;
-the walks in ``kdsl.stdlib.mesh`` read it through the mesh's record
+a face (7.2 MB for 200k faces) and one gather launch after every build, rebuild and
+refit; the walks in ``kdsl.stdlib.mesh`` read it through the mesh's record
 (``MeshRecord.tri``).
 
 The copy must follow the points and the tree: ``Mesh`` writes it at construction and
@@ -16,16 +16,18 @@ at every ``refit()`` (after the points moved, in place or by assigning
 ``mesh.points``), and the mesh's BVH (``MeshBvh``) writes it again after every
 ``rebuild()``, which reorders the items.
 
-A mesh's ``refit()`` writes the copy in its checking kernel (``mesh_refit``), which
-then takes the faces in item order and reads each face's corners once for the face's
-box, its edge lengths and the copy; only a construction and a ``rebuild()`` (the items'
-order unknown to the check, or changed) gather after the build.
+A ``refit()`` issues the gather right behind the mesh's check, before the host has the
+check's answers: the gather reads the check's counters on the device and leaves the
+copy as it was when they are set. (Writing the copy in the check itself, in item order,
+and in the BVH refit's leaf pass both measured slower on the H200: session 11,
+docs/performance.md.)
 """
 
 from __future__ import annotations
 
 from kdsl.frontend.api import kernel, tid
 from kdsl.geometry.bvh import Bvh
+from kdsl.geometry.device_tree import any_set
 from kdsl.runtime.array import array
 from kdsl.runtime.launch import launch
 from kdsl.runtime.stream import current_stream
@@ -35,12 +37,14 @@ from kdsl.types import int32, vec3
 @kernel
 def _gather_tree_points(
     points: array(dtype=vec3), indices: array(dtype=int32), items: array(dtype=int32),
-    tri: array(dtype=vec3),
+    found: array(dtype=int32), tri: array(dtype=vec3),
 ):  # fmt: skip
     # Thread k copies the corners of face items[k] to tri[3k .. 3k + 2]. The indices
-    # were checked (in range) by the mesh's face-box kernel before any gather (a
-    # refit's check writes the copy itself: ``mesh_refit``).
+    # were checked (in range) by the mesh's face-box kernel before any gather; when
+    # that check found something (``found``: its counters), nothing is read or written.
     k = tid()
+    if any_set(found):
+        return
     f = items[k]
     for j in range(3):
         tri[k * 3 + j] = points[indices[f * 3 + j]]
@@ -55,7 +59,8 @@ def _same(a: tuple, b: tuple) -> bool:
 
 
 class TreePoints:
-    """The copy (``tri``: ``3 * faces`` vec3 on the mesh's device) and what it is copied
+    """The copy (``tri``: ``3 * faces`` vec3 on the mesh's device), the mesh check's
+    counters that guard its gather (``found``: ``FaceBoxes.found``) and what it is copied
     from: ``points`` (the mesh's current points array; ``Mesh`` sets it when the points
     array is replaced), ``indices`` (both set by ``attach``) and the BVH's item order
     (``items``, set once the BVH exists). A mesh's ``FaceBoxes`` make one and it comes
@@ -63,8 +68,8 @@ class TreePoints:
     arrays and stream, so a fresh mesh over the arrays of a collected one (its build
     recycled too) prepares none."""
 
-    def __init__(self, tri: array) -> None:
-        self.tri = tri
+    def __init__(self, tri: array, found: array) -> None:
+        self.tri, self.found = tri, found
         self.points: array | None = None
         self.indices: array | None = None
         self.items: array | None = None
@@ -75,17 +80,19 @@ class TreePoints:
         self.points, self.indices, self.items = points, indices, None
 
     def write(self) -> None:
-        """Copy every face's corners in the BVH's item order (one launch)."""
+        """Copy every face's corners in the BVH's item order (one launch); nothing when
+        one of the mesh check's counters (``found``, on the device) is set."""
         items = self.items
         if items is None or items.shape[0] == 0:
             return
         device = self.tri.device
+        found = self.found
         key = (self.points, self.indices, items, _stream_of(device))
         held = self._gather
         if held is None or not _same(held[0], key):
             gather = launch(
                 _gather_tree_points, dim=items.shape[0], device=device, record_cmd=True,
-                inputs=[self.points, self.indices, items, self.tri],
+                inputs=[self.points, self.indices, items, found, self.tri],
             ).launch  # fmt: skip
             held = self._gather = (key, gather)
         held[1]()

@@ -1,14 +1,14 @@
-"""A mesh's ``refit()``: its checking kernel takes the faces in the BVH's item order and
-writes their boxes, edge lengths and the vertex copy (``MeshRecord.tri``) from one read
-of their corners, and the BVH's refit (``device_tree``: bottom up through parity arrival
+"""A mesh's ``refit()``: the check (faces' boxes, edge lengths, the index and finite
+checks), then the BVH's refit (``device_tree``: bottom up through parity arrival
 counters, a GPU's way, or the leaves then one thread in reverse preorder, a CPU's; whole
-packed nodes) is issued before the host has the check's answers and writes nothing when
-they are set. Checked after every vertex moved against a float64 brute force (each
-node's box is the union of its faces' corners, the copy holds the corners in item order,
-the queries find the brute force's answers), with groups, several leaf sizes and
-constructors, degenerate and empty meshes; a refit that finds a bad point or index
-keeps the bounds. The bottom-up kernel runs on the CPU's threads here too; interp runs
-the check and both refit kernels; cuda on the GPU machine."""
+packed nodes) and the gather of the vertex copy (``MeshRecord.tri``), both issued before
+the host has the check's answers and writing nothing when they are set. Checked after
+every vertex moved against a float64 brute force (each node's box is the union of its
+faces' corners, the copy holds the corners in item order, the queries find the brute
+force's answers), with groups, several leaf sizes and constructors, degenerate and
+empty meshes; a refit that finds a bad point or index keeps the bounds and the copy.
+The bottom-up kernel runs on the CPU's threads here too; interp runs the check, the
+gather and both refit kernels; cuda on the GPU machine."""
 
 from __future__ import annotations
 
@@ -23,6 +23,7 @@ from kdsl.geometry import bvh as bvh_module
 from kdsl.geometry import lbvh
 from kdsl.geometry.device_tree import _refit_inner_reverse_preorder, _refit_leaves
 from kdsl.geometry.mesh_refit import _checked_face_boxes
+from kdsl.geometry.mesh_tree_points import _gather_tree_points
 from tests.geometry.mesh_reference import icosphere
 from tests.geometry.test_mesh_tree_points import _check_copy, _check_queries, move_kernel
 
@@ -164,29 +165,26 @@ def test_meshes_without_faces_refit(device, bottom_up_on_cpu):
 
 @pytest.mark.parametrize("device", DEVICES)
 @pytest.mark.parametrize("bottom_up", [False, True])
-def test_a_bad_point_or_index_keeps_the_bounds(device, bottom_up, request):
+def test_a_bad_point_or_index_keeps_the_bounds_and_the_copy(device, bottom_up, request):
     if bottom_up and device == "cpu":
         request.getfixturevalue("bottom_up_on_cpu")
     pts, faces = icosphere(1, bumps=0.05, seed=2)
     points = wp.array(pts, dtype=V3, device=device)
     indices = wp.array(faces, dtype=wp.int32, device=device)
     mesh = wp.Mesh(points, indices)
-    before = mesh.bvh._nodes.numpy().tobytes()
+    before = (mesh.bvh._nodes.numpy().tobytes(), mesh._tree_points.tri.numpy().tobytes())
     bad = pts * 2.0
     bad[4, 2] = np.inf
     wp.copy(points, wp.array(bad, dtype=V3, device=device))
     with pytest.raises(KdslTypeError, match="point 4 is not finite"):
         mesh.refit()
-    assert mesh.bvh._nodes.numpy().tobytes() == before
-    # the copy is rewritten for the faces whose indices are good (a documented choice)
-    items = mesh.bvh.item_order.numpy()
-    np.testing.assert_array_equal(mesh._tree_points.tri.numpy(), bad[faces[items]].reshape(-1, 3))
+    assert (mesh.bvh._nodes.numpy().tobytes(), mesh._tree_points.tri.numpy().tobytes()) == before
     wrong = faces.copy()
     wrong[3, 1] = len(pts) + 7  # an index changed in place after construction
     wp.copy(mesh.indices, wp.array(wrong.ravel(), dtype=wp.int32, device=device))
     with pytest.raises(KdslTypeError, match=f"out of range: {len(pts) + 7}"):
         mesh.refit()  # (nothing out of range is read)
-    assert mesh.bvh._nodes.numpy().tobytes() == before
+    assert (mesh.bvh._nodes.numpy().tobytes(), mesh._tree_points.tri.numpy().tobytes()) == before
     wp.copy(mesh.indices, wp.array(faces.ravel(), dtype=wp.int32, device=device))
     wp.copy(points, wp.array(pts * 2.0, dtype=V3, device=device))
     mesh.refit()  # the counters were left ready: a good refit after bad ones
@@ -210,9 +208,15 @@ def test_refit_kernels_on_interp_match_cpu(bottom_up, bottom_up_on_cpu):
     copy.tri.zero_()
     boxes.lowers.zero_()
     n_pts, n_tris = len(pts), len(faces)
-    wp.launch(_checked_face_boxes, dim=max(n_pts, n_tris), backend="interp",
-              inputs=[copy.points, copy.indices, n_pts, n_tris, boxes.lowers, boxes.uppers,
-                      boxes.edges, boxes.found, copy.items, copy.tri])  # fmt: skip
+    wp.launch(
+        _checked_face_boxes,
+        dim=max(n_pts, n_tris),
+        backend="interp",
+        inputs=[copy.points, copy.indices, n_pts, n_tris, boxes.lowers, boxes.uppers,
+                boxes.edges, boxes.found],
+    )  # fmt: skip
+    wp.launch(_gather_tree_points, dim=n_tris, backend="interp",
+              inputs=[copy.points, copy.indices, copy.items, boxes.found, copy.tri])  # fmt: skip
     none = wp.empty(0, dtype=wp.int32)  # no parent links: the leaves only
     links = [tree.skip, tree.parent, tree.arrivals] if bottom_up else [tree.skip, none, none]
     wp.launch(_refit_leaves, dim=tree.slots, backend="interp",
