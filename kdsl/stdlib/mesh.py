@@ -416,6 +416,13 @@ def _furthest_face(id: wp.uint64, point: wp.vec3, min_dist: float) -> int:
     return best_face
 
 
+@wp.func_grad(_furthest_face)
+def _adj_furthest_face(id: wp.uint64, point: wp.vec3, min_dist: float, adj_ret: int):
+    """No gradient, as ``_adj_closest_face``: the backward pass replays the search whole
+    (the 4-wide walk reads thread-local arrays it could not differentiate through)."""
+    pass
+
+
 @func
 def _next_far_leaf(
     bvh: BvhRecord, node: int, stop: int, point: wp.vec3, bound_sq: float
