@@ -18,6 +18,7 @@ from kdsl.geometry.sah import build_sah
 from kdsl.ir import types as T
 from kdsl.runtime.alloc import empty
 from kdsl.runtime.array import array
+from kdsl.runtime.graphs import state as graphs
 from kdsl.runtime.objects import ObjectRecord
 from kdsl.runtime.stream import current_stream
 from kdsl.stdlib.bvh import BvhNode, BvhRecord
@@ -196,7 +197,11 @@ class Bvh:
 
     def _refit_steps(self, found: array | None = None) -> list:
         """The refit's launches (``device_tree.refit_steps``), prepared once per tree, box
-        arrays, ``found`` and stream."""
+        arrays, ``found`` and stream; plain launches while a graph capture is open (it
+        records those)."""
+        if graphs.ACTIVE:
+            return refit_steps(self._tree, self.lowers, self.uppers, self._nodes, found,
+                               prepared=False)  # fmt: skip
         stream = None if self.device.is_cpu else current_stream(self.device)
         key = (self._tree, self._nodes, self.lowers, self.uppers, found, stream)
         held = self._refit_held

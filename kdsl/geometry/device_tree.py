@@ -31,6 +31,7 @@ a mesh's refit is issued before the host knows whether its points are good.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -252,28 +253,33 @@ def _refit_inner_reverse_preorder(
 
 
 def refit_steps(tree: DeviceTree, item_lowers: array, item_uppers: array, nodes: array,
-                found: array | None = None) -> list[Callable[[], object]]:  # fmt: skip
-    """The prepared launches (callables) that write the bounds of ``tree``'s packed nodes
-    ``nodes`` (``BvhNode``, links already packed) over the item boxes: bottom up where the
-    tree has ``parent`` links (on a GPU), else the leaves then a sequential pass (see the
+                found: array | None = None,
+                prepared: bool = True) -> list[Callable[[], object]]:  # fmt: skip
+    """The launches (callables) that write the bounds of ``tree``'s packed nodes ``nodes``
+    (``BvhNode``, links already packed) over the item boxes: bottom up where the tree
+    has ``parent`` links (on a GPU), else the leaves then a sequential pass (see the
     module docstring). With ``found`` (a few int32 counters on the device, written
-    before the steps run), they write nothing when one is not zero."""
+    before the steps run), they write nothing when one is not zero. ``prepared``: the
+    launches recorded once (``record_cmd``), else plain launches each call (what an open
+    graph capture records)."""
     if tree.slots == 0:
         return []
     device = item_lowers.device
     if found is None:
         found = tree.parent[:0]
-    steps = [launch(
-        _refit_leaves, dim=tree.slots, device=device, record_cmd=True,
-        inputs=[tree.first, tree.count, tree.items, item_lowers, item_uppers, tree.skip,
-                tree.parent, tree.arrivals, found, nodes],
-    ).launch]  # fmt: skip
+    runs = [
+        (_refit_leaves, tree.slots, [tree.first, tree.count, tree.items, item_lowers,
+                                     item_uppers, tree.skip, tree.parent, tree.arrivals,
+                                     found, nodes]),
+    ]  # fmt: skip
     if tree.parent.shape[0] == 0:
-        steps.append(launch(
-            _refit_inner_reverse_preorder, dim=1, device=device, record_cmd=True,
-            inputs=[tree.slots, tree.first, tree.skip, found, nodes],
-        ).launch)  # fmt: skip
-    return steps
+        runs.append((_refit_inner_reverse_preorder, 1,
+                     [tree.slots, tree.first, tree.skip, found, nodes]))  # fmt: skip
+    if not prepared:
+        return [functools.partial(launch, k, dim=dim, device=device, inputs=inputs)
+                for k, dim, inputs in runs]  # fmt: skip
+    return [launch(k, dim=dim, device=device, inputs=inputs, record_cmd=True).launch
+            for k, dim, inputs in runs]  # fmt: skip
 
 
 def refit(tree: DeviceTree, item_lowers: array, item_uppers: array, nodes: array) -> None:

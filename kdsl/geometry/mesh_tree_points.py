@@ -29,6 +29,7 @@ from kdsl.frontend.api import kernel, tid
 from kdsl.geometry.bvh import Bvh
 from kdsl.geometry.device_tree import any_set
 from kdsl.runtime.array import array
+from kdsl.runtime.graphs import state as graphs
 from kdsl.runtime.launch import launch
 from kdsl.runtime.stream import current_stream
 from kdsl.types import int32, vec3
@@ -87,13 +88,15 @@ class TreePoints:
             return
         device = self.tri.device
         found = self.found
+        inputs = [self.points, self.indices, items, found, self.tri]
+        if graphs.ACTIVE:  # a plain launch, which an open graph capture records
+            launch(_gather_tree_points, dim=items.shape[0], device=device, inputs=inputs)
+            return
         key = (self.points, self.indices, items, _stream_of(device))
         held = self._gather
         if held is None or not _same(held[0], key):
-            gather = launch(
-                _gather_tree_points, dim=items.shape[0], device=device, record_cmd=True,
-                inputs=[self.points, self.indices, items, found, self.tri],
-            ).launch  # fmt: skip
+            gather = launch(_gather_tree_points, dim=items.shape[0], device=device,
+                            inputs=inputs, record_cmd=True).launch  # fmt: skip
             held = self._gather = (key, gather)
         held[1]()
 

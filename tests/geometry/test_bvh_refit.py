@@ -92,3 +92,21 @@ def test_lbvh_writes_the_parents_and_links_of_its_nodes(device, leaf_size, num_g
     np.testing.assert_array_equal(got["next"][:m], want["next"][:m])
     np.testing.assert_array_equal(got["first"], tree.first.numpy())
     assert not build_lbvh(lo, hi, leaf_size, groups, num_groups, bottom_up=False).parent.size
+
+
+@pytest.mark.parametrize("device", ["cpu", pytest.param("cuda:0", marks=cuda)])
+def test_a_captured_refit_replays(device):
+    """``Bvh.refit`` prepares its launches once, but inside an open graph capture it
+    launches plainly, so the capture records the refit and each replay refits."""
+    rng = np.random.default_rng(5)
+    lo, hi = boxes(rng, 500, device)
+    bvh = wp.Bvh(lo, hi)
+    bvh.refit()  # (prepared outside the capture)
+    with wp.ScopedCapture(device=device) as capture:
+        bvh.refit()
+    for shift in (0.5, -0.25):
+        moved = lo.numpy() - shift
+        wp.copy(lo, wp.array(moved, dtype=wp.vec3, device=device))
+        wp.capture_launch(capture.graph)
+        wp.synchronize_device(device)
+        np.testing.assert_array_equal(bvh._nodes.numpy()[0]["lower"], moved.min(axis=0))
