@@ -21,22 +21,16 @@ HOST_BACKENDS = ["interp", "cpu"]
 
 
 @wp.kernel
-def closest_kernel(mesh: wp.uint64, xs: wp.array(dtype=V3), max_dist: float,
-                   face: wp.array(dtype=int), dist: wp.array(dtype=float)):  # fmt: skip
+def point_kernel(mesh: wp.uint64, xs: wp.array(dtype=V3), bound: float, far: int,
+                 face: wp.array(dtype=int), dist: wp.array(dtype=float)):  # fmt: skip
+    # The closest point within ``bound`` (far == 0) or the furthest beyond it: the
+    # face and its point's distance, or -1 for both.
     i = wp.tid()
-    q = wp.mesh_query_point_no_sign(mesh, xs[i], max_dist)
-    face[i] = -1
-    dist[i] = -1.0
-    if q.result:
-        face[i] = q.face
-        dist[i] = wp.length(wp.mesh_eval_position(mesh, q.face, q.u, q.v) - xs[i])
-
-
-@wp.kernel
-def furthest_kernel(mesh: wp.uint64, xs: wp.array(dtype=V3), min_dist: float,
-                    face: wp.array(dtype=int), dist: wp.array(dtype=float)):  # fmt: skip
-    i = wp.tid()
-    q = wp.mesh_query_furthest_point_no_sign(mesh, xs[i], min_dist)
+    q = wp.MeshQueryPoint()
+    if far != 0:
+        q = wp.mesh_query_furthest_point_no_sign(mesh, xs[i], bound)
+    else:
+        q = wp.mesh_query_point_no_sign(mesh, xs[i], bound)
     face[i] = -1
     dist[i] = -1.0
     if q.result:
@@ -62,20 +56,20 @@ def _mesh(pts, faces, wide: bool, monkeypatch, **kw):
     return wp.Mesh(wp.array(pts, dtype=V3), wp.array(faces, dtype=wp.int32), **kw)
 
 
-def _closest(mesh, xs, backend="cpu", max_dist=1.0e6):
+def _query(mesh, xs, backend, bound, far, device="cpu"):
     n = len(xs)
-    face, dist = wp.zeros(n, dtype=int), wp.zeros(n, dtype=float)
-    wp.launch(closest_kernel, dim=n, backend=backend,
-              inputs=[mesh.id, wp.array(xs, dtype=V3), max_dist, face, dist])  # fmt: skip
+    face, dist = wp.zeros(n, dtype=int, device=device), wp.zeros(n, dtype=float, device=device)
+    wp.launch(point_kernel, dim=n, backend=backend, device=device,
+              inputs=[mesh.id, wp.array(xs, dtype=V3, device=device), bound, far, face, dist])  # fmt: skip
     return face.numpy(), dist.numpy()
+
+
+def _closest(mesh, xs, backend="cpu", max_dist=1.0e6):
+    return _query(mesh, xs, backend, max_dist, 0)
 
 
 def _furthest(mesh, xs, backend="cpu", min_dist=0.0):
-    n = len(xs)
-    face, dist = wp.zeros(n, dtype=int), wp.zeros(n, dtype=float)
-    wp.launch(furthest_kernel, dim=n, backend=backend,
-              inputs=[mesh.id, wp.array(xs, dtype=V3), min_dist, face, dist])  # fmt: skip
-    return face.numpy(), dist.numpy()
+    return _query(mesh, xs, backend, min_dist, 1)
 
 
 def _furthest_reference(pts, faces, xs):
@@ -299,9 +293,7 @@ def test_cuda_meshes_keep_no_wide_tree():
                    wp.array(faces, dtype=wp.int32, device="cuda"))  # fmt: skip
     assert mesh._wide is None
     xs = _queries(pts, 64)
-    n = len(xs)
-    face, dist = wp.zeros(n, dtype=int, device="cuda"), wp.zeros(n, dtype=float, device="cuda")
-    wp.launch(closest_kernel, dim=n, device="cuda",
-              inputs=[mesh.id, wp.array(xs, dtype=V3, device="cuda"), 1.0e6, face, dist])  # fmt: skip
-    np.testing.assert_allclose(dist.numpy(), closest_distances(pts, faces, xs), rtol=1e-5,
-                               atol=1e-6)  # fmt: skip
+    dist = _query(mesh, xs, "cuda", 1.0e6, 0, device="cuda")[1]
+    np.testing.assert_allclose(dist, closest_distances(pts, faces, xs), rtol=1e-5, atol=1e-6)
+    far = _query(mesh, xs, "cuda", 0.0, 1, device="cuda")[1]
+    np.testing.assert_allclose(far, _furthest_reference(pts, faces, xs), rtol=1e-5)
