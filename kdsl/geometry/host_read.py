@@ -6,8 +6,11 @@ there, before it returns, when they are bad. Reading the check's answer with
 the host from issuing that build until the check is done. ``start`` instead enqueues a
 copy of the values into pinned host memory and an event behind it on the stream; the
 caller issues more work (the BVH build), and ``values`` then waits for the event only:
-the check and the copy, long done by then, not the build. On the CPU the launches
-have run when they return, so ``start`` reads the values at once.
+the check and the copy, long done by then, not the build. The copy runs on a side stream that waits for the work issued so far (an
+event), not on the device's stream: the kernels issued after ``start`` do not queue
+behind a device-to-host copy (a copy between two kernels of one stream cost the H200
+a few microseconds of switching; session 12, docs/performance.md). On the CPU the
+launches have run when they return, so ``start`` reads the values at once.
 """
 
 from __future__ import annotations
@@ -24,11 +27,15 @@ from kdsl.runtime.stream import current_stream
 
 class IntsReader:
     """Reads ``source`` (a contiguous 1-d int32 array, a few elements) back to the host:
-    ``start()`` enqueues the read on the device's current stream, ``values()`` waits
-    for it and returns the values as a tuple of ints. A pinned buffer and an event are
-    made once per reader."""
+    ``start()`` enqueues the read behind the work issued so far on the device's current
+    stream, ``values()`` waits for it and returns the values as a tuple of ints. A
+    pinned buffer, a side stream and two events are made once per reader. The copy runs
+    beside the work issued after ``start``, so that work must not write ``source``
+    before ``values()`` returns (a mesh's check counters are written again only after
+    the host has its answers)."""
 
-    __slots__ = ("_device", "_event", "_host", "_nbytes", "_pinned", "_ptr", "_source", "_values")
+    __slots__ = ("_device", "_event", "_host", "_issued", "_nbytes", "_pinned", "_ptr", "_side",
+                 "_source", "_values")  # fmt: skip
 
     def __init__(self, source: array) -> None:
         self._device = source.device
@@ -42,7 +49,9 @@ class IntsReader:
         self._pinned = cp.cuda.alloc_pinned_memory(max(self._nbytes, 4))
         self._host = np.frombuffer(self._pinned, np.int32, source.shape[0])
         with cp.cuda.Device(self._device.ordinal):
-            self._event = cp.cuda.Event(block=False, disable_timing=True)
+            self._issued = cp.cuda.Event(block=False, disable_timing=True)  # on the stream
+            self._event = cp.cuda.Event(block=False, disable_timing=True)  # the copy's end
+            self._side = cp.cuda.Stream(non_blocking=True)
 
     def start(self) -> None:
         """Enqueue the read behind the work issued so far on the device's stream (refused
@@ -54,13 +63,15 @@ class IntsReader:
             return
         rt = cupy().cuda.runtime
         raw = current_stream(self._device).cuda_stream
+        args = (self._host.ctypes.data, self._ptr, self._nbytes, raw, self._issued.ptr,
+                self._side.ptr, self._event.ptr)  # fmt: skip
         if cuda_device_count() == 1:
-            _enqueue(rt, self._host.ctypes.data, self._ptr, self._nbytes, raw, self._event.ptr)
+            _enqueue(rt, *args)
             return
         current = rt.getDevice()
         rt.setDevice(self._device.ordinal)
         try:
-            _enqueue(rt, self._host.ctypes.data, self._ptr, self._nbytes, raw, self._event.ptr)
+            _enqueue(rt, *args)
         finally:
             rt.setDevice(current)
 
@@ -72,6 +83,11 @@ class IntsReader:
         return tuple(int(x) for x in self._host)
 
 
-def _enqueue(rt: Any, host: int, ptr: int, nbytes: int, stream: int, event: int) -> None:
-    rt.memcpyAsync(host, ptr, nbytes, rt.memcpyDeviceToHost, stream)
-    rt.eventRecord(event, stream)
+def _enqueue(rt: Any, host: int, ptr: int, nbytes: int, stream: int, issued: int, side: int,
+             done: int) -> None:  # fmt: skip
+    """The copy of ``nbytes`` at ``ptr`` into ``host`` on ``side`` behind the work issued
+    on ``stream`` so far, then ``done`` recorded on ``side``."""
+    rt.eventRecord(issued, stream)
+    rt.streamWaitEvent(side, issued, 0)
+    rt.memcpyAsync(host, ptr, nbytes, rt.memcpyDeviceToHost, side)
+    rt.eventRecord(done, side)

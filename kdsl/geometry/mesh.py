@@ -162,13 +162,27 @@ class Mesh:
         index out of range or a non-finite point is an error, and the BVH keeps its
         bounds and the vertex copy. The check, the edge sum, the BVH's refit and the
         copy's gather are issued before the host waits for the check's answers (the
-        refit and the gather read them on the device)."""
+        refit and the gather read them on the device); on a GPU the launches after the
+        check run as one graph from the second refit on."""
+        if self._wide is not None:
+            self._refit_wide()
+            return
+        then = self.bvh.refit_checked_steps(self._faces.found)
+        gather = self._tree_points.prepared()
+        if gather is not None:
+            then = [*then, gather]
+        self._faces.start(self._points, self.indices, then)
+        self._raise_if_bad()
+        self._write_record()
+
+    def _refit_wide(self) -> None:
+        """``refit()`` of a mesh that keeps a 4-wide tree (a CPU's, ``wide_tree``): the
+        check, the BVH's refit and the gather as above, then the wide tree's refit."""
         self._faces.start(self._points, self.indices)
         self.bvh.refit_checked(self._faces.found)
         self._tree_points.write()  # (nothing either when the check found something)
         self._raise_if_bad()
-        if self._wide is not None:
-            self._wide.refit(self.bvh)
+        self._wide.refit(self.bvh)
         self._write_record()
 
     def _raise_if_bad(self) -> None:

@@ -8,16 +8,19 @@ construction or a refit. The arrays it writes are allocated once per mesh
 (``FaceBoxes``), so a refit allocates and fills nothing.
 
 ``FaceBoxes.start`` issues the checking kernel, the read back of its answers (into
-pinned memory, behind an event: ``host_read``) and the edge sum (``ChunkSum``: kdsl
-kernels, skipped on the device when the check found something, so the sum is left as
-it was); ``finish`` waits for the read only. A construction issues its BVH build
-between the two, so the host never waits for the build; a refit issues the BVH's refit
-between them too (``MeshBvh.refit_checked`` and the gather of the vertex copy, which
-read the answers on the device and write nothing when they are set), then waits and
-raises.
+pinned memory on a side stream, behind an event: ``host_read``) and the edge sum
+(``ChunkSum``: kdsl kernels, skipped on the device when the check found something, so
+the sum is left as it was); ``finish`` waits for the read only. A construction issues
+its BVH build between the two, so the host never waits for the build; a refit hands
+``start`` the BVH's refit and the gather of the vertex copy (``MeshBvh.
+refit_checked_steps``, ``TreePoints.prepared``: they read the answers on the device and
+write nothing when they are set), which run behind the sum, the three as one CUDA
+graph from the second refit (``StepGraph``), then waits and raises.
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable, Sequence
 
 from kdsl.frontend.api import atomic_max, isfinite, kernel, length, tid
 from kdsl.frontend.api import max as vmax
@@ -101,18 +104,25 @@ class FaceBoxes:
         ])  # fmt: skip
         self.tree_points = TreePoints(empty(3 * num_tris, dtype=vec3, device=device), self.found)
         self._read = IntsReader(self.found)
-        #: The edge sum's prepared launches and the stream they run on.
-        self._sum: StepGraph | None = None
+        #: (the stream, the edge sum's prepared launches), how many they are, and the
+        #: last two ``StepGraph``s of them followed by a ``then`` of ``start``.
+        self._sum: tuple | None = None
+        self._sum_len = 0
+        self._tails: list[StepGraph] = []
         #: (points, indices, stream) of the prepared check, and the check.
         self._check: tuple | None = None
         self._pending = False
         #: Whether the last ``start`` was finished (one cut short may leave a counter set).
         self.clean = True
 
-    def start(self, points: array, indices: array) -> None:
+    def start(self, points: array, indices: array, then: Sequence[Callable[[], object]] = ()
+              ) -> None:  # fmt: skip
         """Issue the check of the mesh, the writes of its faces' boxes and edge lengths,
-        the read back of the check's answers and the edge sum; ``finish`` waits for the
-        answers. Nothing waits here."""
+        the read back of the check's answers and the edge sum, then the prepared launches
+        ``then`` (a refit's: the BVH's refit and the copy's gather, which read the
+        check's counters on the device); ``finish`` waits for the answers. Nothing waits
+        here. On a GPU the sum and ``then`` run as one graph from the second call with
+        the same launches (``StepGraph``)."""
         num_points, num_tris = points.shape[0], self.lowers.shape[0]
         if max(num_points, num_tris) == 0:
             return
@@ -128,15 +138,33 @@ class FaceBoxes:
             ).launch  # fmt: skip
             held = self._check = (points, indices, stream, check)
         held[3]()
-        self._read.start()  # the answers only: not behind the sum
+        self._read.start()  # the answers only (on a side stream: the tail does not wait)
         if num_tris:
-            total = self._sum
-            if total is None or total.stream is not stream:
-                steps = ChunkSum(self.edges, self.edge_sum, guard=self.found,
-                                 scratch=self._scratch).steps  # fmt: skip
-                total = self._sum = StepGraph(steps, stream, graphs_on(device))
-            total()  # (writes nothing when the check found something)
+            self._tail(stream, then)()  # (writes nothing when the check found something)
+        else:
+            for step in then:
+                step()
         self._pending = True
+
+    def _tail(self, stream, then: Sequence[Callable[[], object]]) -> StepGraph:
+        """The edge sum's launches and ``then`` as one ``StepGraph`` on ``stream``: the
+        one made before for the same launches (the last two are kept: a construction's,
+        with no ``then``, and a refit's), else a new one."""
+        n = len(then)
+        for tail in self._tails:
+            if tail.stream is stream and len(tail.steps) == self._sum_len + n and all(
+                    a is b for a, b in zip(tail.steps[self._sum_len :], then)):  # fmt: skip
+                return tail
+        held = self._sum
+        if held is None or held[0] is not stream:
+            steps = ChunkSum(self.edges, self.edge_sum, guard=self.found,
+                             scratch=self._scratch).steps  # fmt: skip
+            held = self._sum = (stream, steps)
+            self._sum_len = len(steps)
+            self._tails = []
+        tail = StepGraph(held[1] + list(then), stream, graphs_on(self.lowers.device))
+        self._tails = [*self._tails[-1:], tail]
+        return tail
 
     def finish(self) -> tuple[int, int]:
         """Wait for the answers of the last ``start``: (the position of the first index

@@ -25,6 +25,8 @@ docs/performance.md.)
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 from kdsl.frontend.api import kernel, tid
 from kdsl.geometry.bvh import Bvh
 from kdsl.geometry.device_tree import any_set
@@ -86,19 +88,27 @@ class TreePoints:
         items = self.items
         if items is None or items.shape[0] == 0:
             return
-        device = self.tri.device
-        found = self.found
-        inputs = [self.points, self.indices, items, found, self.tri]
         if graphs.ACTIVE:  # a plain launch, which an open graph capture records
-            launch(_gather_tree_points, dim=items.shape[0], device=device, inputs=inputs)
+            launch(_gather_tree_points, dim=items.shape[0], device=self.tri.device,
+                   inputs=[self.points, self.indices, items, self.found, self.tri])  # fmt: skip
             return
+        self.prepared()()
+
+    def prepared(self) -> Callable[[], object] | None:
+        """``write``'s launch, prepared once per set of arrays and stream (None with no
+        items): a mesh's refit issues it in a graph with the BVH's refit."""
+        items = self.items
+        if items is None or items.shape[0] == 0:
+            return None
+        device = self.tri.device
         key = (self.points, self.indices, items, _stream_of(device))
         held = self._gather
         if held is None or not _same(held[0], key):
+            inputs = [self.points, self.indices, items, self.found, self.tri]
             gather = launch(_gather_tree_points, dim=items.shape[0], device=device,
                             inputs=inputs, record_cmd=True).launch  # fmt: skip
             held = self._gather = (key, gather)
-        held[1]()
+        return held[1]
 
 
 class MeshBvh(Bvh):
@@ -124,5 +134,10 @@ class MeshBvh(Bvh):
         """Refit the bounds from the current face boxes, on the device, unless the mesh
         check's counters ``found`` are set (then nothing is written): a mesh's refit
         issues it before the host has the check's answers."""
-        for step in self._refit_steps(found):
+        for step in self.refit_checked_steps(found):
             step()
+
+    def refit_checked_steps(self, found: array) -> list[Callable[[], object]]:
+        """``refit_checked``'s launches, prepared (the same list while the tree, the boxes,
+        ``found`` and the stream stay): a mesh's refit issues them in one graph."""
+        return self._refit_steps(found)

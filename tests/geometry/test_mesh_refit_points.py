@@ -229,3 +229,46 @@ def test_refit_kernels_on_interp_match_cpu(bottom_up, bottom_up_on_cpu):
     np.testing.assert_array_equal(nodes.numpy()[:m], want[0][:m])
     np.testing.assert_array_equal(copy.tri.numpy(), want[1])
     np.testing.assert_array_equal(boxes.lowers.numpy(), want[2])
+
+
+@pytest.mark.parametrize("device", DEVICES)
+def test_the_refit_tail_is_one_step_graph_replayed(device, monkeypatch):
+    """Without a wide tree (a GPU's meshes; here on the CPU too) a refit issues the edge
+    sum, the BVH's refit and the copy's gather as one ``StepGraph`` behind the check: the
+    same one refit after refit (a CUDA graph from the second), a new one after a rebuild
+    (other launches); answers as the brute force's, and a bad point still raises and
+    keeps the bounds and the copy."""
+    from kdsl.geometry import wide_tree
+
+    monkeypatch.setitem(wide_tree.WIDE_TREE, "cpu", False)
+    pts, faces = icosphere(2, bumps=0.05, seed=8)
+    points = wp.array(pts, dtype=V3, device=device)
+    mesh = wp.Mesh(points, wp.array(faces, dtype=wp.int32, device=device))
+    assert mesh._wide is None
+    tails = []
+    for _ in _moves(mesh, pts, faces, steps=4):
+        _check_against_brute_force(mesh, faces)
+        tails.append(mesh._faces._tails[-1])
+    gather = mesh._tree_points.prepared()
+    assert tails[-1].steps[-1] is gather  # the gather last, behind the BVH's refit
+    # moves 1 and 3 assign new points (a new gather, a new tail), 2 moves them in place
+    assert tails[1] is tails[2] and len({id(t) for t in tails}) == 3
+    if device != "cpu":
+        assert tails[2].graph is not None  # its second run captured it
+    mesh.bvh.rebuild("median")  # another tree: other refit launches, another tail
+    for _ in _moves(mesh, pts, faces, steps=2):
+        _check_against_brute_force(mesh, faces)
+    assert mesh._faces._tails[-1] is not tails[-1]
+    before = (mesh.bvh._nodes.numpy().tobytes(), mesh._tree_points.tri.numpy().tobytes())
+    bad = mesh.points.numpy() * 1.5
+    bad[9, 0] = np.nan
+    wp.copy(mesh.points, wp.array(bad, dtype=V3, device=device))
+    for _ in range(2):  # (the second time through the replayed graph)
+        with pytest.raises(KdslTypeError, match="point 9 is not finite"):
+            mesh.refit()
+        assert (mesh.bvh._nodes.numpy().tobytes(),
+                mesh._tree_points.tri.numpy().tobytes()) == before  # fmt: skip
+    bad[9, 0] = 0.5
+    wp.copy(mesh.points, wp.array(bad, dtype=V3, device=device))
+    mesh.refit()
+    _check_against_brute_force(mesh, faces)
