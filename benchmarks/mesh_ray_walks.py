@@ -1,31 +1,46 @@
-"""Variants of the closest-ray-hit walk (``mesh_query_ray``'s search), compiled side by
-side as user ``@func`` code, for A/B timing against the standard library and Warp.
+"""Variants of the mesh ray walks (``mesh_query_ray``'s search, the any hit, the counted
+hits), compiled side by side as user ``@func`` code, for A/B timing against the standard
+library and Warp.
 
     python benchmarks/mesh_ray_walks.py [--tris 200000] [--rays 1000000] [--reps 20]
-        [--device cuda:0] [--variants payload,lib_r64] [--no-warp] [--json PATH]
+        [--device cuda:0] [--variants prefetch,payload,any_lib,any_stack] [--no-warp]
+        [--json PATH]
 
-Each variant is a kernel that answers ``mesh_query_ray(mesh, start, dir, 1e6)`` for one
-ray per thread on the bumpy cube-sphere of ``bench_geometry_mesh.workload`` and writes
-the face and ``t``; ``lib`` (always run) calls the library. The variants (``VARIANTS``):
+Each variant is a kernel over one ray per thread on the bumpy cube-sphere of
+``bench_geometry_mesh.workload`` (``mesh_query_ray(mesh, start, dir, 1e6)`` and its
+kin). ``lib`` (always run) calls the library's ``mesh_query_ray``. The variants
+(``VARIANTS``), by family:
 
-- ``payload``: Warp's stack discipline on nodes whose ``first`` holds minus the right
-  child's index (``right_linked``, built here on the host from the packed nodes): an
-  inner node names both children, so their two loads are independent, and a stack
-  entry carries a node's payload (children, or a leaf's range), so a pop loads no node;
-- ``*_r64``: the kernel compiled with ``cuda_max_registers=64`` (4 blocks of 256 threads
-  per H200 multiprocessor instead of 3).
+- closest hit (compared with ``lib``: faces and ``t`` exactly):
+  - ``prefetch``: session 11's library search (``8318df0``): the packed nodes named only
+    the left child, so an inner node was carried with its right child read from the
+    BVH's ``skip`` array a level ahead (``skip[n + 1]``), a waiting node with its
+    ``first``, ``next`` and right child; with the stackless fallback;
+  - ``payload``: the library's walk since session 12 (Warp's discipline on the
+    right-linked nodes: an inner node's packed ``first`` is ``-1 - right``, so both
+    children load at once, and a stack entry is a payload and an entry ``t``) without
+    the stackless fallback (-2 where the stack would overflow);
+  - ``*_r64``: the kernel compiled with ``cuda_max_registers=64``;
+- any hit (``any_*``, compared with ``any_lib``, the library's
+  ``mesh_query_ray_anyhit``, timed beside Warp's any-hit kernel ``warp_any``):
+  ``any_stack`` walks the right-linked nodes with a stack of payloads (both children
+  loaded at once, the left one first), ``any_near`` the same entering the nearer child
+  first; neither has a fallback (-2 on overflow);
+- counted hits (``count_*``, compared with ``count_lib``,
+  ``mesh_query_ray_count_intersections``, beside Warp's ``warp_count``): ``count_stack``
+  as ``any_stack`` without the early exit.
 
 Session 11 (docs/performance.md, "Mesh rays on the GPU, session 11") also ran the
 session-10 search filled and not (``old_lib``, ``git show
 f8cbe2b:benchmarks/mesh_ray_walks.py``) and copies without the stackless fallback, an
 unpadded slab test, kept pops, global loads and the left child loaded a level ahead
 (``git show 6850bcd:benchmarks/mesh_ray_walks.py``).
-Every kernel but ``lib`` recomputes the hit after the search as the library does (so
-the times compare searches). Times are the minimum over ``--reps`` launches after a
-warm-up. Answers are checked: every variant's faces and ``t`` must equal the library's
-exactly (same tie rule), and the library's hit/miss must agree with Warp's on all but
-``RAY_DISAGREEMENT`` of the rays. The table prints ms per launch and the ratio to
-Warp's time (> 1: faster than Warp).
+Every closest-hit kernel but ``lib`` recomputes the hit after the search as the library
+does (so the times compare searches). Times are the minimum over ``--reps`` launches
+after a warm-up. Answers are checked within each family; the library's hit/miss must
+agree with Warp's on all but ``RAY_DISAGREEMENT`` of the rays (any hits and counts too).
+The table prints ms per launch and the ratio to Warp's time for the family (> 1:
+faster than Warp).
 """
 
 from __future__ import annotations
@@ -55,9 +70,26 @@ from bench_geometry_mesh import MAX_T, RAY_DISAGREEMENT, mesh_kernels, workload
 STACK = 32
 #: The variants: name -> ``variant_kernel``'s keywords (its defaults: the library's walk).
 VARIANTS = {
+    "prefetch": {"walk": "prefetch"},
     "payload": {"walk": "payload"},
     "lib_r64": {"walk": "lib", "regs": 64},
+    "any_lib": {"walk": "any_lib"},
+    "any_stack": {"walk": "any_stack"},
+    "any_near": {"walk": "any_near"},
+    "count_lib": {"walk": "count_lib"},
+    "count_stack": {"walk": "count_stack"},
 }
+#: Each family's reference variant (answers compared with it) and Warp's row.
+FAMILIES = {"ray": ("lib", "warp"), "any": ("any_lib", "warp_any"),
+            "count": ("count_lib", "warp_count")}  # fmt: skip
+
+
+def family(name: str) -> str:
+    """The family of variant ``name``: "any", "count" or "ray" (closest hit)."""
+    for f in ("any", "count"):
+        if name.startswith(f + "_"):
+            return f
+    return "ray"
 
 
 @wp.struct
@@ -86,6 +118,61 @@ def leaf_hits(rec: MeshRecord, bvh: BvhRecord, first: int, count: int, shear: Ra
 
 
 @wp.func
+def leaf_count(rec: MeshRecord, first: int, count: int, shear: RayShear, start: wp.vec3,
+               max_t: float) -> int:  # fmt: skip
+    """The faces of a leaf the ray hits at ``0 <= t < max_t``."""
+    n = 0
+    for k in range(first, first + count):
+        h = intersect_ray_triangle(
+            shear, start, rec.tri[k * 3], rec.tri[k * 3 + 1], rec.tri[k * 3 + 2]
+        )
+        if h[0] >= 0.0 and h[0] < max_t:
+            n = n + 1
+    return n
+
+
+@wp.func
+def root_range(bvh: BvhRecord, root: int) -> wp.vec2i:
+    start = root
+    if start < 0:
+        start = bvh.root
+    if start < 0:
+        return wp.vec2i(0, 0)
+    return wp.vec2i(start, bvh.skip[start])
+
+
+@wp.func
+def skip_of(nd: BvhNode, node: int) -> int:
+    if nd.first < 0:
+        return nd.next
+    return node + 1
+
+
+@wp.func
+def next_ray_leaf(bvh: BvhRecord, node: int, stop: int, start: wp.vec3, inv: wp.vec3,
+                  max_t: float) -> wp.vec3i:  # fmt: skip
+    n = node
+    while n < stop:
+        nd = bvh.nodes[n]
+        if ray_box_enter(nd.lower, nd.upper, start, inv) <= max_t:
+            if nd.first >= 0:
+                return wp.vec3i(nd.first, nd.next, n + 1)
+            n = n + 1
+        else:
+            n = skip_of(nd, n)
+    return wp.vec3i(0, 0, stop)
+
+
+@wp.func
+def payload(nd: BvhNode, node: int) -> wp.vec2i:
+    """A node's payload on right-linked nodes: a leaf's ``(first, count)``, an inner
+    node's ``(left child, first)`` (``first = -1 - right``)."""
+    if nd.first < 0:
+        return wp.vec2i(node + 1, nd.first)
+    return wp.vec2i(nd.first, nd.next)
+
+
+@wp.func
 def push(sa: wp.array(dtype=wp.int32), sb: wp.array(dtype=wp.int32),
          st: wp.array(dtype=wp.float32), count: int, a: int, b: int, t: float) -> int:  # fmt: skip
     """Payload ``(a, b)`` entered at ``t`` onto the stack of ``count`` entries: the new
@@ -98,88 +185,250 @@ def push(sa: wp.array(dtype=wp.int32), sb: wp.array(dtype=wp.int32),
     return STACK + 1
 
 
-def _payload_walk():
-    """Warp's discipline on right-linked nodes (``alt``, ``right_linked``): a node is
-    carried as its payload ``(a, b)``: an inner node's children ``(a, -b)``, a leaf's
-    items ``[a, a + b)``; a stack entry is a payload and its entry ``t``. Both children
-    of a level load at once; a pop loads nothing."""
+@wp.func
+def push2(sa: wp.array(dtype=wp.int32), sb: wp.array(dtype=wp.int32), count: int, a: int,
+          b: int) -> int:  # fmt: skip
+    """``push`` without an entry ``t`` (the any-hit and count walks' stacks)."""
+    if count < STACK:
+        sa[count] = a
+        sb[count] = b
+        return count + 1
+    return STACK + 1
+
+
+@wp.func
+def payload_walk(id: wp.uint64, start: wp.vec3, dir: wp.vec3, max_t: float) -> int:
+    """The library's walk since session 12 (``mesh._ray_closest_slot``) without its
+    stackless fallback: -2 where the stack would overflow."""
+    rec = wp.object_record(id, MeshRecord)
+    bvh = wp.object_record(rec.bvh, BvhRecord)
+    shear = ray_shear(dir)
+    inv = wp.vec3(safe_inverse(dir[0]), safe_inverse(dir[1]), safe_inverse(dir[2]))
+    hit = Hit()
+    hit.t = max_t
+    hit.face = -1
+    hit.slot = -1
+    sa = wp.ext.empty(STACK, dtype=wp.int32)
+    sb = wp.ext.empty(STACK, dtype=wp.int32)
+    st = wp.ext.empty(STACK, dtype=wp.float32)
+    count = 0
+    lost = False
+    root = bvh.root
+    active = False
+    a = 0
+    b = 0
+    if root >= 0:
+        nd = bvh.nodes[root]
+        active = ray_box_enter(nd.lower, nd.upper, start, inv) <= hit.t
+        p = payload(nd, root)
+        a = p[0]
+        b = p[1]
+    while active:
+        while b < 0:  # an inner node: both children, loaded independently
+            right = -1 - b
+            left_nd = bvh.nodes[a]
+            right_nd = bvh.nodes[right]
+            t_l = ray_box_enter(left_nd.lower, left_nd.upper, start, inv)
+            t_r = ray_box_enter(right_nd.lower, right_nd.upper, start, inv)
+            l_in = t_l <= hit.t
+            r_in = t_r <= hit.t
+            lp = payload(left_nd, a)
+            rp = payload(right_nd, right)
+            if r_in and (not l_in or t_r < t_l):  # the right child first
+                if l_in:
+                    count = push(sa, sb, st, count, lp[0], lp[1], t_l)
+                a = rp[0]
+                b = rp[1]
+            elif l_in:
+                if r_in:
+                    count = push(sa, sb, st, count, rp[0], rp[1], t_r)
+                a = lp[0]
+                b = lp[1]
+            else:
+                b = 0  # both missed: nothing to test
+            if count > STACK:
+                lost = True
+                count = STACK
+        hit = leaf_hits(rec, bvh, a, b, shear, start, hit)
+        active = False
+        while count > 0 and not active:
+            count = count - 1
+            if st[count] <= hit.t:
+                a = sa[count]
+                b = sb[count]
+                active = True
+    if lost:
+        return -2
+    return hit.slot
+
+
+@wp.func
+def wait_links(nodes: wp.array(dtype=wp.int32), keys: wp.array(dtype=wp.float32),
+               links: wp.array(dtype=wp.vec3i), count: int, node: int, key: float,
+               first: int, next: int, right: int) -> int:  # fmt: skip
+    if count < STACK:
+        nodes[count] = node
+        keys[count] = key
+        links[count] = wp.vec3i(first, next, right)
+    return count + 1
+
+
+@wp.func
+def prefetch_walk(id: wp.uint64, start: wp.vec3, dir: wp.vec3, max_t: float) -> int:
+    """Session 11's library search (``8318df0``), on today's nodes: an inner node is
+    carried with its right child read from the ``skip`` array a level ahead (its
+    packed ``first`` is not used: only its sign), a waiting node keeps its links, and
+    the stackless fallback."""
+    rec = wp.object_record(id, MeshRecord)
+    bvh = wp.object_record(rec.bvh, BvhRecord)
+    shear = ray_shear(dir)
+    inv = wp.vec3(safe_inverse(dir[0]), safe_inverse(dir[1]), safe_inverse(dir[2]))
+    hit = Hit()
+    hit.t = max_t
+    hit.face = -1
+    hit.slot = -1
+    span = root_range(bvh, -1)
+    nodes = wp.ext.empty(STACK, dtype=wp.int32)
+    enters = wp.ext.empty(STACK, dtype=wp.float32)
+    links = wp.ext.empty(STACK, dtype=wp.vec3i)
+    last = bvh.skip.shape[0] - 1
+    count = 0
+    sweep = span[1]
+    node = span[0]
+    active = False
+    first = 0
+    items = 0
+    right = 0  # the right child of ``node`` while it is an inner node
+    if span[0] < span[1]:
+        nd = bvh.nodes[node]
+        active = ray_box_enter(nd.lower, nd.upper, start, inv) <= hit.t
+        first = nd.first
+        items = nd.next
+        right = bvh.skip[wp.min(node + 1, last)]
+    while active or sweep < span[1]:
+        if active:
+            while first < 0:
+                left = node + 1
+                left_nd = bvh.nodes[left]
+                right_nd = bvh.nodes[right]
+                left_right = bvh.skip[wp.min(left + 1, last)]
+                right_right = bvh.skip[wp.min(right + 1, last)]
+                t_left = ray_box_enter(left_nd.lower, left_nd.upper, start, inv)
+                t_right = ray_box_enter(right_nd.lower, right_nd.upper, start, inv)
+                left_in = t_left <= hit.t
+                right_in = t_right <= hit.t
+                go_right = right_in and (not left_in or t_right < t_left)
+                if left_in and right_in:
+                    if go_right:
+                        count = wait_links(nodes, enters, links, count, left, t_left,
+                                           left_nd.first, left_nd.next, left_right)  # fmt: skip
+                    else:
+                        count = wait_links(nodes, enters, links, count, right, t_right,
+                                           right_nd.first, right_nd.next, right_right)  # fmt: skip
+                    if count > STACK:
+                        count = STACK
+                        sweep = span[0]
+                if go_right:
+                    node = right
+                    first = right_nd.first
+                    items = right_nd.next
+                    right = right_right
+                elif left_in:
+                    node = left
+                    first = left_nd.first
+                    items = left_nd.next
+                    right = left_right
+                else:
+                    first = 0
+                    items = 0
+        else:
+            step = next_ray_leaf(bvh, sweep, span[1], start, inv, hit.t)
+            sweep = step[2]
+            first = step[0]
+            items = step[1]
+        hit = leaf_hits(rec, bvh, first, items, shear, start, hit)
+        active = False
+        while count > 0 and not active:
+            count = count - 1
+            if enters[count] <= hit.t:
+                node = nodes[count]
+                link = links[count]
+                first = link[0]
+                items = link[1]
+                right = link[2]
+                active = True
+    return hit.slot
+
+
+def _stack_count_walk(stop_at_first: bool, nearer_first: bool):
+    """Hits counted on the right-linked nodes with a stack of payloads (no entry ``t``:
+    every box the ray meets before ``max_t`` is entered): a level loads both children
+    at once; ``stop_at_first``: the any hit (1 or 0); ``nearer_first``: the child the
+    ray enters first is visited first, else the left one. -2 on a stack overflow."""
 
     @wp.func
-    def walk(id: wp.uint64, alt: wp.array(dtype=BvhNode), start: wp.vec3, dir: wp.vec3,
-             max_t: float) -> int:  # fmt: skip
+    def walk(id: wp.uint64, start: wp.vec3, dir: wp.vec3, max_t: float) -> int:
         rec = wp.object_record(id, MeshRecord)
         bvh = wp.object_record(rec.bvh, BvhRecord)
         shear = ray_shear(dir)
         inv = wp.vec3(safe_inverse(dir[0]), safe_inverse(dir[1]), safe_inverse(dir[2]))
-        hit = Hit()
-        hit.t = max_t
-        hit.face = -1
-        hit.slot = -1
         sa = wp.ext.empty(STACK, dtype=wp.int32)
         sb = wp.ext.empty(STACK, dtype=wp.int32)
-        st = wp.ext.empty(STACK, dtype=wp.float32)
         count = 0
         lost = False
+        found = 0
         root = bvh.root
         active = False
         a = 0
         b = 0
         if root >= 0:
-            nd = alt[root]
-            active = ray_box_enter(nd.lower, nd.upper, start, inv) <= hit.t
-            a = nd.first
-            b = nd.next
-            if nd.first < 0:
-                a = root + 1
-                b = nd.first
+            nd = bvh.nodes[root]
+            active = ray_box_enter(nd.lower, nd.upper, start, inv) <= max_t
+            p = payload(nd, root)
+            a = p[0]
+            b = p[1]
         while active:
-            descend = b < 0
-            while descend:  # an inner node: both children, loaded independently
-                left = alt[a]
-                right = alt[-b]
-                t_l = ray_box_enter(left.lower, left.upper, start, inv)
-                t_r = ray_box_enter(right.lower, right.upper, start, inv)
-                l_in = t_l <= hit.t
-                r_in = t_r <= hit.t
-                # payloads of the two children
-                la = left.first
-                lb = left.next
-                if left.first < 0:
-                    la = a + 1
-                    lb = left.first
-                ra = right.first
-                rb = right.next
-                if right.first < 0:
-                    ra = -b + 1
-                    rb = right.first
-                if r_in and (not l_in or t_r < t_l):  # the right child first
+            while b < 0:
+                right = -1 - b
+                left_nd = bvh.nodes[a]
+                right_nd = bvh.nodes[right]
+                t_l = ray_box_enter(left_nd.lower, left_nd.upper, start, inv)
+                t_r = ray_box_enter(right_nd.lower, right_nd.upper, start, inv)
+                l_in = t_l <= max_t
+                r_in = t_r <= max_t
+                lp = payload(left_nd, a)
+                rp = payload(right_nd, right)
+                go_right = r_in and not l_in
+                if wp.static(nearer_first):
+                    go_right = r_in and (not l_in or t_r < t_l)
+                if go_right:
                     if l_in:
-                        count = push(sa, sb, st, count, la, lb, t_l)
-                    a = ra
-                    b = rb
+                        count = push2(sa, sb, count, lp[0], lp[1])
+                    a = rp[0]
+                    b = rp[1]
                 elif l_in:
                     if r_in:
-                        count = push(sa, sb, st, count, ra, rb, t_r)
-                    a = la
-                    b = lb
+                        count = push2(sa, sb, count, rp[0], rp[1])
+                    a = lp[0]
+                    b = lp[1]
                 else:
-                    b = 0  # both missed: nothing to test
+                    b = 0
                 if count > STACK:
                     lost = True
                     count = STACK
-                descend = b < 0
-            if b >= 0:  # at a leaf (b = 0: both children missed): its faces, then a pop
-                hit = leaf_hits(rec, bvh, a, b, shear, start, hit)
-                active = False
-                while count > 0 and not active:
-                    count = count - 1
-                    if st[count] <= hit.t:
-                        a = sa[count]
-                        b = sb[count]
-                        active = True
+            found = found + leaf_count(rec, a, b, shear, start, max_t)
+            active = count > 0
+            if wp.static(stop_at_first):
+                active = active and found == 0
+            if active:
+                count = count - 1
+                a = sa[count]
+                b = sb[count]
         if lost:
             return -2
-        return hit.slot
+        if wp.static(stop_at_first):
+            return wp.min(found, 1)
+        return found
 
     return walk
 
@@ -199,61 +448,67 @@ def finish(id: wp.uint64, slot: int, start: wp.vec3, dir: wp.vec3) -> wp.vec2:
     return wp.vec2(h[0], float(face))
 
 
+def _library_count(m):
+    """The counted-hits kernel against module ``m`` (kdsl or warp): ``face[i]`` the count."""
+
+    @m.kernel(enable_backward=False)
+    def count(mesh: m.uint64, start: m.array(dtype=m.vec3), d: m.array(dtype=m.vec3),
+              face: m.array(dtype=m.int32), t: m.array(dtype=float)):  # fmt: skip
+        i = m.tid()
+        face[i] = m.mesh_query_ray_count_intersections(mesh, start[i], d[i])
+
+    return count
+
+
+def _library_any(m):
+    """The any-hit kernel against module ``m``: ``face[i]`` 1 on a hit, else 0."""
+
+    @m.kernel(enable_backward=False)
+    def anyhit(mesh: m.uint64, start: m.array(dtype=m.vec3), d: m.array(dtype=m.vec3),
+               face: m.array(dtype=m.int32), t: m.array(dtype=float)):  # fmt: skip
+        i = m.tid()
+        face[i] = 0
+        if m.mesh_query_ray_anyhit(mesh, start[i], d[i], MAX_T):
+            face[i] = 1
+
+    return anyhit
+
+
 def variant_kernel(walk: str, regs: int | None = None):
-    """The kernel of one variant: ``face[i]``, ``t[i]`` of ray ``i``. ``walk``: "lib"
-    (``mesh_query_ray``) or "payload"; ``regs``: the kernel option
-    ``cuda_max_registers``."""
+    """The kernel of one variant: ``face[i]``, ``t[i]`` of ray ``i`` (any hit and
+    counts: ``face[i]`` only). ``walk``: "lib" (``mesh_query_ray``), "prefetch",
+    "payload", "any_lib", "any_stack", "any_near", "count_lib" or "count_stack";
+    ``regs``: the kernel option ``cuda_max_registers``."""
     options = {} if regs is None else {"cuda_max_registers": regs}
     if walk == "lib":  # the mesh benchmark's ray kernel (one source for kdsl and Warp)
         return wp.kernel(mesh_kernels(wp)[1].fn, enable_backward=False, **options)
-    search = _payload_walk()
+    if walk == "any_lib":
+        return _library_any(wp)
+    if walk == "count_lib":
+        return _library_count(wp)
+    if walk in ("any_stack", "any_near", "count_stack"):
+        hits = _stack_count_walk(walk.startswith("any"), walk == "any_near")
+
+        @wp.kernel(enable_backward=False, **options)
+        def counted(mesh: wp.uint64, start: wp.array(dtype=wp.vec3),
+                    d: wp.array(dtype=wp.vec3), face: wp.array(dtype=wp.int32),
+                    t: wp.array(dtype=float)):  # fmt: skip
+            i = wp.tid()
+            face[i] = hits(mesh, start[i], d[i], MAX_T)
+
+        return counted
+    search = payload_walk if walk == "payload" else prefetch_walk
 
     @wp.kernel(enable_backward=False, **options)
-    def rays(mesh: wp.uint64, alt: wp.array(dtype=BvhNode), start: wp.array(dtype=wp.vec3),
-             d: wp.array(dtype=wp.vec3), face: wp.array(dtype=wp.int32),
-             t: wp.array(dtype=float)):  # fmt: skip
+    def rays(mesh: wp.uint64, start: wp.array(dtype=wp.vec3), d: wp.array(dtype=wp.vec3),
+             face: wp.array(dtype=wp.int32), t: wp.array(dtype=float)):  # fmt: skip
         i = wp.tid()
-        slot = search(mesh, alt, start[i], d[i], MAX_T)
+        slot = search(mesh, start[i], d[i], MAX_T)
         r = finish(mesh, slot, start[i], d[i])
         face[i] = int(r[1])
         t[i] = r[0]
 
     return rays
-
-
-@wp.kernel(enable_backward=False)
-def _node_count(mesh: wp.uint64, out: wp.array(dtype=wp.int32)):
-    rec = wp.object_record(mesh, MeshRecord)
-    out[0] = wp.object_record(rec.bvh, BvhRecord).nodes.shape[0]
-
-
-@wp.kernel(enable_backward=False)
-def _copy_nodes(mesh: wp.uint64, out: wp.array(dtype=BvhNode)):
-    i = wp.tid()
-    rec = wp.object_record(mesh, MeshRecord)
-    out[i] = wp.object_record(rec.bvh, BvhRecord).nodes[i]
-
-
-def packed_nodes(mesh: wp.Mesh, dev: str) -> np.ndarray:
-    """The packed nodes of ``mesh``'s BVH, read through its record (a NumPy structured
-    array)."""
-    n = wp.zeros(1, dtype=wp.int32, device=dev)
-    wp.launch(_node_count, 1, [mesh.id, n], device=dev)
-    out = wp.zeros(int(n.numpy()[0]), dtype=BvhNode, device=dev)
-    wp.launch(_copy_nodes, out.shape[0], [mesh.id, out], device=dev)
-    return out.numpy()
-
-
-def right_linked(nodes: np.ndarray) -> np.ndarray:
-    """A copy of packed nodes (a ``BvhNode`` structured array) whose inner nodes'
-    ``first`` is minus their right child's index (the left child is the next node)."""
-    out = nodes.copy()
-    first, nxt = nodes["first"], nodes["next"]
-    inner = np.flatnonzero(first == -1)
-    left = inner + 1
-    right = np.where(first[left] >= 0, left + 1, nxt[left])
-    out["first"][inner] = -right
-    return out
 
 
 def _time(fn, reps: int, sync) -> float:
@@ -268,28 +523,58 @@ def _time(fn, reps: int, sync) -> float:
     return best
 
 
-def _warp_side(data: dict, device: str, reps: int):
+def _warp_side(data: dict, device: str, reps: int, families: set[str]) -> dict:
+    """Warp's rows for ``families``: name -> (seconds, face, t)."""
     import warp
 
     warp.config.quiet = True
     warp.init()
-
-    wrays = mesh_kernels(warp)[1]
-
     pts = warp.array(data["points"], dtype=warp.vec3, device=device)
     idx = warp.array(data["faces"].reshape(-1), dtype=warp.int32, device=device)
     mesh = warp.Mesh(pts, idx)
     n = len(data["ray_start"])
     s = warp.array(data["ray_start"], dtype=warp.vec3, device=device)
     d = warp.array(data["ray_dir"], dtype=warp.vec3, device=device)
-    face = warp.zeros(n, dtype=warp.int32, device=device)
-    t = warp.zeros(n, dtype=float, device=device)
+    kernels = {"ray": mesh_kernels(warp)[1], "any": _library_any(warp),
+               "count": _library_count(warp)}  # fmt: skip
+    out = {}
+    for fam in sorted(families):
+        k = kernels[fam]
+        face = warp.zeros(n, dtype=warp.int32, device=device)
+        t = warp.zeros(n, dtype=float, device=device)
 
-    def run():
-        warp.launch(wrays, n, [mesh.id, s, d, face, t], device=device)
+        def run(k=k, face=face, t=t):
+            warp.launch(k, n, [mesh.id, s, d, face, t], device=device)
 
-    secs = _time(run, reps, lambda: warp.synchronize_device(device))
-    return secs, face.numpy(), t.numpy(), mesh
+        secs = _time(run, reps, lambda: warp.synchronize_device(device))
+        out[FAMILIES[fam][1]] = (secs, face.numpy(), t.numpy())
+    return out
+
+
+def _check(rows: list[dict], answers: dict, n: int) -> bool:
+    """Compare each row's answers with its family's reference (exactly) and each
+    reference's with Warp's (hit/miss, ``t`` within 1e-5, counts); fills the rows'
+    ``face_diff``/``t_diff``; whether all agree."""
+    ok = True
+    for row in rows:
+        name = row["variant"]
+        fam = row["family"]
+        ref, warp_name = FAMILIES[fam]
+        lf, lt = answers[ref]
+        f, t = answers[name]
+        if name == warp_name:  # Warp against the reference
+            if fam == "ray":
+                row["face_diff"] = int(((f >= 0) != (lf >= 0)).sum())
+                both = (f >= 0) & (lf >= 0)
+                row["t_diff"] = int((np.abs(t - lt) > 1e-5 * np.maximum(1, np.abs(lt)))[both].sum())
+            else:
+                row["face_diff"], row["t_diff"] = int((f != lf).sum()), 0
+            ok &= row["face_diff"] <= RAY_DISAGREEMENT * n
+        else:
+            row["face_diff"] = int((f != lf).sum())
+            row["t_diff"] = int(((t != lt) & (lf >= 0)).sum()) if fam == "ray" else 0
+            ok &= row["face_diff"] == 0 and row["t_diff"] == 0
+    return ok
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -309,50 +594,40 @@ def main(argv: list[str] | None = None) -> int:
     n = len(data["ray_start"])
     mesh = wp.Mesh(wp.array(data["points"], dtype=wp.vec3, device=dev),
                    wp.array(data["faces"].reshape(-1), dtype=wp.int32, device=dev))  # fmt: skip
-    alt = wp.array(right_linked(packed_nodes(mesh, dev)), dtype=BvhNode, device=dev)
     s = wp.array(data["ray_start"], dtype=wp.vec3, device=dev)
     d = wp.array(data["ray_dir"], dtype=wp.vec3, device=dev)
+    names = ["lib", *(v for v in args.variants.split(",") if v and v != "lib")]
+    for name in names:
+        if name not in VARIANTS and name != "lib":
+            ap.error(f"unknown variant {name!r}; choose from {', '.join(VARIANTS)}")
+    families = {family(v) for v in names}
+    for fam in families:  # each family's reference runs too
+        if FAMILIES[fam][0] not in names:
+            names.append(FAMILIES[fam][0])
     rows: list[dict] = []
     answers: dict[str, tuple[np.ndarray, np.ndarray]] = {}
-    warp_row = None
     if not args.no_warp:
-        secs, wface, wt, _keep = _warp_side(data, dev, args.reps)
-        warp_row = {"variant": "warp", "ms": secs * 1e3}
-        answers["warp"] = (wface, wt)
-    kernels = {"lib": variant_kernel("lib")}
-    for name in [v for v in args.variants.split(",") if v]:
-        kernels[name] = variant_kernel(**VARIANTS[name])
-    for name, k in kernels.items():
+        for name, (secs, face, t) in _warp_side(data, dev, args.reps, families).items():
+            fam = next(f for f, (_, w) in FAMILIES.items() if w == name)
+            rows.append({"variant": name, "family": fam, "ms": secs * 1e3})
+            answers[name] = (face, t)
+    for name in names:
+        k = variant_kernel("lib") if name == "lib" else variant_kernel(**VARIANTS[name])
         face = wp.zeros(n, dtype=wp.int32, device=dev)
         t = wp.zeros(n, dtype=float, device=dev)
 
         def run(k=k, face=face, t=t):
-            args = (
-                [mesh.id, s, d, face, t]
-                if k.arg_names[1] == "start"
-                else [mesh.id, alt, s, d, face, t]
-            )
-            wp.launch(k, n, args, device=dev)
+            wp.launch(k, n, [mesh.id, s, d, face, t], device=dev)
 
         secs = _time(run, args.reps, lambda: wp.synchronize_device(dev))
         answers[name] = (face.numpy(), t.numpy())
-        rows.append({"variant": name, "ms": secs * 1e3})
-    ok = True
-    lf, lt = answers["lib"]
+        rows.append({"variant": name, "family": family(name), "ms": secs * 1e3})
+    ok = _check(rows, answers, n)
+    warp_ms = {r["family"]: r["ms"] for r in rows if r["variant"].startswith("warp")}
     for row in rows:
-        f, t = answers[row["variant"]]
-        row["face_diff"] = int((f != lf).sum())
-        row["t_diff"] = int(((t != lt) & (lf >= 0)).sum())
-        ok &= row["face_diff"] == 0 and row["t_diff"] == 0
-    if warp_row is not None:
-        wf, wt = answers["warp"]
-        warp_row["face_diff"] = int(((wf >= 0) != (lf >= 0)).sum())
-        both = (wf >= 0) & (lf >= 0)
-        warp_row["t_diff"] = int((np.abs(wt - lt) > 1e-5 * np.maximum(1, np.abs(lt)))[both].sum())
-        ok &= warp_row["face_diff"] <= RAY_DISAGREEMENT * n
-        rows.insert(0, warp_row)
-        for row in rows:
-            row["vs_warp"] = warp_row["ms"] / row["ms"]
+        if row["family"] in warp_ms:
+            row["vs_warp"] = warp_ms[row["family"]] / row["ms"]
+    rows.sort(key=lambda r: list(FAMILIES).index(r["family"]))
     print(f"{n} rays, {len(data['faces'])} triangles, {dev}, min of {args.reps} launches")
     print(f"{'variant':<26}{'ms':>8}{'x Warp':>8}{'face diff':>11}{'t diff':>8}")
     for r in rows:

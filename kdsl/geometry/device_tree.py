@@ -4,7 +4,9 @@ Every constructor ends in a ``DeviceTree``: the preorder topology ``kdsl.stdlib.
 documents (``skip``, ``first``, ``count``, ``items``, ``group_roots``) on the boxes'
 device, plus what a GPU refit needs: ``parent`` (each node's parent, -1 at the root) and
 ``arrivals``, one counter per node (both empty on a CPU). An inner node ``n``'s children
-are ``n + 1`` and ``skip[n + 1]``, so the tree needs no child arrays. The arrays have
+are ``n + 1`` and ``skip[n + 1]``, so the tree needs no child arrays (its ``first`` is -1
+for an inner node; the packed nodes name the right child there, ``inner_first``). The
+arrays have
 ``slots`` entries: the nodes, then (lbvh trees, whose node count stays on the device)
 unused slots marked ``first = UNUSED``, which every kernel here skips, so none needs
 the node count on the host.
@@ -45,7 +47,7 @@ from kdsl.runtime.alloc import empty, zeros
 from kdsl.runtime.array import array
 from kdsl.runtime.carve import carve
 from kdsl.runtime.launch import launch
-from kdsl.stdlib.bvh import BvhNode
+from kdsl.stdlib.bvh import BvhNode, inner_first
 from kdsl.types import int32, vec3
 
 #: ``first`` of a node slot past a tree's last node (an lbvh tree has ``2n - 1`` slots
@@ -208,7 +210,7 @@ def _refit_leaves(
         sibling = nodes[s]  # (two 16-byte loads)
         lo = vmin(lo, sibling.lower)
         hi = vmax(hi, sibling.upper)
-        nodes[p] = BvhNode(lo, -1, hi, next_p)
+        nodes[p] = BvhNode(lo, inner_first(vmax(n, s)), hi, next_p)  # (right: the later)
         n = p
         p = up
 
@@ -225,11 +227,14 @@ def _pack_links(
         packed_next[n] = count[n]
     else:
         packed_next[n] = skip[n]
+        if f == -1:  # an inner node (not an unused slot): its right child
+            packed_first[n] = inner_first(skip[n + 1])
 
 
 def pack_nodes(tree: DeviceTree, views: tuple) -> None:
-    """Write the links of the packed nodes whose ``node_views`` are ``views``: ``first``,
-    and ``next``, an inner node's ``skip`` or a leaf's count; ``refit`` writes the bounds."""
+    """Write the links of the packed nodes whose ``node_views`` are ``views``: ``first``
+    (a leaf's, or an inner node's right child as ``inner_first``), and ``next``, an inner
+    node's ``skip`` or a leaf's count; ``refit`` writes the bounds."""
     if tree.slots == 0:
         return
     launch(_pack_links, dim=tree.slots, device=views[1].device,
@@ -247,9 +252,11 @@ def _refit_inner_reverse_preorder(
     for k in range(slots):
         n = slots - 1 - k
         if first[n] == -1:  # an inner node (not an unused slot)
+            r = skip[n + 1]  # the right child
             a = nodes[n + 1]
-            b = nodes[skip[n + 1]]
-            nodes[n] = BvhNode(vmin(a.lower, b.lower), -1, vmax(a.upper, b.upper), skip[n])
+            b = nodes[r]
+            nodes[n] = BvhNode(vmin(a.lower, b.lower), inner_first(r), vmax(a.upper, b.upper),
+                               skip[n])  # fmt: skip
 
 
 def refit_steps(tree: DeviceTree, item_lowers: array, item_uppers: array, nodes: array,

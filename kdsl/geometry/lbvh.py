@@ -61,7 +61,7 @@ from kdsl.runtime.array import array
 from kdsl.runtime.carve import carve
 from kdsl.runtime.launch import Launch, launch
 from kdsl.runtime.stream import current_stream
-from kdsl.stdlib.bvh import BvhNode
+from kdsl.stdlib.bvh import BvhNode, inner_first
 from kdsl.types import float32, int32, uint64, vec2i, vec3
 from kdsl.utils.merge_sort import MergeSortKeys
 from kdsl.utils.scan import ScanInto
@@ -396,7 +396,8 @@ def _preorder(
     starts: array(dtype=int32), bounds: array(dtype=int32),
 ):  # fmt: skip
     # Thread x: radix-tree node x, written at its preorder number when kept (links,
-    # contiguous ``first``/``count`` for the refit, packed node and bounds, and, with
+    # contiguous ``first``/``count`` for the refit, packed node (an inner one naming its
+    # right child, ``inner_first``) and bounds, and, with
     # ``with_parents``, its parent's preorder number: a kept node's parent is kept); and
     # slot x, when past the last node, marked unused. The preorder number comes from the
     # scan of the kept nodes' first positions (``before``) and a short walk up the chain
@@ -456,7 +457,8 @@ def _preorder(
         count[pre] = b - a + 1
     else:
         first[pre] = -1
-        packed_first[pre] = -1
+        # the right child: after the parent and the left child's kept subtree
+        packed_first[pre] = inner_first(pre + 1 + _kept_size(n, sizes, left[x]))
         packed_next[pre] = after
         count[pre] = 0
     if with_parents != 0:

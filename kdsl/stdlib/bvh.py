@@ -6,7 +6,9 @@ Kernels reach it through its record (``BvhRecord``, read with ``object_record``)
 - nodes are numbered in depth-first preorder: node ``n`` has bounds ``lowers[n]``,
   ``uppers[n]``; its subtree is the nodes ``n .. skip[n] - 1``; a leaf holds the items
   ``items[first[n] : first[n] + count[n]]``, an inner node (``first[n] < 0``) has its
-  left child at ``n + 1``;
+  left child at ``n + 1`` and its right child at ``skip[n + 1]``, which ``first[n]``
+  names too (``first[n] = -1 - right``, ``right_child``: "right-linked" nodes, so a
+  walk loads both children at once);
 - ``item_lowers`` / ``item_uppers`` are the boxes the BVH was built over (the user's
   arrays), ``group_roots[g]`` is the root node of group ``g``'s subtree;
 - ``nodes`` packs each node's bounds, ``first`` and ``skip`` (or a leaf's count) in 32
@@ -46,14 +48,27 @@ class BvhNode:
     """A node packed for traversal (32 bytes, two 16-byte halves as Warp's: the lower
     bound and ``first``, the upper bound and ``next``; declared 16-byte aligned, so a
     GPU reads a node with two vector loads): ``first`` is a leaf's first position in
-    ``items`` (-1 for an inner node), ``next`` an inner node's ``skip`` or a leaf's item
-    count. ``BvhRecord``'s ``lowers``, ``uppers`` and ``first`` are strided views of
-    these fields."""
+    ``items``, or for an inner node ``-1 - right`` (``inner_first``; at most -3: the
+    right child follows the parent and its left child), ``next`` an inner node's
+    ``skip`` or a leaf's item count. ``BvhRecord``'s ``lowers``, ``uppers`` and
+    ``first`` are strided views of these fields."""
 
     lower: wp.vec3
     first: wp.int32
     upper: wp.vec3
     next: wp.int32
+
+
+@func
+def inner_first(right: int) -> int:
+    """The packed ``first`` of an inner node whose right child is node ``right``."""
+    return -1 - right
+
+
+@func
+def right_child(first: int) -> int:
+    """The right child of an inner node whose packed ``first`` is ``first``."""
+    return -1 - first
 
 
 @wp.struct

@@ -41,6 +41,7 @@ from kdsl.stdlib.bvh import (
     bvh_query_aabb,
     bvh_query_next,
     bvh_query_sphere,
+    right_child,
 )
 from kdsl.stdlib.mesh_primitives import (
     RayShear,
@@ -576,18 +577,27 @@ def _ray_leaf(
 
 
 @func
-def _wait_node(
-    nodes: wp.array(dtype=wp.int32), keys: wp.array(dtype=wp.float32),
-    links: wp.array(dtype=wp.vec3i), count: int, node: int, key: float, nd: BvhNode,
-    right: int,
+def _wait_payload(
+    firsts: wp.array(dtype=wp.int32), nexts: wp.array(dtype=wp.int32),
+    keys: wp.array(dtype=wp.float32), count: int, first: int, next: int, key: float,
 ) -> int:  # fmt: skip
-    """``_wait`` that also keeps the node's ``first``, ``next`` and right child
-    (``links``), so that taking it off the stack loads nothing."""
+    """``_wait`` for a node carried as its payload (``first``, ``next``: see
+    ``_ray_closest_slot``), so that taking it off the stack loads nothing."""
     if count < WALK_STACK:
-        nodes[count] = node
+        firsts[count] = first
+        nexts[count] = next
         keys[count] = key
-        links[count] = wp.vec3i(nd.first, nd.next, right)
     return count + 1
+
+
+@func
+def _payload(nd: BvhNode, node: int) -> wp.vec2i:
+    """The payload of node ``node`` (packed as ``nd``) for ``_ray_closest_slot``: a
+    leaf's ``(first, count)``, an inner node's ``(left child, first)`` (its packed
+    ``first`` names its right child: ``right_child``)."""
+    if nd.first < 0:
+        return wp.vec2i(node + 1, nd.first)
+    return wp.vec2i(nd.first, nd.next)
 
 
 @func
@@ -597,14 +607,13 @@ def _ray_closest_slot(id: wp.uint64, start: wp.vec3, dir: wp.vec3, max_t: float,
 
     Front to back: at an inner node the child the ray enters first is visited next and
     the other waits on a small stack with its entry ``t``, dropped when a hit nearer
-    than that is found meanwhile. A level waits for one load: an inner node is carried
-    with its right child, which the BVH's ``skip`` array names (the right child of
-    ``n`` is ``skip[n + 1]``, where the left child's subtree ends), so a level loads
-    both children's nodes and both their right children at once (the packed nodes name
-    only ``skip`` of the node itself, so the right child would otherwise wait for the
-    left child's load); a waiting node keeps its ``first``, ``next`` and right child,
-    so taking it off the stack loads nothing (docs/performance.md, "Mesh rays on the
-    GPU, session 11"). A tree deeper than the stack (``WALK_STACK``) overflows into a
+    than that is found meanwhile. A node is carried as its payload ``(a, b)`` (Warp's
+    discipline): an inner node's left child and packed ``first`` (``b < 0``, which
+    names the right child: the packed nodes are right-linked, ``kdsl.stdlib.bvh``), a
+    leaf's faces ``[a, a + b)``; so a level loads both children's nodes at once, with
+    no load waiting on another, and a waiting node is a payload and an entry ``t``, so
+    taking it off the stack loads nothing (docs/performance.md, "Right-linked nodes,
+    session 12"). A tree deeper than the stack (``WALK_STACK``) overflows into a
     stackless pass over the whole range, bounded by the hit found so far, in the same
     loop (one leaf test site): the answer never depends on the order."""
     rec = wp.object_record(id, MeshRecord)
@@ -616,77 +625,64 @@ def _ray_closest_slot(id: wp.uint64, start: wp.vec3, dir: wp.vec3, max_t: float,
     hit.face = -1
     hit.slot = -1
     span = _root_range(bvh, root)
-    nodes = wp.ext.empty(WALK_STACK, dtype=wp.int32)  # pushed before popped: no zero fill
+    firsts = wp.ext.empty(WALK_STACK, dtype=wp.int32)  # pushed before popped: no zero fill
+    nexts = wp.ext.empty(WALK_STACK, dtype=wp.int32)
     enters = wp.ext.empty(WALK_STACK, dtype=wp.float32)
-    links = wp.ext.empty(WALK_STACK, dtype=wp.vec3i)
-    last = bvh.skip.shape[0] - 1  # (``skip`` of a leaf's successor: read, never used)
     count = 0
     sweep = span[1]  # the stackless pass's next node: none until the stack overflows
-    node = span[0]
-    active = False  # ``node`` is to be visited; ``first``, ``items``: its packed fields
-    first = 0
-    items = 0
-    right = 0  # the right child of ``node`` while it is an inner node
+    active = False  # a node is to be visited: its payload (a, b)
+    a = 0
+    b = 0
     if span[0] < span[1]:
-        nd = bvh.nodes[node]
+        nd = bvh.nodes[span[0]]
         active = ray_box_enter(nd.lower, nd.upper, start, inv) <= hit.t
-        first = nd.first
-        items = nd.next
-        right = bvh.skip[wp.min(node + 1, last)]
+        p = _payload(nd, span[0])
+        a = p[0]
+        b = p[1]
     while active or sweep < span[1]:
         if active:
             # Down the nearer children to a leaf (or to where both children are
-            # missed), then the leaf's faces: "while-while", as the closest point.
-            while first < 0:
-                left = node + 1
-                left_nd = bvh.nodes[left]
+            # missed: b = 0), then the leaf's faces: "while-while", as the closest point.
+            while b < 0:
+                right = right_child(b)
+                left_nd = bvh.nodes[a]
                 right_nd = bvh.nodes[right]
-                left_right = bvh.skip[wp.min(left + 1, last)]  # used when they are inner
-                right_right = bvh.skip[wp.min(right + 1, last)]
                 t_left = ray_box_enter(left_nd.lower, left_nd.upper, start, inv)
                 t_right = ray_box_enter(right_nd.lower, right_nd.upper, start, inv)
                 left_in = t_left <= hit.t  # (false for NaN: a missed box)
                 right_in = t_right <= hit.t
-                go_right = right_in and (not left_in or t_right < t_left)
-                if left_in and right_in:  # the other one waits
-                    if go_right:
-                        count = _wait_node(nodes, enters, links, count, left, t_left, left_nd,
-                                           left_right)  # fmt: skip
-                    else:
-                        count = _wait_node(nodes, enters, links, count, right, t_right,
-                                           right_nd, right_right)  # fmt: skip
-                    if count > WALK_STACK:  # full: a stackless pass once it is empty
-                        count = WALK_STACK
-                        sweep = span[0]
-                if go_right:
-                    node = right
-                    first = right_nd.first
-                    items = right_nd.next
-                    right = right_right
+                lp = _payload(left_nd, a)
+                rp = _payload(right_nd, right)
+                if right_in and (not left_in or t_right < t_left):  # the right one first
+                    if left_in:
+                        count = _wait_payload(firsts, nexts, enters, count, lp[0], lp[1],
+                                              t_left)  # fmt: skip
+                    a = rp[0]
+                    b = rp[1]
                 elif left_in:
-                    node = left
-                    first = left_nd.first
-                    items = left_nd.next
-                    right = left_right
+                    if right_in:
+                        count = _wait_payload(firsts, nexts, enters, count, rp[0], rp[1],
+                                              t_right)  # fmt: skip
+                    a = lp[0]
+                    b = lp[1]
                 else:  # both missed: no leaf to test
-                    first = 0
-                    items = 0
+                    b = 0
+                if count > WALK_STACK:  # full: a stackless pass once it is empty
+                    count = WALK_STACK
+                    sweep = span[0]
         else:  # after an overflow, the stackless pass: its next leaf
             step = _next_ray_leaf(bvh, sweep, span[1], start, inv, hit.t)
             sweep = step[2]
-            first = step[0]
-            items = step[1]
-        hit = _ray_leaf(rec, bvh, first, items, shear, start, hit)
+            a = step[0]
+            b = step[1]
+        hit = _ray_leaf(rec, bvh, a, b, shear, start, hit)
         # the nearest waiting node not beyond the hit found so far
         active = False
         while count > 0 and not active:
             count = count - 1
             if enters[count] <= hit.t:
-                node = nodes[count]
-                link = links[count]
-                first = link[0]
-                items = link[1]
-                right = link[2]
+                a = firsts[count]
+                b = nexts[count]
                 active = True
     return hit.slot
 

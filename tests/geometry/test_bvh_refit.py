@@ -35,7 +35,20 @@ def node_bounds(tree, lo, hi):
     want = packed.numpy()[: tree.num_nodes]
     np.testing.assert_array_equal(got["first"], want["first"])
     np.testing.assert_array_equal(got["next"], want["next"])
+    np.testing.assert_array_equal(got["first"], right_linked_first(tree))
     return got["lower"], got["upper"]
+
+
+def right_linked_first(tree):
+    """The packed ``first`` of ``tree``'s nodes, from its topology: a leaf's first item,
+    an inner node's ``-1 - right`` (its right child ``skip[n + 1]``)."""
+    m = tree.num_nodes
+    first, skip = tree.first.numpy()[:m], tree.skip.numpy()
+    inner = np.flatnonzero(first == -1)
+    out = first.copy()
+    out[inner] = -1 - skip[inner + 1]
+    assert np.all(out[inner] <= -3) and np.all(out[first != -1] >= 0)  # (apart from UNUSED)
+    return out
 
 
 @pytest.mark.parametrize("device", ["cpu", pytest.param("cuda:0", marks=cuda)])
@@ -90,7 +103,8 @@ def test_lbvh_writes_the_parents_and_links_of_its_nodes(device, leaf_size, num_g
     pack_nodes(tree, node_views(packed))
     got, want = tree.nodes.numpy(), packed.numpy()
     np.testing.assert_array_equal(got["next"][:m], want["next"][:m])
-    np.testing.assert_array_equal(got["first"], tree.first.numpy())
+    np.testing.assert_array_equal(got["first"], want["first"])  # (unused slots: UNUSED)
+    np.testing.assert_array_equal(got["first"][:m], right_linked_first(tree))
     assert not build_lbvh(lo, hi, leaf_size, groups, num_groups, bottom_up=False).parent.size
 
 

@@ -98,6 +98,7 @@ def test_tree_is_the_radix_tree_of_the_keys(device, use_scan, n, cells, leaf_siz
         np.testing.assert_array_equal(nodes["lower"][k], lo[under].min(axis=0))
         np.testing.assert_array_equal(nodes["upper"][k], hi[under].max(axis=0))
         assert nodes["next"][k] == (count[k] if first[k] >= 0 else skip[k])
+        assert nodes["first"][k] == (first[k] if first[k] >= 0 else -1 - skip[k + 1])
     parents = t.parent.numpy()  # each node's parent: the node whose children it is
     assert parents[0] == -1 and np.all(parents[m:] == -1)
     for k in range(m):
