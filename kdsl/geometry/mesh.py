@@ -162,16 +162,15 @@ class Mesh:
         index out of range or a non-finite point is an error, and the BVH keeps its
         bounds and the vertex copy. The check, the edge sum, the BVH's refit and the
         copy's gather are issued before the host waits for the check's answers (the
-        refit and the gather read them on the device); on a GPU the launches after the
-        check run as one graph from the second refit on."""
+        refit and the gather read them on the device); on a GPU the three run side by
+        side behind the check, as one graph from the second refit on."""
         if self._wide is not None:
             self._refit_wide()
             return
-        then = self.bvh.refit_checked_steps(self._faces.found)
-        gather = self._tree_points.prepared()
-        if gather is not None:
-            then = [*then, gather]
-        self._faces.start(self._points, self.indices, then)
+        faces = self._faces
+        gather = self._tree_points.prepared(faces.beside_stream())
+        faces.start(self._points, self.indices, self.bvh.refit_checked_steps(faces.found),
+                    () if gather is None else (gather,))  # fmt: skip
         self._raise_if_bad()
         self._write_record()
 

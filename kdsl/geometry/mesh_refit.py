@@ -21,11 +21,13 @@ graph from the second refit (``StepGraph``), then waits and raises.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from typing import Any
 
 from kdsl.frontend.api import atomic_max, isfinite, kernel, length, tid
 from kdsl.frontend.api import max as vmax
 from kdsl.frontend.api import min as vmin
-from kdsl.geometry.graph_steps import StepGraph, graphs_on
+from kdsl.geometry.forked_steps import ForkedSteps, side_streams
+from kdsl.geometry.graph_steps import graphs_on
 from kdsl.geometry.host_read import IntsReader
 from kdsl.geometry.mesh_tree_points import TreePoints
 from kdsl.geometry.recycle import RecycleBin
@@ -104,25 +106,28 @@ class FaceBoxes:
         ])  # fmt: skip
         self.tree_points = TreePoints(empty(3 * num_tris, dtype=vec3, device=device), self.found)
         self._read = IntsReader(self.found)
-        #: (the stream, the edge sum's prepared launches), how many they are, and the
-        #: last two ``StepGraph``s of them followed by a ``then`` of ``start``.
-        self._sum: tuple | None = None
-        self._sum_len = 0
-        self._tails: list[StepGraph] = []
+        #: The edge sum's prepared launches per stream they were prepared on.
+        self._sums: dict[Any, list] = {}
+        #: The last two runs of the sum and a ``start``'s ``then``/``beside``
+        #: (``ForkedSteps``), with what they were made of: (then, beside, stream, run).
+        self._tails: list[tuple] = []
         #: (points, indices, stream) of the prepared check, and the check.
         self._check: tuple | None = None
         self._pending = False
         #: Whether the last ``start`` was finished (one cut short may leave a counter set).
         self.clean = True
 
-    def start(self, points: array, indices: array, then: Sequence[Callable[[], object]] = ()
-              ) -> None:  # fmt: skip
+    def start(self, points: array, indices: array, then: Sequence[Callable[[], object]] = (),
+              beside: Sequence[Callable[[], object]] = ()) -> None:  # fmt: skip
         """Issue the check of the mesh, the writes of its faces' boxes and edge lengths,
-        the read back of the check's answers and the edge sum, then the prepared launches
-        ``then`` (a refit's: the BVH's refit and the copy's gather, which read the
-        check's counters on the device); ``finish`` waits for the answers. Nothing waits
-        here. On a GPU the sum and ``then`` run as one graph from the second call with
-        the same launches (``StepGraph``)."""
+        the read back of the check's answers and the edge sum, and behind the check the
+        prepared launches ``then`` (on the stream) and ``beside`` (prepared on
+        ``side_streams(device, 2)[1]``): a refit's BVH refit and the copy's gather, which
+        read the check's counters on the device. ``finish`` waits for the answers;
+        nothing waits here. With a ``then`` or ``beside`` on a GPU, the sum (on the first
+        side stream), ``then`` and ``beside`` run side by side and the stream waits for
+        all three (``ForkedSteps``), as one graph from the second call with the same
+        launches."""
         num_points, num_tris = points.shape[0], self.lowers.shape[0]
         if max(num_points, num_tris) == 0:
             return
@@ -138,33 +143,42 @@ class FaceBoxes:
             ).launch  # fmt: skip
             held = self._check = (points, indices, stream, check)
         held[3]()
-        self._read.start()  # the answers only (on a side stream: the tail does not wait)
-        if num_tris:
-            self._tail(stream, then)()  # (writes nothing when the check found something)
-        else:
-            for step in then:
-                step()
+        self._read.start()  # the answers only (on a side stream: the rest does not wait)
+        self._tail(stream, then, beside)()  # (the sum writes nothing when the check found something)
         self._pending = True
 
-    def _tail(self, stream, then: Sequence[Callable[[], object]]) -> StepGraph:
-        """The edge sum's launches and ``then`` as one ``StepGraph`` on ``stream``: the
-        one made before for the same launches (the last two are kept: a construction's,
-        with no ``then``, and a refit's), else a new one."""
-        n = len(then)
-        for tail in self._tails:
-            if tail.stream is stream and len(tail.steps) == self._sum_len + n and all(
-                    a is b for a, b in zip(tail.steps[self._sum_len :], then)):  # fmt: skip
-                return tail
-        held = self._sum
-        if held is None or held[0] is not stream:
-            steps = ChunkSum(self.edges, self.edge_sum, guard=self.found,
-                             scratch=self._scratch).steps  # fmt: skip
-            held = self._sum = (stream, steps)
-            self._sum_len = len(steps)
-            self._tails = []
-        tail = StepGraph(held[1] + list(then), stream, graphs_on(self.lowers.device))
-        self._tails = [*self._tails[-1:], tail]
-        return tail
+    def beside_stream(self) -> Any:
+        """The stream ``start``'s ``beside`` launches are prepared on (None on a CPU)."""
+        device = self.lowers.device
+        return None if device.is_cpu else side_streams(device, 2)[1]
+
+    def _sum_steps(self, stream) -> list:
+        """The edge sum's launches prepared on ``stream`` (none without faces)."""
+        steps = self._sums.get(stream)
+        if steps is None:
+            steps = [] if self.lowers.shape[0] == 0 else ChunkSum(
+                self.edges, self.edge_sum, guard=self.found, scratch=self._scratch,
+                stream=stream).steps  # fmt: skip
+            self._sums[stream] = steps
+        return steps
+
+    def _tail(self, stream, then: Sequence[Callable[[], object]],
+              beside: Sequence[Callable[[], object]]) -> Callable[[], None]:  # fmt: skip
+        """What ``start`` runs after the read: the one made before for the same launches
+        and stream (the last two are kept: a construction's and a refit's), else a new
+        one."""
+        for t in self._tails:
+            if t[2] is stream and _same_steps(t[0], then) and _same_steps(t[1], beside):
+                return t[3]
+        graphed = graphs_on(self.lowers.device)
+        if stream is None or not (then or beside):  # the sum on the stream, then ``then``
+            run = ForkedSteps([*self._sum_steps(stream), *then, *beside], [], stream, graphed)
+        else:
+            side, other = side_streams(stream.device, 2)
+            run = ForkedSteps(then, [(side, self._sum_steps(side)), (other, beside)], stream,
+                              graphed)  # fmt: skip
+        self._tails = [*self._tails[-1:], (tuple(then), tuple(beside), stream, run)]
+        return run
 
     def finish(self) -> tuple[int, int]:
         """Wait for the answers of the last ``start``: (the position of the first index
@@ -188,6 +202,10 @@ class FaceBoxes:
         lengths and edge sum; returns ``finish``'s answer."""
         self.start(points, indices)
         return self.finish()
+
+
+def _same_steps(a: Sequence, b: Sequence) -> bool:
+    return len(a) == len(b) and all(x is y for x, y in zip(a, b))
 
 
 #: The face boxes of collected meshes, for the next mesh of as many faces (``recycle``:

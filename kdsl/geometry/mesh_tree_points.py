@@ -26,6 +26,7 @@ docs/performance.md.)
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any
 
 from kdsl.frontend.api import kernel, tid
 from kdsl.geometry.bvh import Bvh
@@ -76,7 +77,8 @@ class TreePoints:
         self.points: array | None = None
         self.indices: array | None = None
         self.items: array | None = None
-        self._gather: tuple | None = None  # (its arrays and stream, the prepared gather)
+        #: Per stream: (the arrays it copies, the gather prepared on that stream).
+        self._gather: dict[Any, tuple] = {}
 
     def attach(self, points: array, indices: array) -> None:
         """Copy from ``points`` and ``indices`` (a new mesh's) from now on."""
@@ -94,20 +96,23 @@ class TreePoints:
             return
         self.prepared()()
 
-    def prepared(self) -> Callable[[], object] | None:
-        """``write``'s launch, prepared once per set of arrays and stream (None with no
-        items): a mesh's refit issues it in a graph with the BVH's refit."""
+    def prepared(self, stream: Any = None) -> Callable[[], object] | None:
+        """``write``'s launch prepared on ``stream`` (a ``kdsl.Stream``; None: the current
+        one), once per set of arrays and stream (None with no items): a mesh's refit
+        issues it beside the BVH's refit."""
         items = self.items
         if items is None or items.shape[0] == 0:
             return None
         device = self.tri.device
-        key = (self.points, self.indices, items, _stream_of(device))
-        held = self._gather
+        if stream is None:
+            stream = _stream_of(device)
+        key = (self.points, self.indices, items)
+        held = self._gather.get(stream)
         if held is None or not _same(held[0], key):
             inputs = [self.points, self.indices, items, self.found, self.tri]
             gather = launch(_gather_tree_points, dim=items.shape[0], device=device,
-                            inputs=inputs, record_cmd=True).launch  # fmt: skip
-            held = self._gather = (key, gather)
+                            inputs=inputs, record_cmd=True, stream=stream).launch  # fmt: skip
+            held = self._gather[stream] = (key, gather)
         return held[1]
 
 

@@ -23,6 +23,7 @@ the check first.
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any
 
 from kdsl.frontend.api import kernel, tid
 from kdsl.frontend.api import min as vmin
@@ -92,14 +93,16 @@ class ChunkSum:
     """A prepared ``out[0] = sum(values)`` (see the module docstring): ``values`` a
     contiguous 1-d float32 array, ``out`` a float32 array of at least one element on its
     device, ``guard`` None or an int32 array there. The launches are prepared once, on
-    the stream current when it is made; ``steps`` lists them (for a caller that captures
+    ``stream`` (a ``kdsl.Stream`` of its device; None: the one current when it is made);
+    ``steps`` lists them (for a caller that captures
     them as a graph). An empty ``values`` sums to 0.0. ``scratch``: float32 values on the
     device for the levels before the last (``scratch_size``; allocated when None)."""
 
     __slots__ = ("steps", "_scratch")
 
     def __init__(self, values: array, out: array, guard: array | None = None,
-                 chunk: int = CHUNK, scratch: array | None = None) -> None:  # fmt: skip
+                 chunk: int = CHUNK, scratch: array | None = None,
+                 stream: Any = None) -> None:  # fmt: skip
         v, o = check_array("values", values), check_array("out", out)
         g = None if guard is None else check_array("guard", guard)
         same_device(values=v, out=o, guard=g)
@@ -136,7 +139,8 @@ class ChunkSum:
             else:
                 k, inputs = _sum_chunks, [src, n, chunk, guard, dst]
             self.steps.append(
-                launch(k, dim=size, device=device, record_cmd=True, inputs=inputs).launch
+                launch(k, dim=size, device=device, record_cmd=True, inputs=inputs,
+                       stream=stream).launch
             )
             src, n, at = dst, size, at + size
 

@@ -24,6 +24,7 @@ from kdsl.geometry import lbvh
 from kdsl.geometry.device_tree import _refit_inner_reverse_preorder, _refit_leaves
 from kdsl.geometry.mesh_refit import _checked_face_boxes
 from kdsl.geometry.mesh_tree_points import _gather_tree_points
+from kdsl.utils.chunk_sum import sum_levels
 from tests.geometry.mesh_reference import icosphere
 from tests.geometry.test_mesh_tree_points import _check_copy, _check_queries, move_kernel
 
@@ -232,12 +233,14 @@ def test_refit_kernels_on_interp_match_cpu(bottom_up, bottom_up_on_cpu):
 
 
 @pytest.mark.parametrize("device", DEVICES)
-def test_the_refit_tail_is_one_step_graph_replayed(device, monkeypatch):
-    """Without a wide tree (a GPU's meshes; here on the CPU too) a refit issues the edge
-    sum, the BVH's refit and the copy's gather as one ``StepGraph`` behind the check: the
-    same one refit after refit (a CUDA graph from the second), a new one after a rebuild
-    (other launches); answers as the brute force's, and a bad point still raises and
-    keeps the bounds and the copy."""
+def test_the_refit_runs_its_three_launches_side_by_side(device, monkeypatch):
+    """Without a wide tree (a GPU's meshes; here on the CPU too) a refit issues the BVH's
+    refit, the edge sum and the copy's gather behind the check as one ``ForkedSteps``
+    (on a GPU: the BVH refit on the stream, the other two on side streams, joined back):
+    the same one refit after refit (a CUDA graph from the second), a new one when the
+    points array or the tree changes; answers as the brute force's (queries included,
+    which run behind the join), and a bad point still raises and keeps the bounds and
+    the copy, in the graph too."""
     from kdsl.geometry import wide_tree
 
     monkeypatch.setitem(wide_tree.WIDE_TREE, "cpu", False)
@@ -248,18 +251,26 @@ def test_the_refit_tail_is_one_step_graph_replayed(device, monkeypatch):
     tails = []
     for _ in _moves(mesh, pts, faces, steps=4):
         _check_against_brute_force(mesh, faces)
-        tails.append(mesh._faces._tails[-1])
-    gather = mesh._tree_points.prepared()
-    assert tails[-1].steps[-1] is gather  # the gather last, behind the BVH's refit
-    # moves 1 and 3 assign new points (a new gather, a new tail), 2 moves them in place
+        tails.append(mesh._faces._tails[-1][3])
+    fork = tails[-1]
+    gather = mesh._tree_points.prepared(mesh._faces.beside_stream())
+    refit = mesh.bvh.refit_checked_steps(mesh._faces.found)
+    assert all(any(s is f for f in fork.steps) for s in refit) and fork.steps[-1] is gather
+    assert len(fork.steps) == len(refit) + len(sum_levels(len(faces))) + 1  # + sum, gather
+    if device != "cpu":  # the BVH refit on the stream, the sum and the gather beside it
+        assert fork.main == refit
+        assert [len(b[1]) for b in fork.branches] == [len(sum_levels(len(faces))), 1]
+    # moves 1 and 3 assign new points (a new gather, a new fork), 2 moves them in place
     assert tails[1] is tails[2] and len({id(t) for t in tails}) == 3
     if device != "cpu":
         assert tails[2].graph is not None  # its second run captured it
-    mesh.bvh.rebuild("median")  # another tree: other refit launches, another tail
+    _check_queries(mesh, mesh.points.numpy(), faces, "cuda" if device != "cpu" else "cpu")
+    mesh.bvh.rebuild("median")  # another tree: other refit launches, another fork
     for _ in _moves(mesh, pts, faces, steps=2):
         _check_against_brute_force(mesh, faces)
-    assert mesh._faces._tails[-1] is not tails[-1]
+    assert mesh._faces._tails[-1][3] is not tails[-1]
     before = (mesh.bvh._nodes.numpy().tobytes(), mesh._tree_points.tri.numpy().tobytes())
+    edge_sum = mesh._faces.edge_sum.numpy()[0]
     bad = mesh.points.numpy() * 1.5
     bad[9, 0] = np.nan
     wp.copy(mesh.points, wp.array(bad, dtype=V3, device=device))
@@ -268,6 +279,7 @@ def test_the_refit_tail_is_one_step_graph_replayed(device, monkeypatch):
             mesh.refit()
         assert (mesh.bvh._nodes.numpy().tobytes(),
                 mesh._tree_points.tri.numpy().tobytes()) == before  # fmt: skip
+        assert mesh._faces.edge_sum.numpy()[0] == edge_sum
     bad[9, 0] = 0.5
     wp.copy(mesh.points, wp.array(bad, dtype=V3, device=device))
     mesh.refit()
