@@ -176,12 +176,12 @@ class Mesh:
 
     def _refit_wide(self) -> None:
         """``refit()`` of a mesh that keeps a 4-wide tree (a CPU's, ``wide_tree``): the
-        check, the BVH's refit and the gather as above, then the wide tree's refit."""
+        check, then one pass over the wide tree's subtrees that writes the vertex copy,
+        the BVH's bounds and the wide tree (``WideTree.refit``: nothing when the check
+        found something), then the wait for the check's answers."""
         self._faces.start(self._points, self.indices)
-        self.bvh.refit_checked(self._faces.found)
-        self._tree_points.write()  # (nothing either when the check found something)
-        self._raise_if_bad()
         self._wide.refit(self.bvh)
+        self._raise_if_bad()
         self._write_record()
 
     def _raise_if_bad(self) -> None:

@@ -7,192 +7,47 @@ mesh keeps one is decided here, once, by device kind (``WIDE_TREE``): the CPU, w
 it measured faster (docs/performance.md, "CPU closest points: a 4-wide tree"); a GPU
 walks the binary tree. docs/geometry.md ("Wide tree") describes the layout.
 
-The collapse (``rebuild``, after every build of the binary tree) is one kdsl kernel
-run by one thread: from the root, depth first (so a subtree's wide nodes, and its
-leaves, are numbered consecutively), each wide node takes its binary node's two
-children and splits the one of largest surface area into its own two, until it has
-four or only leaves are left, where a leaf is any binary subtree of at most four
-faces whose faces are consecutive in the item order (so two small sibling leaves
-share one wide leaf). It writes the topology (``WideNode.child``, ``src``) and
-each wide leaf's faces; ``refit`` (after every refit of the binary tree, so also after
-the points moved) copies each child's box from its binary node and gathers the
-leaves' corners from the mesh's vertex copy in item order (``TreePoints.tri``, where
-a leaf's faces are consecutive) in parallel kernels.
+``rebuild`` (after every build of the binary tree) collapses it
+(``kdsl.geometry.wide_collapse``: the topology, and a cut of the tree into subtrees,
+the tasks), writes each wide node's links and boxes and fills the leaves from the
+mesh's vertex copy in item order (``TreePoints.tri``, where a leaf's faces are
+consecutive). ``refit`` (the CPU mesh's whole refit, after its check) updates the
+vertex copy, the binary tree's bounds and the wide tree together, in one pass over the
+tasks (each worker takes a run of subtrees: the corners of their faces gathered from
+the points into the copy and into the leaves, then their binary nodes bottom up from
+the copy, then their wide nodes' boxes from the binary nodes) and one thread for the
+few nodes above the cut: each array is written once, by the thread that has the
+values it needs in its cache (docs/performance.md, "CPU refit and build, session 12").
 """
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Callable
 from typing import Any
 
-from kdsl.frontend.api import func, inout, kernel, static, tid
+from kdsl.frontend.api import func, kernel, static, tid, where
 from kdsl.frontend.constants import nan
 from kdsl.geometry.bvh import Bvh
+from kdsl.geometry.device_tree import any_set
 from kdsl.geometry.mesh_tree_points import TreePoints
+from kdsl.geometry.wide_collapse import LANES, WORKERS, Collapsed, collapse
 from kdsl.runtime.alloc import clone, empty
 from kdsl.runtime.array import array
+from kdsl.runtime.graphs import state as graphs
 from kdsl.runtime.launch import launch
 from kdsl.runtime.objects import ObjectRecord
 from kdsl.stdlib.bvh import BvhNode
 from kdsl.stdlib.mesh_primitives import is_sliver
 from kdsl.stdlib.mesh_wide import WideLeaf, WideNode, WideRecord
-from kdsl.types import float32, int32, vec2i, vec3, vec4, vec4i
+from kdsl.types import float32, int32, vec2i, vec3, vec4i
 
 #: Whether a mesh keeps a 4-wide tree, per device kind (the one place this is chosen).
 WIDE_TREE = {"cpu": True, "cuda": False}
-#: The most faces a wide leaf holds (its four lanes).
-LANES = 4
-#: ``_collapse``'s status when a binary leaf holds more faces than a wide leaf.
-_REFUSED = 1
 
 
 @func
-def _end(nodes: array(dtype=BvhNode), n: int) -> int:
-    """The node after the subtree of binary node ``n`` (preorder)."""
-    nd = nodes[n]
-    if nd.first >= 0:
-        return n + 1
-    return nd.next
-
-
-@func
-def _small(nodes: array(dtype=BvhNode), n: int) -> vec2i:
-    """``(first, count)`` of the faces of binary node ``n``'s subtree when it holds at
-    most ``LANES`` of them, at consecutive positions of the item order; count -1
-    otherwise. Reads at most a few nodes: it stops past ``LANES`` faces."""
-    end = _end(nodes, n)
-    first = -1
-    total = 0
-    m = n
-    while m < end and total >= 0:
-        nd = nodes[m]
-        if nd.first >= 0:
-            if first < 0:
-                first = nd.first
-            if nd.first != first + total or total + nd.next > LANES:
-                total = -1
-            else:
-                total = total + nd.next
-        m = m + 1
-    return vec2i(first, total)
-
-
-@func
-def _area(nodes: array(dtype=BvhNode), n: int) -> float:
-    """Half the surface area of binary node ``n``'s box."""
-    nd = nodes[n]
-    e = nd.upper - nd.lower
-    return e[0] * e[1] + e[1] * e[2] + e[2] * e[0]
-
-
-@func
-def _candidate(
-    nodes: array(dtype=BvhNode), n: int, at: int, kids: inout(vec4i), firsts: inout(vec4i),
-    counts: inout(vec4i), areas: inout(vec4),
-):  # fmt: skip
-    """Binary node ``n`` as a wide node's child ``at``: a wide leaf (``_small``: its
-    faces' first position and count) or a node (count -1, and its box's half area, to
-    pick the next split)."""
-    r = _small(nodes, n)
-    kids[at] = n
-    firsts[at] = r[0]
-    counts[at] = r[1]
-    areas[at] = float32(0.0)
-    if r[1] < 0:
-        areas[at] = _area(nodes, n)
-
-
-@func
-def _children(
-    nodes: array(dtype=BvhNode), b: int, kids: inout(vec4i), firsts: inout(vec4i),
-    counts: inout(vec4i),
-):  # fmt: skip
-    """The (up to) four binary nodes under inner node ``b`` that become a wide node's
-    children (``kids``, -1: an empty slot): ``b``'s two, then the largest (by area)
-    that is not a wide leaf split into its two, until four or only wide leaves; with
-    each wide leaf's faces (``firsts``, ``counts``; count -1 for a node)."""
-    kids = vec4i(b + 1, _end(nodes, b + 1), -1, -1)
-    areas = vec4(float32(0.0))
-    for j in range(static(2)):
-        _candidate(nodes, kids[j], j, kids, firsts, counts, areas)
-    k = 2
-    while k < LANES:
-        pick = -1
-        for j in range(static(LANES)):
-            if j < k and counts[j] < 0 and (pick < 0 or areas[j] > areas[pick]):
-                pick = j
-        if pick < 0:
-            k = LANES
-        else:
-            split = kids[pick]
-            _candidate(nodes, split + 1, pick, kids, firsts, counts, areas)
-            _candidate(nodes, _end(nodes, split + 1), k, kids, firsts, counts, areas)
-            k = k + 1
-
-
-@kernel
-def _collapse(
-    nodes: array(dtype=BvhNode), stack: array(dtype=int32),
-    parents: array(dtype=int32), child: array(dtype=vec4i), src: array(dtype=vec4i),
-    spans: array(dtype=vec2i), counts: array(dtype=int32),
-):  # fmt: skip
-    # One thread, depth first (a subtree's wide nodes and leaves are numbered
-    # consecutively): binary node stack[t] becomes the next wide node, linked into
-    # lane parents[t] % 4 of wide node parents[t] / 4 (-1: the root); writes child[w],
-    # src[w] and each wide leaf's faces (spans: first position in the items, count);
-    # counts = (wide nodes, wide leaves, status).
-    num_nodes = 0
-    num_leaves = 0
-    status = 0
-    stack[0] = 0
-    parents[0] = -1
-    top = 1
-    while top > 0:
-        top = top - 1
-        b = stack[top]
-        w = num_nodes
-        num_nodes = num_nodes + 1
-        up = parents[top]
-        if up >= 0:
-            link = child[up // LANES]
-            link[up % LANES] = w
-            child[up // LANES] = link
-        kids = vec4i(b, -1, -1, -1)  # a root of at most four faces: one leaf under the root
-        r = _small(nodes, b)
-        firsts = vec4i(r[0], 0, 0, 0)
-        sizes = vec4i(r[1], 0, 0, 0)
-        if r[1] < 0:
-            if nodes[b].first >= 0:
-                status = _REFUSED  # a binary leaf of more faces than a wide leaf's lanes
-            else:
-                _children(nodes, b, kids, firsts, sizes)
-        links = vec4i(-1)
-        for j in range(static(LANES)):
-            n = kids[j]
-            if n >= 0:
-                if sizes[j] >= 0:
-                    spans[num_leaves] = vec2i(firsts[j], sizes[j])
-                    links[j] = -num_leaves - 1
-                    num_leaves = num_leaves + 1
-                elif nodes[n].first >= 0:
-                    status = _REFUSED
-        for jj in range(static(LANES)):  # the wide nodes below, lane 0 on top
-            j = LANES - 1 - jj
-            n = kids[j]
-            if n >= 0 and sizes[j] < 0 and nodes[n].first < 0:
-                stack[top] = n
-                parents[top] = w * LANES + j
-                top = top + 1
-        child[w] = links
-        src[w] = kids
-        if status != 0:
-            top = 0  # (stop: the mesh walks its binary tree)
-    counts[0] = num_nodes
-    counts[1] = num_leaves
-    counts[2] = status
-
-
-@func
-def _lane_boxes(nd: WideNode, bnodes: array(dtype=BvhNode)) -> WideNode:
+def lane_boxes(nd: WideNode, bnodes: array(dtype=BvhNode)) -> WideNode:
     """``nd`` with each child's box copied from its binary node (NaN: an empty slot)."""
     out = nd
     for i in range(static(LANES)):
@@ -212,34 +67,12 @@ def _lane_boxes(nd: WideNode, bnodes: array(dtype=BvhNode)) -> WideNode:
     return out
 
 
-@kernel
-def _init_nodes(
-    child: array(dtype=vec4i), src: array(dtype=vec4i), bnodes: array(dtype=BvhNode),
-    out: array(dtype=WideNode),
-):  # fmt: skip
-    w = tid()
-    nd = WideNode()
-    nd.child = child[w]
-    nd.src = src[w]
-    out[w] = _lane_boxes(nd, bnodes)
-
-
-@kernel
-def _refit_nodes(bnodes: array(dtype=BvhNode), nodes: array(dtype=WideNode)):
-    w = tid()
-    nodes[w] = _lane_boxes(nodes[w], bnodes)
-
-
-@kernel
-def _gather_leaves(
-    tri: array(dtype=vec3), items: array(dtype=int32), spans: array(dtype=vec2i),
-    leaves: array(dtype=WideLeaf),
-):  # fmt: skip
-    # Leaf k's lanes: the corners of the faces at its item positions, read from the
-    # mesh's vertex copy in item order (consecutive: no index loads; zero in an empty
-    # lane), and the faces' numbers (-1 for an empty lane or a sliver).
-    k = tid()
-    span = spans[k]
+@func
+def leaf_from_tri(tri: array(dtype=vec3), items: array(dtype=int32), span: vec2i) -> WideLeaf:
+    """The wide leaf of the faces at item positions ``span[0] .. span[0] + span[1] - 1``:
+    their corners, read from the mesh's vertex copy in item order (consecutive: no index
+    loads; zero in an empty lane), and the faces' numbers (-1 for an empty lane or a
+    sliver)."""
     lf = WideLeaf()
     lf.face = vec4i(-1)
     for i in range(static(LANES)):
@@ -262,7 +95,128 @@ def _gather_leaves(
         lf.cx[i] = c[0]
         lf.cy[i] = c[1]
         lf.cz[i] = c[2]
-    leaves[k] = lf
+    return lf
+
+
+@kernel
+def _init_nodes(
+    child: array(dtype=vec4i), src: array(dtype=vec4i), bnodes: array(dtype=BvhNode),
+    out: array(dtype=WideNode),
+):  # fmt: skip
+    w = tid()
+    nd = WideNode()
+    nd.child = child[w]
+    nd.src = src[w]
+    out[w] = lane_boxes(nd, bnodes)
+
+
+@func
+def _low(a: vec3, b: vec3) -> vec3:
+    """The componentwise minimum of finite ``a`` and ``b``: a compare and a select each
+    (``min`` orders -0.0 and 0.0 and passes NaN over, at three times the instructions;
+    the refit's points were checked, and a box's zero is as good either way)."""
+    return vec3(where(a[0] < b[0], a[0], b[0]), where(a[1] < b[1], a[1], b[1]),
+                where(a[2] < b[2], a[2], b[2]))  # fmt: skip
+
+
+@func
+def _high(a: vec3, b: vec3) -> vec3:
+    """The componentwise maximum of finite ``a`` and ``b`` (see ``_low``)."""
+    return vec3(where(a[0] > b[0], a[0], b[0]), where(a[1] > b[1], a[1], b[1]),
+                where(a[2] > b[2], a[2], b[2]))  # fmt: skip
+
+
+@func
+def _gather_corners(
+    points: array(dtype=vec3), indices: array(dtype=int32), items: array(dtype=int32),
+    span: vec2i, tri: array(dtype=vec3),
+):  # fmt: skip
+    """Copy the corners of the faces at item positions ``span`` into the vertex copy
+    (the indices were checked before)."""
+    for i in range(span[1]):
+        at = span[0] + i
+        f = items[at] * 3
+        tri[at * 3] = points[indices[f]]
+        tri[at * 3 + 1] = points[indices[f + 1]]
+        tri[at * 3 + 2] = points[indices[f + 2]]
+
+
+@func
+def _refit_binary(n: int, tri: array(dtype=vec3), bnodes: array(dtype=BvhNode)):
+    """Binary node ``n``'s bounds: a leaf's from its faces' corners in the vertex copy,
+    an inner node's from its two children's (written before); its links stay as they
+    are."""
+    nd = bnodes[n]
+    lo = vec3()
+    hi = vec3()
+    if nd.first >= 0:  # (at most LANES faces: unrolled)
+        at = nd.first * 3
+        lo = tri[at]
+        hi = lo
+        for i in range(static(LANES)):
+            if i < nd.next:
+                for j in range(static(3)):
+                    p = tri[at + i * 3 + j]
+                    lo = _low(lo, p)
+                    hi = _high(hi, p)
+    else:
+        a = bnodes[n + 1]
+        right = n + 2  # (after a leaf on the left)
+        if a.first < 0:
+            right = a.next
+        b = bnodes[right]
+        lo = _low(a.lower, b.lower)
+        hi = _high(a.upper, b.upper)
+    nd.lower = lo
+    nd.upper = hi
+    bnodes[n] = nd
+
+
+@kernel
+def _refit_tasks(
+    points: array(dtype=vec3), indices: array(dtype=int32), items: array(dtype=int32),
+    spans: array(dtype=vec2i), tasks: array(dtype=vec4i), trees: array(dtype=vec4i),
+    workers: array(dtype=int32), found: array(dtype=int32), refit: int32,
+    tri: array(dtype=vec3), bnodes: array(dtype=BvhNode), nodes: array(dtype=WideNode),
+    leaves: array(dtype=WideLeaf),
+):  # fmt: skip
+    # Worker k: its run of tasks (``kdsl.geometry.wide_collapse``), each a subtree:
+    # with ``refit``, its faces' corners into the vertex copy, its leaves, its binary
+    # nodes (reverse preorder: children first) and its wide nodes' boxes; without
+    # (after a build), its leaves from the copy as it is. Nothing when ``found`` (the
+    # mesh check's counters) has a count.
+    k = tid()
+    if any_set(found):
+        return
+    for t in range(workers[k], workers[k + 1]):
+        tk = tasks[t]
+        for leaf in range(tk[2], tk[3]):
+            span = spans[leaf]
+            if refit != 0:
+                _gather_corners(points, indices, items, span, tri)
+            leaves[leaf] = leaf_from_tri(tri, items, span)
+        if refit != 0:
+            tr = trees[t]
+            for m in range(tr[1] - tr[0]):
+                _refit_binary(tr[1] - 1 - m, tri, bnodes)
+            for w in range(tk[0], tk[1]):
+                nodes[w] = lane_boxes(nodes[w], bnodes)
+
+
+@kernel
+def _refit_top(
+    tops: array(dtype=int32), top_wide: array(dtype=int32), found: array(dtype=int32),
+    tri: array(dtype=vec3), bnodes: array(dtype=BvhNode), nodes: array(dtype=WideNode),
+):  # fmt: skip
+    # One thread, after the tasks: the binary nodes above them (listed parents first:
+    # taken in reverse) and the wide nodes above them.
+    if any_set(found):
+        return
+    for m in range(tops.shape[0]):
+        _refit_binary(tops[tops.shape[0] - 1 - m], tri, bnodes)
+    for m in range(top_wide.shape[0]):
+        w = top_wide[m]
+        nodes[w] = lane_boxes(nodes[w], bnodes)
 
 
 def wants_wide_tree(device: Any, leaf_size: int) -> bool:
@@ -273,11 +227,12 @@ def wants_wide_tree(device: Any, leaf_size: int) -> bool:
 
 class WideTree:
     """A mesh's 4-wide tree (``kdsl.stdlib.mesh_wide.WideRecord``; ``id`` for the mesh's
-    record). ``tree_points`` is the mesh's ``TreePoints``, whose vertex copy (``tri``,
-    in the BVH's item order, written before the wide tree is) the leaves are gathered
-    from. ``rebuild(bvh)`` collapses the binary
-    tree again (after it was built), ``refit(bvh)`` refreshes the boxes and corners
-    (after it was refit)."""
+    record). ``tree_points`` is the mesh's ``TreePoints``: its vertex copy (``tri``, in
+    the BVH's item order), which a build writes before the wide tree is and ``refit``
+    writes itself, what it is copied from (``points``, ``indices``, ``items``) and the
+    mesh check's counters (``found``). ``rebuild(bvh)`` collapses the binary tree again
+    (after it was built); ``refit(bvh)`` updates the copy, ``bvh``'s bounds and the
+    wide tree from the current points."""
 
     def __init__(self, tree_points: TreePoints, device: Any) -> None:
         self.tree_points = tree_points
@@ -286,6 +241,9 @@ class WideTree:
         self.nodes: array | None = None
         self.leaves: array | None = None
         self._spans: array | None = None
+        self._cut: Collapsed | None = None
+        #: (the arrays they were prepared for, the prepared refit launches).
+        self._held: tuple | None = None
 
     @property
     def id(self) -> int:
@@ -293,38 +251,59 @@ class WideTree:
         return self._record.id
 
     def rebuild(self, bvh: Bvh) -> None:
-        """Collapse ``bvh``'s tree (current bounds) and gather the leaves."""
+        """Collapse ``bvh``'s tree (current bounds) and fill the leaves from the copy."""
         dev = self.device
         tris = self.tree_points.indices.shape[0] // 3
-        cap = max(tris, 1)  # at most one wide node and one wide leaf per face
-        stack, parents = (empty(cap, dtype=int32, device=dev) for _ in range(2))
-        child, src = (empty(cap, dtype=vec4i, device=dev) for _ in range(2))
-        spans = empty(cap, dtype=vec2i, device=dev)
-        counts = empty(3, dtype=int32, device=dev)
-        num_nodes = num_leaves = status = 0
-        if tris > 0:
-            launch(_collapse, dim=1, device=dev,
-                   inputs=[bvh.packed_nodes, stack, parents, child, src, spans, counts])  # fmt: skip
-            num_nodes, num_leaves, status = (int(x) for x in counts.numpy())
-        if status != 0:
-            num_nodes = num_leaves = 0
+        cut = collapse(bvh.packed_nodes, tris, dev)
+        num_nodes = cut.child.shape[0]
         self.nodes = empty(num_nodes, dtype=WideNode, device=dev)
-        self.leaves = empty(num_leaves, dtype=WideLeaf, device=dev)
-        self._spans = clone(spans[:num_leaves])
+        self.leaves = empty(cut.spans.shape[0], dtype=WideLeaf, device=dev)
+        self._spans = clone(cut.spans)
+        self._cut = cut
+        self._held = None
         if num_nodes:
             launch(_init_nodes, dim=num_nodes, device=dev,
-                   inputs=[child[:num_nodes], src[:num_nodes], bvh.packed_nodes, self.nodes])  # fmt: skip
-        self._gather(bvh)
-        self._record.write({"nodes": self.nodes, "leaves": self.leaves, "fallback": status})
+                   inputs=[cut.child, cut.src, bvh.packed_nodes, self.nodes])  # fmt: skip
+            launch(_refit_tasks, dim=WORKERS, device=dev,
+                   inputs=self._task_inputs(bvh, 0))  # fmt: skip
+        self._record.write({"nodes": self.nodes, "leaves": self.leaves, "fallback": cut.status})
 
     def refit(self, bvh: Bvh) -> None:
-        """Copy the children's boxes from ``bvh``'s refit nodes; gather the corners again."""
-        if self.nodes.shape[0]:
-            launch(_refit_nodes, dim=self.nodes.shape[0], device=self.device,
-                   inputs=[bvh.packed_nodes, self.nodes])  # fmt: skip
-        self._gather(bvh)
+        """Copy the faces' corners from the current points into the vertex copy, refit
+        ``bvh``'s bounds (links untouched) and the wide tree's boxes and leaves, in one
+        pass (two launches); nothing is written when the mesh check's counters are set.
+        A wide tree the collapse refused (or of no faces) leaves the tree to
+        ``bvh.refit_checked`` and the copy to ``TreePoints.write``."""
+        if not self.nodes.shape[0]:
+            bvh.refit_checked(self.tree_points.found)
+            self.tree_points.write()
+            return
+        for step in self._refit_steps(bvh):
+            step()
 
-    def _gather(self, bvh: Bvh) -> None:
-        if self.leaves.shape[0]:
-            launch(_gather_leaves, dim=self.leaves.shape[0], device=self.device,
-                   inputs=[self.tree_points.tri, bvh.item_order, self._spans, self.leaves])  # fmt: skip
+    def _task_inputs(self, bvh: Bvh, refit: int) -> list:
+        """``_refit_tasks``' arguments: a refit's, or (``refit`` 0) a build's."""
+        tp, cut = self.tree_points, self._cut
+        return [tp.points, tp.indices, bvh.item_order, self._spans, cut.tasks, cut.trees,
+                cut.workers, tp.found, refit, tp.tri, bvh.packed_nodes, self.nodes,
+                self.leaves]  # fmt: skip
+
+    def _refit_steps(self, bvh: Bvh) -> list[Callable[[], object]]:
+        """The refit's two launches, prepared once per set of arrays; plain launches
+        while a graph capture is open (it records those)."""
+        tp, cut, dev = self.tree_points, self._cut, self.device
+        key = (tp.points, tp.indices, bvh.item_order, bvh.packed_nodes, tp.tri)
+        held = self._held
+        if not graphs.ACTIVE and held is not None and all(a is b for a, b in zip(held[0], key)):
+            return held[1]
+        runs = [
+            (_refit_tasks, WORKERS, self._task_inputs(bvh, 1)),
+            (_refit_top, 1, [cut.tops, cut.top_wide, tp.found, tp.tri, bvh.packed_nodes,
+                             self.nodes]),
+        ]  # fmt: skip
+        if graphs.ACTIVE:
+            return [functools.partial(launch, k, dim=d, device=dev, inputs=i) for k, d, i in runs]
+        steps = [launch(k, dim=d, device=dev, inputs=i, record_cmd=True).launch
+                 for k, d, i in runs]  # fmt: skip
+        self._held = (key, steps)
+        return steps
