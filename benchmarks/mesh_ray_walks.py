@@ -28,7 +28,11 @@ kin). ``lib`` (always run) calls the library's ``mesh_query_ray``. The variants
   first; neither has a fallback (-2 on overflow);
 - counted hits (``count_*``, compared with ``count_lib``,
   ``mesh_query_ray_count_intersections``, beside Warp's ``warp_count``): ``count_stack``
-  as ``any_stack`` without the early exit.
+  as ``any_stack`` without the early exit;
+- closest points (``point_*``, the workload's query points, ``mesh_query_point_no_sign``
+  at ``MAX_DIST``; faces and ``u`` compared with ``point_lib``, the library's, beside
+  Warp's ``warp_point``): ``point_skip``, the library's binary walk before session 12,
+  where the far child's load waited for the near child's (its ``skip``).
 
 Session 11 (docs/performance.md, "Mesh rays on the GPU, session 11") also ran the
 session-10 search filled and not (``old_lib``, ``git show
@@ -38,7 +42,8 @@ unpadded slab test, kept pops, global loads and the left child loaded a level ah
 Every closest-hit kernel but ``lib`` recomputes the hit after the search as the library
 does (so the times compare searches). Times are the minimum over ``--reps`` launches
 after a warm-up. Answers are checked within each family; the library's hit/miss must
-agree with Warp's on all but ``RAY_DISAGREEMENT`` of the rays (any hits and counts too).
+agree with Warp's on all but ``RAY_DISAGREEMENT`` of the rays (any hits and counts too;
+closest points: found or not, as faces may tie).
 The table prints ms per launch and the ratio to Warp's time for the family (> 1:
 faster than Warp).
 """
@@ -58,14 +63,17 @@ from kdsl.stdlib.bvh import BvhNode, BvhRecord
 from kdsl.stdlib.mesh import MeshRecord
 from kdsl.stdlib.mesh_primitives import (
     RayShear,
+    box_distance_sq,
+    closest_point_to_triangle,
     intersect_ray_triangle,
+    is_sliver,
     ray_box_enter,
     ray_shear,
     safe_inverse,
 )
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_geometry_mesh import MAX_T, RAY_DISAGREEMENT, mesh_kernels, workload
+from bench_geometry_mesh import MAX_DIST, MAX_T, RAY_DISAGREEMENT, mesh_kernels, workload
 
 STACK = 32
 #: The variants: name -> ``variant_kernel``'s keywords (its defaults: the library's walk).
@@ -78,15 +86,17 @@ VARIANTS = {
     "any_near": {"walk": "any_near"},
     "count_lib": {"walk": "count_lib"},
     "count_stack": {"walk": "count_stack"},
+    "point_lib": {"walk": "point_lib"},
+    "point_skip": {"walk": "point_skip"},
 }
 #: Each family's reference variant (answers compared with it) and Warp's row.
 FAMILIES = {"ray": ("lib", "warp"), "any": ("any_lib", "warp_any"),
-            "count": ("count_lib", "warp_count")}  # fmt: skip
+            "count": ("count_lib", "warp_count"), "point": ("point_lib", "warp_point")}  # fmt: skip
 
 
 def family(name: str) -> str:
-    """The family of variant ``name``: "any", "count" or "ray" (closest hit)."""
-    for f in ("any", "count"):
+    """The family of variant ``name``: "any", "count", "point" or "ray" (closest hit)."""
+    for f in ("any", "count", "point"):
         if name.startswith(f + "_"):
             return f
     return "ray"
@@ -434,6 +444,108 @@ def _stack_count_walk(stop_at_first: bool, nearer_first: bool):
 
 
 @wp.func
+def closest_in_leaf(rec: MeshRecord, bvh: BvhRecord, first: int, count: int, point: wp.vec3,
+                    best: wp.vec2) -> wp.vec2:  # fmt: skip
+    """The library's leaf test of the closest point: ``best`` is (squared distance,
+    face as a float)."""
+    out = best
+    for k in range(first, first + count):
+        a = rec.tri[k * 3]
+        b = rec.tri[k * 3 + 1]
+        c = rec.tri[k * 3 + 2]
+        uv = closest_point_to_triangle(a, b, c, point)
+        q = a * uv[0] + b * uv[1] + c * (1.0 - uv[0] - uv[1])
+        d = wp.length_sq(q - point)
+        if d <= out[0]:
+            f = bvh.items[k]
+            if d < out[0] or (out[1] >= 0.0 and float(f) < out[1]):  # noqa: SIM102
+                if not is_sliver(a, b, c):
+                    out = wp.vec2(d, float(f))
+    return out
+
+
+@wp.func
+def next_near_leaf(bvh: BvhRecord, node: int, stop: int, point: wp.vec3,
+                   bound_sq: float) -> wp.vec3i:  # fmt: skip
+    n = node
+    while n < stop:
+        nd = bvh.nodes[n]
+        if box_distance_sq(nd.lower, nd.upper, point) <= bound_sq:
+            if nd.first >= 0:
+                return wp.vec3i(nd.first, nd.next, n + 1)
+            n = n + 1
+        else:
+            n = skip_of(nd, n)
+    return wp.vec3i(0, 0, stop)
+
+
+@wp.func
+def closest_skip(id: wp.uint64, point: wp.vec3, max_dist: float) -> int:
+    """The library's closest-point search before session 12 (``mesh._closest_face``'s
+    binary walk): the far child is the near child's successor, read from the near
+    child's node (``skip``), so its load waits for the near one's."""
+    rec = wp.object_record(id, MeshRecord)
+    bvh = wp.object_record(rec.bvh, BvhRecord)
+    best = wp.vec2(max_dist * max_dist, -1.0)
+    span = root_range(bvh, -1)
+    nodes = wp.ext.empty(STACK, dtype=wp.int32)
+    dists = wp.ext.empty(STACK, dtype=wp.float32)
+    count = 0
+    sweep = span[1]
+    if span[0] < span[1]:
+        nodes[0] = span[0]
+        dists[0] = 0.0
+        count = 1
+    while count > 0 or sweep < span[1]:
+        first = 0
+        items = 0
+        if count == 0:
+            step = next_near_leaf(bvh, sweep, span[1], point, best[0])
+            sweep = step[2]
+            first = step[0]
+            items = step[1]
+        else:
+            count = count - 1
+            node = nodes[count]
+            if dists[count] <= best[0]:
+                nd = bvh.nodes[node]
+                inner = nd.first < 0
+                while inner:
+                    near = node + 1
+                    near_nd = bvh.nodes[near]
+                    far = skip_of(near_nd, near)
+                    far_nd = bvh.nodes[far]
+                    d_near = box_distance_sq(near_nd.lower, near_nd.upper, point)
+                    d_far = box_distance_sq(far_nd.lower, far_nd.upper, point)
+                    if d_far < d_near:
+                        tmp = near
+                        near = far
+                        far = tmp
+                        near_nd = far_nd
+                        tmp_d = d_near
+                        d_near = d_far
+                        d_far = tmp_d
+                    if d_far <= best[0]:
+                        if count < STACK:
+                            nodes[count] = far
+                            dists[count] = d_far
+                        count = count + 1
+                        if count > STACK:
+                            count = STACK
+                            sweep = span[0]
+                    inner = False
+                    if d_near <= best[0]:
+                        node = near
+                        nd = near_nd
+                        inner = nd.first < 0
+                if nd.first >= 0:
+                    first = nd.first
+                    items = nd.next
+        best = closest_in_leaf(rec, bvh, first, items, point, best)
+    return int(best[1])
+
+
+@wp.func
 def finish(id: wp.uint64, slot: int, start: wp.vec3, dir: wp.vec3) -> wp.vec2:
     """The library's tail after the search: the hit recomputed from its slot (``t``,
     face as a float; face -1 for a miss)."""
@@ -458,6 +570,23 @@ def _library_count(m):
         face[i] = m.mesh_query_ray_count_intersections(mesh, start[i], d[i])
 
     return count
+
+
+def _library_point(m):
+    """The closest-point kernel against module ``m``: ``face[i]`` the face (-1: none),
+    ``t[i]`` its ``u`` (the rays' ``start`` are the query points)."""
+
+    @m.kernel(enable_backward=False)
+    def point(mesh: m.uint64, start: m.array(dtype=m.vec3), d: m.array(dtype=m.vec3),
+              face: m.array(dtype=m.int32), t: m.array(dtype=float)):  # fmt: skip
+        i = m.tid()
+        q = m.mesh_query_point_no_sign(mesh, start[i], MAX_DIST)
+        face[i] = -1
+        if q.result:
+            face[i] = q.face
+            t[i] = q.u
+
+    return point
 
 
 def _library_any(m):
@@ -486,6 +615,24 @@ def variant_kernel(walk: str, regs: int | None = None):
         return _library_any(wp)
     if walk == "count_lib":
         return _library_count(wp)
+    if walk == "point_lib":
+        return _library_point(wp)
+    if walk == "point_skip":
+
+        @wp.kernel(enable_backward=False, **options)
+        def point(mesh: wp.uint64, start: wp.array(dtype=wp.vec3),
+                  d: wp.array(dtype=wp.vec3), face: wp.array(dtype=wp.int32),
+                  t: wp.array(dtype=float)):  # fmt: skip
+            i = wp.tid()
+            f = closest_skip(mesh, start[i], MAX_DIST)
+            face[i] = f
+            if f >= 0:  # the library's tail: the barycentrics on the face found
+                a = wp.mesh_get_point(mesh, f * 3)
+                b = wp.mesh_get_point(mesh, f * 3 + 1)
+                c = wp.mesh_get_point(mesh, f * 3 + 2)
+                t[i] = closest_point_to_triangle(a, b, c, start[i])[0]
+
+        return point
     if walk in ("any_stack", "any_near", "count_stack"):
         hits = _stack_count_walk(walk.startswith("any"), walk == "any_near")
 
@@ -535,16 +682,17 @@ def _warp_side(data: dict, device: str, reps: int, families: set[str]) -> dict:
     n = len(data["ray_start"])
     s = warp.array(data["ray_start"], dtype=warp.vec3, device=device)
     d = warp.array(data["ray_dir"], dtype=warp.vec3, device=device)
+    xs = warp.array(data["points_q"][:n], dtype=warp.vec3, device=device)
     kernels = {"ray": mesh_kernels(warp)[1], "any": _library_any(warp),
-               "count": _library_count(warp)}  # fmt: skip
+               "count": _library_count(warp), "point": _library_point(warp)}  # fmt: skip
     out = {}
     for fam in sorted(families):
         k = kernels[fam]
         face = warp.zeros(n, dtype=warp.int32, device=device)
         t = warp.zeros(n, dtype=float, device=device)
 
-        def run(k=k, face=face, t=t):
-            warp.launch(k, n, [mesh.id, s, d, face, t], device=device)
+        def run(k=k, face=face, t=t, at=xs if fam == "point" else s):
+            warp.launch(k, n, [mesh.id, at, d, face, t], device=device)
 
         secs = _time(run, reps, lambda: warp.synchronize_device(device))
         out[FAMILIES[fam][1]] = (secs, face.numpy(), t.numpy())
@@ -563,16 +711,16 @@ def _check(rows: list[dict], answers: dict, n: int) -> bool:
         lf, lt = answers[ref]
         f, t = answers[name]
         if name == warp_name:  # Warp against the reference
-            if fam == "ray":
+            if fam in ("ray", "point"):  # hit or miss (points: faces may tie)
                 row["face_diff"] = int(((f >= 0) != (lf >= 0)).sum())
-                both = (f >= 0) & (lf >= 0)
+                both = (f >= 0) & (lf >= 0) & (fam == "ray")
                 row["t_diff"] = int((np.abs(t - lt) > 1e-5 * np.maximum(1, np.abs(lt)))[both].sum())
             else:
                 row["face_diff"], row["t_diff"] = int((f != lf).sum()), 0
             ok &= row["face_diff"] <= RAY_DISAGREEMENT * n
         else:
             row["face_diff"] = int((f != lf).sum())
-            row["t_diff"] = int(((t != lt) & (lf >= 0)).sum()) if fam == "ray" else 0
+            row["t_diff"] = int(((t != lt) & (lf >= 0)).sum()) if fam in ("ray", "point") else 0
             ok &= row["face_diff"] == 0 and row["t_diff"] == 0
     return ok
 
@@ -596,6 +744,7 @@ def main(argv: list[str] | None = None) -> int:
                    wp.array(data["faces"].reshape(-1), dtype=wp.int32, device=dev))  # fmt: skip
     s = wp.array(data["ray_start"], dtype=wp.vec3, device=dev)
     d = wp.array(data["ray_dir"], dtype=wp.vec3, device=dev)
+    xs = wp.array(data["points_q"][:n], dtype=wp.vec3, device=dev)  # the point family's
     names = ["lib", *(v for v in args.variants.split(",") if v and v != "lib")]
     for name in names:
         if name not in VARIANTS and name != "lib":
@@ -616,8 +765,10 @@ def main(argv: list[str] | None = None) -> int:
         face = wp.zeros(n, dtype=wp.int32, device=dev)
         t = wp.zeros(n, dtype=float, device=dev)
 
-        def run(k=k, face=face, t=t):
-            wp.launch(k, n, [mesh.id, s, d, face, t], device=dev)
+        at = xs if family(name) == "point" else s
+
+        def run(k=k, face=face, t=t, at=at):
+            wp.launch(k, n, [mesh.id, at, d, face, t], device=dev)
 
         secs = _time(run, args.reps, lambda: wp.synchronize_device(dev))
         answers[name] = (face.numpy(), t.numpy())
