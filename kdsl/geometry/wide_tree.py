@@ -26,10 +26,11 @@ import functools
 from collections.abc import Callable
 from typing import Any
 
-from kdsl.frontend.api import func, kernel, static, tid, where
+from kdsl.frontend.api import func, kernel, static, tid
 from kdsl.frontend.constants import nan
 from kdsl.geometry.bvh import Bvh
 from kdsl.geometry.device_tree import any_set
+from kdsl.geometry.finite_minmax import high3, low3
 from kdsl.geometry.mesh_tree_points import TreePoints
 from kdsl.geometry.wide_collapse import LANES, WORKERS, Collapsed, collapse
 from kdsl.runtime.alloc import clone, empty
@@ -111,22 +112,6 @@ def _init_nodes(
 
 
 @func
-def _low(a: vec3, b: vec3) -> vec3:
-    """The componentwise minimum of finite ``a`` and ``b``: a compare and a select each
-    (``min`` orders -0.0 and 0.0 and passes NaN over, at three times the instructions;
-    the refit's points were checked, and a box's zero is as good either way)."""
-    return vec3(where(a[0] < b[0], a[0], b[0]), where(a[1] < b[1], a[1], b[1]),
-                where(a[2] < b[2], a[2], b[2]))  # fmt: skip
-
-
-@func
-def _high(a: vec3, b: vec3) -> vec3:
-    """The componentwise maximum of finite ``a`` and ``b`` (see ``_low``)."""
-    return vec3(where(a[0] > b[0], a[0], b[0]), where(a[1] > b[1], a[1], b[1]),
-                where(a[2] > b[2], a[2], b[2]))  # fmt: skip
-
-
-@func
 def _gather_corners(
     points: array(dtype=vec3), indices: array(dtype=int32), items: array(dtype=int32),
     span: vec2i, tri: array(dtype=vec3),
@@ -157,16 +142,16 @@ def _refit_binary(n: int, tri: array(dtype=vec3), bnodes: array(dtype=BvhNode)):
             if i < nd.next:
                 for j in range(static(3)):
                     p = tri[at + i * 3 + j]
-                    lo = _low(lo, p)
-                    hi = _high(hi, p)
+                    lo = low3(lo, p)
+                    hi = high3(hi, p)
     else:
         a = bnodes[n + 1]
         right = n + 2  # (after a leaf on the left)
         if a.first < 0:
             right = a.next
         b = bnodes[right]
-        lo = _low(a.lower, b.lower)
-        hi = _high(a.upper, b.upper)
+        lo = low3(a.lower, b.lower)
+        hi = high3(a.upper, b.upper)
     nd.lower = lo
     nd.upper = hi
     bnodes[n] = nd

@@ -1,0 +1,121 @@
+"""A CPU mesh's upkeep, kdsl beside Warp: a fresh ``Mesh`` and ``refit()`` after every
+vertex moved, on the mesh benchmark's bumpy cube-sphere, and where kdsl's time goes.
+
+    python benchmarks/bench_mesh_upkeep.py [--tris 200000] [--reps 15] [--json PATH]
+
+Both libraries build a mesh over the same points and indices and refit it after a
+kernel scaled every point (as ``bench_geometry_mesh.py``'s refit row: the move is timed
+with the refit); the calls alternate between the libraries (and, for kdsl, between
+the whole call and its stages) round after round in one process, so a change of load
+on a shared host reaches both: compare the ratios, min and median over ``--reps``
+rounds. Warp 1.19 runs on one core (its CPU path), kdsl on every core the process may
+use. The stage rows time kdsl's steps one by one (the check with its read back, the
+wide tree's refit pass and its top pass; the BVH build, the vertex copy, the collapse,
+the wide tree's first fill), each called alone in the same state the call leaves
+them. Prints a table, writes benchmarks/results/mesh_upkeep.json.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import kdsl as wp
+from kdsl.geometry import wide_collapse
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_geometry_mesh import mesh_kernels, workload
+
+RESULTS = Path(__file__).resolve().parent / "results" / "mesh_upkeep.json"
+
+
+def _kdsl_rows(data: dict) -> dict:
+    """The kdsl calls and stages to time (name -> callable)."""
+    move = mesh_kernels(wp)[3]
+    pts = wp.array(data["points"], dtype=wp.vec3)
+    idx = wp.array(data["faces"].reshape(-1), dtype=wp.int32)
+    moving = wp.array(data["points"], dtype=wp.vec3)
+    mesh = wp.Mesh(moving, idx)
+
+    def move_refit():
+        wp.launch(move, dim=moving.shape[0], inputs=[moving, 1.0001])
+        mesh.refit()
+
+    def check():
+        mesh._faces.start(mesh.points, mesh.indices)
+        mesh._faces.finish()
+
+    calls = {"kdsl fresh Mesh": lambda: wp.Mesh(pts, idx), "kdsl move + refit": move_refit,
+             "  refit: check + read back": check}  # fmt: skip
+    wide = mesh._wide
+    if wide is not None and wide.nodes.shape[0]:
+        steps = wide._refit_steps(mesh.bvh)
+        calls["  refit: subtree pass"] = steps[0]
+        calls["  refit: top pass"] = steps[1]
+        calls["  build: collapse"] = lambda: wide_collapse.collapse(
+            mesh.bvh.packed_nodes, idx.shape[0] // 3, wp.get_device("cpu"))
+        calls["  build: wide rebuild"] = lambda: wide.rebuild(mesh.bvh)
+    calls["  build: vertex copy"] = mesh._tree_points.write
+    return calls
+
+
+def _warp_rows(data: dict) -> dict:
+    """Warp's calls (its CPU device), or none without Warp."""
+    try:
+        import warp
+    except ImportError:
+        return {}
+    warp.config.quiet = True
+    move = mesh_kernels(warp)[3]
+    pts = warp.array(data["points"], dtype=warp.vec3, device="cpu")
+    idx = warp.array(data["faces"].reshape(-1), dtype=warp.int32, device="cpu")
+    moving = warp.array(data["points"], dtype=warp.vec3, device="cpu")
+    mesh = warp.Mesh(moving, idx)
+
+    def move_refit():
+        warp.launch(move, dim=moving.shape[0], inputs=[moving, 1.0001], device="cpu")
+        mesh.refit()
+
+    return {"warp fresh Mesh": lambda: warp.Mesh(pts, idx), "warp move + refit": move_refit}
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--tris", type=int, default=200_000)
+    p.add_argument("--reps", type=int, default=15)
+    p.add_argument("--json", type=Path, default=RESULTS)
+    args = p.parse_args()
+    data = workload(args.tris, 1)
+    calls = {**_kdsl_rows(data), **_warp_rows(data)}
+    for fn in calls.values():  # warm up: compiles, first packings, recycled builds
+        fn()
+        fn()
+    times = {name: [] for name in calls}
+    for _ in range(args.reps):
+        for name, fn in calls.items():
+            t = time.perf_counter()
+            fn()
+            times[name].append(time.perf_counter() - t)
+    rows = [{"name": k, "min_ms": 1e3 * min(v), "median_ms": 1e3 * statistics.median(v)}
+            for k, v in times.items()]  # fmt: skip
+    by = {r["name"]: r for r in rows}
+    print(f"{len(data['faces'])} faces, {args.reps} rounds; ms")
+    print(f"{'call':<28} {'min':>8} {'median':>8}")
+    for r in rows:
+        print(f"{r['name']:<28} {r['min_ms']:8.3f} {r['median_ms']:8.3f}")
+    for what in ("fresh Mesh", "move + refit"):
+        k, w = by.get(f"kdsl {what}"), by.get(f"warp {what}")
+        if k and w:
+            print(f"Warp / kdsl, {what}: min {w['min_ms'] / k['min_ms']:.2f}x, "
+                  f"median {w['median_ms'] / k['median_ms']:.2f}x")  # fmt: skip
+    args.json.parent.mkdir(parents=True, exist_ok=True)
+    args.json.write_text(json.dumps({"faces": len(data["faces"]), "reps": args.reps,
+                                     "rows": rows}, indent=2))  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()
