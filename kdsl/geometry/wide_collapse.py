@@ -70,10 +70,14 @@ def _faces(nodes: array(dtype=BvhNode), n: int) -> int:
 def _small(nodes: array(dtype=BvhNode), n: int) -> vec2i:
     """``(first, count)`` of the faces of binary node ``n``'s subtree when it holds at
     most ``LANES`` of them, at consecutive positions of the item order; count -1
-    otherwise. Reads at most a few nodes: it stops past ``LANES`` faces."""
+    otherwise. Reads at most a few nodes: a subtree of more than ``2 LANES - 1`` nodes
+    has more than ``LANES`` leaves (no node read), and the walk stops past ``LANES``
+    faces."""
     end = _end(nodes, n)
     first = -1
     total = 0
+    if end - n > 2 * LANES - 1:
+        total = -1
     m = n
     while m < end and total >= 0:
         nd = nodes[m]
