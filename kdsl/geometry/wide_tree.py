@@ -157,19 +157,24 @@ def _refit_binary(n: int, tri: array(dtype=vec3), bnodes: array(dtype=BvhNode)):
     bnodes[n] = nd
 
 
+#: ``_refit_tasks``' modes: the leaves from the vertex copy as it is; the copy gathered
+#: from the points, then the leaves (a build's first fill); a refit (the copy, the
+#: leaves, the binary tree's bounds and the wide tree's boxes).
+_LEAVES, _COPY, _REFIT = 0, 1, 2
+
+
 @kernel
 def _refit_tasks(
     points: array(dtype=vec3), indices: array(dtype=int32), items: array(dtype=int32),
     spans: array(dtype=vec2i), tasks: array(dtype=vec4i), trees: array(dtype=vec4i),
-    workers: array(dtype=int32), found: array(dtype=int32), refit: int32,
+    workers: array(dtype=int32), found: array(dtype=int32), mode: int32,
     tri: array(dtype=vec3), bnodes: array(dtype=BvhNode), nodes: array(dtype=WideNode),
     leaves: array(dtype=WideLeaf),
 ):  # fmt: skip
     # Worker k: its run of tasks (``kdsl.geometry.wide_collapse``), each a subtree:
-    # with ``refit``, its faces' corners into the vertex copy, its leaves, its binary
-    # nodes (reverse preorder: children first) and its wide nodes' boxes; without
-    # (after a build), its leaves from the copy as it is. Nothing when ``found`` (the
-    # mesh check's counters) has a count.
+    # its faces' corners into the vertex copy (not with ``_LEAVES``), its leaves, and
+    # with ``_REFIT`` its binary nodes (reverse preorder: children first) and its wide
+    # nodes' boxes. Nothing when ``found`` (the mesh check's counters) has a count.
     k = tid()
     if any_set(found):
         return
@@ -177,10 +182,10 @@ def _refit_tasks(
         tk = tasks[t]
         for leaf in range(tk[2], tk[3]):
             span = spans[leaf]
-            if refit != 0:
+            if mode != _LEAVES:
                 _gather_corners(points, indices, items, span, tri)
             leaves[leaf] = leaf_from_tri(tri, items, span)
-        if refit != 0:
+        if mode == _REFIT:
             tr = trees[t]
             for m in range(tr[1] - tr[0]):
                 _refit_binary(tr[1] - 1 - m, tri, bnodes)
@@ -213,11 +218,11 @@ def wants_wide_tree(device: Any, leaf_size: int) -> bool:
 class WideTree:
     """A mesh's 4-wide tree (``kdsl.stdlib.mesh_wide.WideRecord``; ``id`` for the mesh's
     record). ``tree_points`` is the mesh's ``TreePoints``: its vertex copy (``tri``, in
-    the BVH's item order), which a build writes before the wide tree is and ``refit``
-    writes itself, what it is copied from (``points``, ``indices``, ``items``) and the
-    mesh check's counters (``found``). ``rebuild(bvh)`` collapses the binary tree again
-    (after it was built); ``refit(bvh)`` updates the copy, ``bvh``'s bounds and the
-    wide tree from the current points."""
+    the BVH's item order), which ``rebuild`` and ``refit`` write with the wide tree,
+    what it is copied from (``points``, ``indices``) and the mesh check's counters
+    (``found``). ``rebuild(bvh)`` collapses the binary tree again (after it was built);
+    ``refit(bvh)`` updates the copy, ``bvh``'s bounds and the wide tree from the current
+    points."""
 
     def __init__(self, tree_points: TreePoints, device: Any) -> None:
         self.tree_points = tree_points
@@ -236,7 +241,9 @@ class WideTree:
         return self._record.id
 
     def rebuild(self, bvh: Bvh) -> None:
-        """Collapse ``bvh``'s tree (current bounds) and fill the leaves from the copy."""
+        """Collapse ``bvh``'s tree (current bounds, items in their new order), gather the
+        vertex copy from the points and fill the leaves (``TreePoints.write`` writes the
+        copy instead when the collapse refused or there are no faces)."""
         dev = self.device
         tris = self.tree_points.indices.shape[0] // 3
         cut = collapse(bvh.packed_nodes, tris, dev)
@@ -250,7 +257,9 @@ class WideTree:
             launch(_init_nodes, dim=num_nodes, device=dev,
                    inputs=[cut.child, cut.src, bvh.packed_nodes, self.nodes])  # fmt: skip
             launch(_refit_tasks, dim=WORKERS, device=dev,
-                   inputs=self._task_inputs(bvh, 0))  # fmt: skip
+                   inputs=self._task_inputs(bvh, _COPY))  # fmt: skip
+        else:
+            self.tree_points.write()
         self._record.write({"nodes": self.nodes, "leaves": self.leaves, "fallback": cut.status})
 
     def refit(self, bvh: Bvh) -> None:
@@ -266,11 +275,11 @@ class WideTree:
         for step in self._refit_steps(bvh):
             step()
 
-    def _task_inputs(self, bvh: Bvh, refit: int) -> list:
-        """``_refit_tasks``' arguments: a refit's, or (``refit`` 0) a build's."""
+    def _task_inputs(self, bvh: Bvh, mode: int) -> list:
+        """``_refit_tasks``' arguments in ``mode``."""
         tp, cut = self.tree_points, self._cut
         return [tp.points, tp.indices, bvh.item_order, self._spans, cut.tasks, cut.trees,
-                cut.workers, tp.found, refit, tp.tri, bvh.packed_nodes, self.nodes,
+                cut.workers, tp.found, mode, tp.tri, bvh.packed_nodes, self.nodes,
                 self.leaves]  # fmt: skip
 
     def _refit_steps(self, bvh: Bvh) -> list[Callable[[], object]]:
@@ -282,7 +291,7 @@ class WideTree:
         if not graphs.ACTIVE and held is not None and all(a is b for a, b in zip(held[0], key)):
             return held[1]
         runs = [
-            (_refit_tasks, WORKERS, self._task_inputs(bvh, 1)),
+            (_refit_tasks, WORKERS, self._task_inputs(bvh, _REFIT)),
             (_refit_top, 1, [cut.tops, cut.top_wide, tp.found, tp.tri, bvh.packed_nodes,
                              self.nodes]),
         ]  # fmt: skip
