@@ -4,7 +4,8 @@ icosphere of 1,280 faces (5,120 off the interpreter) with leaves of 1 and 4 face
 points inside (the centre, where every face is nearly as close as the closest),
 outside and on the shell, against a float64 brute force; rays on a group's subtree
 against the brute force over that group's faces; and a tree deeper than the ordered
-walks' stack (``WALK_STACK``), where they finish with a stackless pass."""
+walks' stack (``WALK_STACK``), where they finish with a stackless pass (for the closest
+ray hit also with the first hit in an entry the overflow lost)."""
 
 from __future__ import annotations
 
@@ -210,3 +211,60 @@ def test_walks_deeper_than_the_stack_match_brute_force(backend):
             np.testing.assert_allclose(t[i], ref.min(), rtol=1e-6)
         else:
             assert face[i] == -1
+
+
+def _wide_chain(winner: int) -> tuple[np.ndarray, np.ndarray]:
+    """``_deep_chain``'s tree (the faces' box centres kept) with every face grown to a
+    cube 8 wide about its centre, so that a ray along ``(1, 1, 0)`` near the origin
+    enters every node's box and the closest-hit walk pushes a node at every level
+    (more than ``WALK_STACK``: the deepest pushes are lost). The chain's faces lie in
+    planes ``x - y + z = c`` (parallel to those rays: missed); the 40 faces of the
+    cluster contain their cube's diagonal and turn about it, and face ``winner``'s
+    turn makes it the first hit: one of the cluster's right subtrees near the bottom,
+    which the walk can only reach in its stackless pass after the overflow."""
+    pts, faces = _deep_chain()
+    tri = pts[faces].astype(np.float64)
+    centres = 0.5 * (tri.min(axis=1) + tri.max(axis=1))
+    m = len(centres)
+    shapes = np.empty((m, 3, 3))
+    shapes[:] = [[-1, -1, -1], [1, 1, -1], [-1, 1, 1]]  # plane x - y + z = -1 (relative)
+    turn = np.random.default_rng(0).uniform(-1.0, 0.5, m)
+    turn[winner] = 0.9  # (the plane (1 + s) x + (1 - s) y - 2 z = 0: s = 0.9 is hit first)
+    cluster = np.arange(30, 70)
+    shapes[cluster, 0] = [-1, -1, -1]
+    shapes[cluster, 1] = [1, 1, 1]
+    shapes[cluster, 2] = np.column_stack([np.ones(40), -np.ones(40), turn[cluster]])
+    out = (centres[:, None, :] + 4.0 * shapes).astype(np.float32)
+    return out.reshape(-1, 3), np.arange(3 * m, dtype=np.int32).reshape(-1, 3)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_ray_walks_overflowing_the_stack_match_brute_force(backend):
+    """The closest hit's stack overflows on every ray and the first hit lies in a lost
+    entry (a walk without its stackless pass answers another face here), so only the
+    stackless pass finds it; any hit and counted hits are checked too."""
+    dev = _device(backend)
+    rng = np.random.default_rng(3)
+    n = 8 if backend == "interp" else 16
+    y0 = -20.0 + rng.uniform(-2.0, 2.0, n)
+    starts = np.column_stack([y0 + 1.5, y0, rng.uniform(-2.0, 2.0, n)]).astype(np.float32)
+    dirs = np.tile(np.array([[1.0, 1.0, 0.0]], np.float32), (n, 1))
+    for winner in (33, 34):
+        pts, faces = _wide_chain(winner)
+        mesh = wp.Mesh(wp.array(pts, dtype=V3, device=dev),
+                       wp.array(faces, dtype=wp.int32, device=dev), bvh_constructor="lbvh",
+                       bvh_leaf_size=1)  # fmt: skip
+        depth = wp.zeros(1, dtype=int, device=dev)
+        wp.launch(depth_kernel, dim=1, inputs=[mesh.bvh.id, depth], backend=backend, device=dev)
+        assert depth.numpy()[0] > WALK_STACK + 1
+        t, face, anyhit, count = (wp.full(n, v, dtype=int if v == -1 else float, device=dev)
+                                  for v in (np.inf, -1, -1, -1))  # fmt: skip
+        inputs = [mesh.id, -1, wp.array(starts, dtype=V3, device=dev),
+                  wp.array(dirs, dtype=V3, device=dev), t, face, anyhit, count]  # fmt: skip
+        wp.launch(rays_kernel, dim=n, inputs=inputs, backend=backend, device=dev)
+        t, face, anyhit, count = (a.numpy() for a in (t, face, anyhit, count))
+        for i in range(n):
+            ref = ray_hits(pts, faces, starts[i], dirs[i])
+            assert count[i] == np.isfinite(ref).sum() and anyhit[i] == 1
+            assert face[i] == winner == np.argmin(ref), (winner, i, face[i])
+            np.testing.assert_allclose(t[i], ref.min(), rtol=1e-6)
