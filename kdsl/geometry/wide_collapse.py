@@ -21,10 +21,12 @@ on the pool's equal chunks.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 from kdsl.frontend.api import func, inout, kernel, static
-from kdsl.runtime.alloc import clone, empty
+from kdsl.runtime.alloc import copy, empty
 from kdsl.runtime.array import array
+from kdsl.runtime.carve import carve
 from kdsl.runtime.launch import launch
 from kdsl.stdlib.bvh import BvhNode
 from kdsl.types import float32, int32, vec2i, vec4, vec4i
@@ -287,13 +289,13 @@ def _collapse(
 
 @dataclass
 class Collapsed:
-    """``collapse``'s result on the tree's device: the wide nodes' ``child`` and ``src``
-    and the leaves' ``spans`` (views of scratch arrays, to be copied), the cut for the
-    refit (``tasks``, ``trees``, ``tops``, ``top_wide``, ``workers``: kept), and
-    ``status`` (``REFUSED``: no wide tree)."""
+    """``collapse``'s result on the tree's device: the wide nodes' links ``child`` and
+    ``src`` (views of the collapse's scratch, for the first fill), and, kept (views of
+    one block), the leaves' ``spans``, the cut for the refit (``tasks``, ``trees``,
+    ``tops``, ``top_wide``, ``workers``), and ``status`` (``REFUSED``: no wide tree)."""
 
-    child: array
-    src: array
+    child: array | None
+    src: array | None
     spans: array
     tasks: array
     trees: array
@@ -303,15 +305,30 @@ class Collapsed:
     status: int
 
 
+def _blocks(words: list[tuple[Any, int]], device) -> list[array]:
+    """Views of one new int32 block: one per ``(dtype, count)`` (dtype of 1, 2 or 4
+    int32 words), laid one after the other."""
+    sizes = [n * _WORDS[t] for t, n in words]
+    block = empty(max(sum(sizes), 1), dtype=int32, device=device)
+    at, parts = 0, []
+    for (t, n), size in zip(words, sizes):
+        parts.append((4 * at, t, n))
+        at += size
+    return carve(block, parts)
+
+
+#: int32 words of the collapse's element types.
+_WORDS = {int32: 1, vec2i: 2, vec4i: 4}
+
+
 def collapse(nodes: array, num_tris: int, device) -> Collapsed:
     """Collapse the binary tree of packed ``nodes`` (over ``num_tris`` faces, bounds
-    current) on ``device`` (one launch, one read back of its counts)."""
+    current) on ``device``: one launch, one read back of its counts, the scratch one
+    allocation and what is kept another."""
     cap = max(num_tris, 1)  # at most one wide node, one leaf, one task a face
-    stack, parents, tops, top_wide = (empty(cap, dtype=int32, device=device) for _ in range(4))
-    child, src, tasks, trees = (empty(cap, dtype=vec4i, device=device) for _ in range(4))
-    spans = empty(cap, dtype=vec2i, device=device)
-    workers = empty(WORKERS + 1, dtype=int32, device=device)
-    counts = empty(6, dtype=int32, device=device)
+    (child, src, tasks, trees, spans, stack, parents, tops, top_wide, workers,
+     counts) = _blocks([(vec4i, cap)] * 4 + [(vec2i, cap)] + [(int32, cap)] * 4
+                       + [(int32, WORKERS + 1), (int32, 6)], device)  # fmt: skip
     got = [0] * 6
     if num_tris > 0:
         target = max(MIN_TASK, num_tris // TASKS)
@@ -324,7 +341,10 @@ def collapse(nodes: array, num_tris: int, device) -> Collapsed:
     if got[_TASKS] == 0:
         workers.zero_()
     n, m, t = got[_NODES], got[_LEAVES], got[_TASKS]
-    return Collapsed(
-        child[:n], src[:n], spans[:m], clone(tasks[:t]), clone(trees[:t]),
-        clone(tops[: got[_TOPS]]), clone(top_wide[: got[_TOP_WIDE]]), workers, got[_STATUS],
-    )  # fmt: skip
+    parts = [(spans, vec2i, m), (tasks, vec4i, t), (trees, vec4i, t), (tops, int32, got[_TOPS]),
+             (top_wide, int32, got[_TOP_WIDE]), (workers, int32, WORKERS + 1)]  # fmt: skip
+    kept = _blocks([(dtype, k) for _, dtype, k in parts], device)
+    for dst, (a, _, k) in zip(kept, parts):
+        if k:
+            copy(dst, a, count=k)
+    return Collapsed(child[:n], src[:n], *kept, got[_STATUS])

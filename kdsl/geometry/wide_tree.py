@@ -33,7 +33,7 @@ from kdsl.geometry.device_tree import any_set
 from kdsl.geometry.finite_minmax import high3, low3
 from kdsl.geometry.mesh_tree_points import TreePoints
 from kdsl.geometry.wide_collapse import LANES, WORKERS, Collapsed, collapse
-from kdsl.runtime.alloc import clone, empty
+from kdsl.runtime.alloc import empty
 from kdsl.runtime.array import array
 from kdsl.runtime.graphs import state as graphs
 from kdsl.runtime.launch import launch
@@ -99,16 +99,20 @@ def leaf_from_tri(tri: array(dtype=vec3), items: array(dtype=int32), span: vec2i
     return lf
 
 
-@kernel
-def _init_nodes(
-    child: array(dtype=vec4i), src: array(dtype=vec4i), bnodes: array(dtype=BvhNode),
-    out: array(dtype=WideNode),
+@func
+def _wide_node(
+    child: array(dtype=vec4i), src: array(dtype=vec4i), w: int, bnodes: array(dtype=BvhNode),
+    nodes: array(dtype=WideNode), build: bool,
 ):  # fmt: skip
-    w = tid()
+    """Wide node ``w``'s children's boxes from their binary nodes; after a build
+    (``build``) its links too, from the collapse's ``child`` and ``src``."""
     nd = WideNode()
-    nd.child = child[w]
-    nd.src = src[w]
-    out[w] = lane_boxes(nd, bnodes)
+    if build:
+        nd.child = child[w]
+        nd.src = src[w]
+    else:
+        nd = nodes[w]
+    nodes[w] = lane_boxes(nd, bnodes)
 
 
 @func
@@ -157,10 +161,10 @@ def _refit_binary(n: int, tri: array(dtype=vec3), bnodes: array(dtype=BvhNode)):
     bnodes[n] = nd
 
 
-#: ``_refit_tasks``' modes: the leaves from the vertex copy as it is; the copy gathered
-#: from the points, then the leaves (a build's first fill); a refit (the copy, the
-#: leaves, the binary tree's bounds and the wide tree's boxes).
-_LEAVES, _COPY, _REFIT = 0, 1, 2
+#: ``_refit_tasks``' modes: a build's first fill (the vertex copy gathered from the
+#: points, the leaves, the wide nodes' links and boxes) and a refit (the copy, the
+#: leaves, the binary tree's bounds and the wide nodes' boxes).
+_BUILD, _REFIT = 0, 1
 
 
 @kernel
@@ -168,13 +172,14 @@ def _refit_tasks(
     points: array(dtype=vec3), indices: array(dtype=int32), items: array(dtype=int32),
     spans: array(dtype=vec2i), tasks: array(dtype=vec4i), trees: array(dtype=vec4i),
     workers: array(dtype=int32), found: array(dtype=int32), mode: int32,
-    tri: array(dtype=vec3), bnodes: array(dtype=BvhNode), nodes: array(dtype=WideNode),
-    leaves: array(dtype=WideLeaf),
+    child: array(dtype=vec4i), src: array(dtype=vec4i), tri: array(dtype=vec3),
+    bnodes: array(dtype=BvhNode), nodes: array(dtype=WideNode), leaves: array(dtype=WideLeaf),
 ):  # fmt: skip
     # Worker k: its run of tasks (``kdsl.geometry.wide_collapse``), each a subtree:
-    # its faces' corners into the vertex copy (not with ``_LEAVES``), its leaves, and
-    # with ``_REFIT`` its binary nodes (reverse preorder: children first) and its wide
-    # nodes' boxes. Nothing when ``found`` (the mesh check's counters) has a count.
+    # its faces' corners into the vertex copy, its leaves, with ``_REFIT`` its binary
+    # nodes (reverse preorder: children first), then its wide nodes (``_wide_node``;
+    # after a build with the collapse's links ``child`` and ``src``). Nothing when
+    # ``found`` (the mesh check's counters) has a count.
     k = tid()
     if any_set(found):
         return
@@ -182,31 +187,31 @@ def _refit_tasks(
         tk = tasks[t]
         for leaf in range(tk[2], tk[3]):
             span = spans[leaf]
-            if mode != _LEAVES:
-                _gather_corners(points, indices, items, span, tri)
+            _gather_corners(points, indices, items, span, tri)
             leaves[leaf] = leaf_from_tri(tri, items, span)
         if mode == _REFIT:
             tr = trees[t]
             for m in range(tr[1] - tr[0]):
                 _refit_binary(tr[1] - 1 - m, tri, bnodes)
-            for w in range(tk[0], tk[1]):
-                nodes[w] = lane_boxes(nodes[w], bnodes)
+        for w in range(tk[0], tk[1]):
+            _wide_node(child, src, w, bnodes, nodes, mode == _BUILD)
 
 
 @kernel
 def _refit_top(
     tops: array(dtype=int32), top_wide: array(dtype=int32), found: array(dtype=int32),
-    tri: array(dtype=vec3), bnodes: array(dtype=BvhNode), nodes: array(dtype=WideNode),
+    mode: int32, child: array(dtype=vec4i), src: array(dtype=vec4i), tri: array(dtype=vec3),
+    bnodes: array(dtype=BvhNode), nodes: array(dtype=WideNode),
 ):  # fmt: skip
-    # One thread, after the tasks: the binary nodes above them (listed parents first:
-    # taken in reverse) and the wide nodes above them.
+    # One thread, after the tasks: with ``_REFIT`` the binary nodes above them (listed
+    # parents first: taken in reverse), then the wide nodes above them.
     if any_set(found):
         return
-    for m in range(tops.shape[0]):
-        _refit_binary(tops[tops.shape[0] - 1 - m], tri, bnodes)
+    if mode == _REFIT:
+        for m in range(tops.shape[0]):
+            _refit_binary(tops[tops.shape[0] - 1 - m], tri, bnodes)
     for m in range(top_wide.shape[0]):
-        w = top_wide[m]
-        nodes[w] = lane_boxes(nodes[w], bnodes)
+        _wide_node(child, src, top_wide[m], bnodes, nodes, mode == _BUILD)
 
 
 def wants_wide_tree(device: Any, leaf_size: int) -> bool:
@@ -242,24 +247,23 @@ class WideTree:
 
     def rebuild(self, bvh: Bvh) -> None:
         """Collapse ``bvh``'s tree (current bounds, items in their new order), gather the
-        vertex copy from the points and fill the leaves (``TreePoints.write`` writes the
-        copy instead when the collapse refused or there are no faces)."""
+        vertex copy from the points, fill the leaves and write the wide nodes
+        (``TreePoints.write`` writes the copy instead when the collapse refused or there
+        are no faces)."""
         dev = self.device
         tris = self.tree_points.indices.shape[0] // 3
         cut = collapse(bvh.packed_nodes, tris, dev)
-        num_nodes = cut.child.shape[0]
-        self.nodes = empty(num_nodes, dtype=WideNode, device=dev)
+        self.nodes = empty(cut.child.shape[0], dtype=WideNode, device=dev)
         self.leaves = empty(cut.spans.shape[0], dtype=WideLeaf, device=dev)
-        self._spans = clone(cut.spans)
+        self._spans = cut.spans
         self._cut = cut
         self._held = None
-        if num_nodes:
-            launch(_init_nodes, dim=num_nodes, device=dev,
-                   inputs=[cut.child, cut.src, bvh.packed_nodes, self.nodes])  # fmt: skip
-            launch(_refit_tasks, dim=WORKERS, device=dev,
-                   inputs=self._task_inputs(bvh, _COPY))  # fmt: skip
+        if self.nodes.shape[0]:
+            for kernel_, dim, inputs in self._runs(bvh, _BUILD, cut.child, cut.src):
+                launch(kernel_, dim=dim, device=dev, inputs=inputs)
         else:
             self.tree_points.write()
+        cut.child = cut.src = None  # (the collapse's scratch: not kept)
         self._record.write({"nodes": self.nodes, "leaves": self.leaves, "fallback": cut.status})
 
     def refit(self, bvh: Bvh) -> None:
@@ -275,26 +279,28 @@ class WideTree:
         for step in self._refit_steps(bvh):
             step()
 
-    def _task_inputs(self, bvh: Bvh, mode: int) -> list:
-        """``_refit_tasks``' arguments in ``mode``."""
+    def _runs(self, bvh: Bvh, mode: int, child: array, src: array) -> list[tuple]:
+        """The two launches of a pass in ``mode`` (kernel, dim, inputs)."""
         tp, cut = self.tree_points, self._cut
-        return [tp.points, tp.indices, bvh.item_order, self._spans, cut.tasks, cut.trees,
-                cut.workers, tp.found, mode, tp.tri, bvh.packed_nodes, self.nodes,
-                self.leaves]  # fmt: skip
+        return [
+            (_refit_tasks, WORKERS,
+             [tp.points, tp.indices, bvh.item_order, self._spans, cut.tasks, cut.trees,
+              cut.workers, tp.found, mode, child, src, tp.tri, bvh.packed_nodes, self.nodes,
+              self.leaves]),
+            (_refit_top, 1, [cut.tops, cut.top_wide, tp.found, mode, child, src, tp.tri,
+                             bvh.packed_nodes, self.nodes]),
+        ]  # fmt: skip
 
     def _refit_steps(self, bvh: Bvh) -> list[Callable[[], object]]:
         """The refit's two launches, prepared once per set of arrays; plain launches
         while a graph capture is open (it records those)."""
-        tp, cut, dev = self.tree_points, self._cut, self.device
+        tp, dev = self.tree_points, self.device
         key = (tp.points, tp.indices, bvh.item_order, bvh.packed_nodes, tp.tri)
         held = self._held
         if not graphs.ACTIVE and held is not None and all(a is b for a, b in zip(held[0], key)):
             return held[1]
-        runs = [
-            (_refit_tasks, WORKERS, self._task_inputs(bvh, _REFIT)),
-            (_refit_top, 1, [cut.tops, cut.top_wide, tp.found, tp.tri, bvh.packed_nodes,
-                             self.nodes]),
-        ]  # fmt: skip
+        no_links = self._cut.tasks[:0]  # (a refit keeps the nodes' links)
+        runs = self._runs(bvh, _REFIT, no_links, no_links)
         if graphs.ACTIVE:
             return [functools.partial(launch, k, dim=d, device=dev, inputs=i) for k, d, i in runs]
         steps = [launch(k, dim=d, device=dev, inputs=i, record_cmd=True).launch
