@@ -13,6 +13,7 @@ from kdsl.ir import (
     ops_math,
     ops_mem,
     ops_pointer,
+    ops_prefetch,
     ops_print,
     ops_scf,
     ops_target,

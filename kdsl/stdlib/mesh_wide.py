@@ -11,7 +11,9 @@ branches. docs/geometry.md ("Wide tree") describes the layout and its upkeep.
 
 The walk visits the nearer children first (each child's place on a stack of
 ``WIDE_STACK`` entries is its rank among the four by distance, pushed far to near) and
-tests a leaf when it comes off the stack, at one site. It answers as the binary walk
+tests a leaf when it comes off the stack, at one site. A node visit first prefetches
+its four children (``kd.prefetch``), so that their cache misses overlap instead of
+coming one per step (1.3x in an A/B on the benchmark's 200k-face mesh). It answers as the binary walk
 (``kdsl.stdlib.mesh._closest_face``): the lowest face index among the faces at the
 smallest distance below ``max_dist``, slivers left out (their lanes carry face -1), a
 NaN point finds nothing; each face's distance is computed by the same float32
@@ -31,6 +33,7 @@ instead of 33.9).
 """
 
 import kdsl as wp
+from kdsl.frontend.builtins_prefetch import PREFETCH as prefetch
 from kdsl.frontend.builtins_target import TARGET_HAS_WIDE_TREE as target_has_wide_tree
 from kdsl.frontend.inout import inout
 from kdsl.frontend.kernel import func
@@ -218,6 +221,22 @@ def _push_children(
 
 
 @func
+def _prefetch_children(w: WideRecord, child: wp.vec4i):
+    """Prefetch the node's four children (``kd.prefetch``), whether they will be pushed
+    or not: their loads, one after another as they come off the stack, then find them
+    in the cache (the nearest comes off next, the others after its subtree). Testing
+    each child's distance first measured slower; issued after the distances, the hints
+    made LLVM split the four box distances into two-lane vectors. An empty slot names
+    leaf 0, a harmless hint."""
+    for i in range(wp.static(4)):
+        c = child[i]
+        if c < 0:
+            prefetch(w.leaves, -c - 1)
+        else:
+            prefetch(w.nodes, c)
+
+
+@func
 def _wide_leaf_far(lf: WideLeaf, p: wp.vec3, best_d: inout(wp.float32), best_f: inout(wp.int32)):
     """``_wide_leaf`` for the furthest point: a face's distance is its furthest
     vertex's (the binary walk's ``furthest_point_to_triangle``, whose vertex is exactly
@@ -295,6 +314,7 @@ def _wide_walk(id: wp.uint64, point: wp.vec3, dist: float, far: bool) -> int:
                 return WIDE_OVERFLOW
             else:
                 nd = w.nodes[ref]
+                _prefetch_children(w, nd.child)  # (before the distances: more lead)
                 d = wp.vec4(0.0)
                 if far:
                     d = _far_box_distances(nd, point)

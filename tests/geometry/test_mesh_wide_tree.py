@@ -286,6 +286,30 @@ def test_a_full_stack_falls_back_to_the_binary_walk(monkeypatch):
                                atol=1e-6)  # fmt: skip
 
 
+def _host_has(feature: str) -> bool:
+    import llvmlite.binding as llvm
+
+    return bool(llvm.get_host_cpu_features().get(feature, False))
+
+
+@pytest.mark.skipif(not _host_has("avx2"), reason="the vectorizer's choice depends on the host")
+def test_the_leaf_test_vectorizes_across_lanes():
+    # The leaf test's tree of operations is deeper than LLVM's default SLP limit (12):
+    # cut there, the rest was vectorized across x/y/z within a lane (about 100
+    # shufflevector and 220 two-float vectors in this kernel); with
+    # kdsl.backends.cpu.jit.SLP_MAX_DEPTH it is one four-lane pass (17 and 16). The node
+    # visit's four box distances are one four-lane pass too (the walk's prefetches come
+    # before them: issued after, they split the distances into two-lane vectors, 100).
+    from kdsl.backends.cpu import BACKEND
+    from kdsl.compiler import lower
+
+    text = lower(BACKEND, wide_id_kernel.build_module(), "llvm-ir", None)
+    assert text.count("fdiv <4 x float>") == 4  # the leaf's four divisions, on lanes
+    assert "fdiv float" not in text
+    assert text.count("shufflevector") < 50
+    assert text.count("<2 x float>") < 50
+
+
 @pytest.mark.skipif(not wp.is_cuda_available(), reason="no GPU")
 def test_cuda_meshes_keep_no_wide_tree():
     pts, faces = icosphere(3)

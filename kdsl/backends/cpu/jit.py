@@ -26,6 +26,17 @@ _ENGINE: llvm.ExecutionEngine | None = None
 #: as the lowerings that emit them list them.
 _LIBM_NAMES = (*mathops.C_FUNCTIONS, *arith.C_FUNCTIONS)
 
+#: How deep LLVM's SLP vectorizer follows a tree of scalar operations up from its seed
+#: (a reduction, a bundle of stores or compares) before it gathers the operands from
+#: scalars (LLVM's default: 12). kdsl lowers vectors to scalars, so code written over a
+#: struct's vec4 lanes becomes vector code only through SLP; the 4-wide leaf test of the
+#: mesh point queries (``kdsl.stdlib.mesh_wide``: loads, six dot products, the region
+#: selects, the closest point, a compare) is a tree some 20 operations deep, which the
+#: default cut in the middle: the rest was then vectorized across x/y/z within a lane,
+#: with shuffles and spills, about 1.8x slower (docs/performance.md, "CPU closest points,
+#: session 12"). Process-wide (an LLVM option), so also for other llvmlite users.
+SLP_MAX_DEPTH = 24
+
 
 def llvm_version() -> str:
     """The LLVM version llvmlite was built with, e.g. ``"22.1.0"``."""
@@ -41,6 +52,7 @@ def version_tag() -> str:
 def _init() -> None:
     llvm.initialize_native_target()
     llvm.initialize_native_asmprinter()
+    llvm.set_option("kdsl", f"-slp-recursion-max-depth={SLP_MAX_DEPTH}")
     _register_libm()
 
 

@@ -14,6 +14,7 @@ from kdsl.backends.cpu import (
     local,
     mathops,
     memory,
+    prefetch,  # kd.prefetch's lowering
     printing,
     target,  # kd.target_has's lowering
     vector,
@@ -33,6 +34,7 @@ __all__ = [
     "mathops",
     "array_from_ptr",
     "memory",
+    "prefetch",
     "printing",
     "target",
     "vector",
