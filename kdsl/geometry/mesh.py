@@ -124,12 +124,13 @@ class Mesh:
         self._tree_points.attach(pts, idx)
         self.bvh.tree_points = self._tree_points  # (its rebuild() writes them again)
         self._tree_points.items = self.bvh.item_order
-        self._tree_points.write()
         self._wide = None  # the CPU's 4-wide tree for the closest points (wide_tree)
         if wants_wide_tree(self.device, self.bvh.leaf_size):
             self._wide = WideTree(self._tree_points, self.device)
-            self._wide.rebuild(self.bvh)
+            self._wide.rebuild(self.bvh)  # (it writes the vertex copy too)
             self.bvh.wide = self._wide  # (its rebuild() collapses the new tree)
+        else:
+            self._tree_points.write()
         keep_face_boxes(self.bvh, self._faces)  # for a later mesh, once the BVH is collected
         self._record = ObjectRecord(self, MeshRecord.__kdsl_type__, "mesh", self.device)
         self._write_record()

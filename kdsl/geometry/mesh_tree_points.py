@@ -127,11 +127,13 @@ class MeshBvh(Bvh):
     wide = None
 
     def rebuild(self, constructor: str | None = None) -> None:
-        """``Bvh.rebuild``, then the mesh's vertex copy in the new item order."""
+        """``Bvh.rebuild``, then the mesh's vertex copy in the new item order (written by
+        the wide tree's rebuild when the mesh keeps one)."""
         super().rebuild(constructor)
         if self.tree_points is not None:
             self.tree_points.items = self.item_order
-            self.tree_points.write()
+            if self.wide is None:
+                self.tree_points.write()
         if self.wide is not None:
             self.wide.rebuild(self)
 
