@@ -24,8 +24,7 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 from kdsl.frontend.api import atomic_max, isfinite, kernel, length, tid
-from kdsl.frontend.api import max as vmax
-from kdsl.frontend.api import min as vmin
+from kdsl.geometry.finite_minmax import high3, low3
 from kdsl.geometry.forked_steps import ForkedSteps, side_streams
 from kdsl.geometry.graph_steps import graphs_on
 from kdsl.geometry.host_read import IntsReader
@@ -74,8 +73,8 @@ def _checked_face_boxes(
     a = points[indices[i * 3]]
     b = points[indices[i * 3 + 1]]
     c = points[indices[i * 3 + 2]]
-    lowers[i] = vmin(vmin(a, b), c)
-    uppers[i] = vmax(vmax(a, b), c)
+    lowers[i] = low3(low3(a, b), c)  # (a NaN point is reported: no box is used then)
+    uppers[i] = high3(high3(a, b), c)
     edges[i] = length(b - a) + length(c - a) + length(c - b)
 
 
