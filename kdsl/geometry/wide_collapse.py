@@ -302,6 +302,7 @@ class Collapsed:
     tops: array
     top_wide: array
     workers: array
+    done: array
     status: int
 
 
@@ -342,9 +343,11 @@ def collapse(nodes: array, num_tris: int, device) -> Collapsed:
         workers.zero_()
     n, m, t = got[_NODES], got[_LEAVES], got[_TASKS]
     parts = [(spans, vec2i, m), (tasks, vec4i, t), (trees, vec4i, t), (tops, int32, got[_TOPS]),
-             (top_wide, int32, got[_TOP_WIDE]), (workers, int32, WORKERS + 1)]  # fmt: skip
+             (top_wide, int32, got[_TOP_WIDE]), (workers, int32, WORKERS + 1),
+             (None, int32, 1)]  # fmt: skip
     kept = _blocks([(dtype, k) for _, dtype, k in parts], device)
     for dst, (a, _, k) in zip(kept, parts):
-        if k:
+        if a is not None and k:
             copy(dst, a, count=k)
+    kept[-1].zero_()
     return Collapsed(child[:n], src[:n], *kept, got[_STATUS])

@@ -26,7 +26,7 @@ import functools
 from collections.abc import Callable
 from typing import Any
 
-from kdsl.frontend.api import func, kernel, static, tid
+from kdsl.frontend.api import atomic_add, func, kernel, static, thread_fence, tid
 from kdsl.frontend.constants import nan
 from kdsl.geometry.bvh import Bvh
 from kdsl.geometry.device_tree import any_set
@@ -167,19 +167,36 @@ def _refit_binary(n: int, tri: array(dtype=vec3), bnodes: array(dtype=BvhNode)):
 _BUILD, _REFIT = 0, 1
 
 
+@func
+def _above_cut(
+    tops: array(dtype=int32), top_wide: array(dtype=int32), mode: int32,
+    child: array(dtype=vec4i), src: array(dtype=vec4i), tri: array(dtype=vec3),
+    bnodes: array(dtype=BvhNode), nodes: array(dtype=WideNode),
+):  # fmt: skip
+    """The nodes above the cut, after every task: with ``_REFIT`` the binary ones
+    (listed parents first: taken in reverse), then the wide ones."""
+    if mode == _REFIT:
+        for m in range(tops.shape[0]):
+            _refit_binary(tops[tops.shape[0] - 1 - m], tri, bnodes)
+    for m in range(top_wide.shape[0]):
+        _wide_node(child, src, top_wide[m], bnodes, nodes, mode == _BUILD)
+
+
 @kernel
 def _refit_tasks(
     points: array(dtype=vec3), indices: array(dtype=int32), items: array(dtype=int32),
     spans: array(dtype=vec2i), tasks: array(dtype=vec4i), trees: array(dtype=vec4i),
-    workers: array(dtype=int32), found: array(dtype=int32), mode: int32,
+    workers: array(dtype=int32), tops: array(dtype=int32), top_wide: array(dtype=int32),
+    found: array(dtype=int32), done: array(dtype=int32), mode: int32,
     child: array(dtype=vec4i), src: array(dtype=vec4i), tri: array(dtype=vec3),
     bnodes: array(dtype=BvhNode), nodes: array(dtype=WideNode), leaves: array(dtype=WideLeaf),
 ):  # fmt: skip
     # Worker k: its run of tasks (``kdsl.geometry.wide_collapse``), each a subtree:
     # its faces' corners into the vertex copy, its leaves, with ``_REFIT`` its binary
     # nodes (reverse preorder: children first), then its wide nodes (``_wide_node``;
-    # after a build with the collapse's links ``child`` and ``src``). Nothing when
-    # ``found`` (the mesh check's counters) has a count.
+    # after a build with the collapse's links ``child`` and ``src``). The last worker
+    # to finish (``done``: a counter, zero between launches) does the nodes above the
+    # cut. Nothing when ``found`` (the mesh check's counters) has a count.
     k = tid()
     if any_set(found):
         return
@@ -195,23 +212,11 @@ def _refit_tasks(
                 _refit_binary(tr[1] - 1 - m, tri, bnodes)
         for w in range(tk[0], tk[1]):
             _wide_node(child, src, w, bnodes, nodes, mode == _BUILD)
-
-
-@kernel
-def _refit_top(
-    tops: array(dtype=int32), top_wide: array(dtype=int32), found: array(dtype=int32),
-    mode: int32, child: array(dtype=vec4i), src: array(dtype=vec4i), tri: array(dtype=vec3),
-    bnodes: array(dtype=BvhNode), nodes: array(dtype=WideNode),
-):  # fmt: skip
-    # One thread, after the tasks: with ``_REFIT`` the binary nodes above them (listed
-    # parents first: taken in reverse), then the wide nodes above them.
-    if any_set(found):
-        return
-    if mode == _REFIT:
-        for m in range(tops.shape[0]):
-            _refit_binary(tops[tops.shape[0] - 1 - m], tri, bnodes)
-    for m in range(top_wide.shape[0]):
-        _wide_node(child, src, top_wide[m], bnodes, nodes, mode == _BUILD)
+    thread_fence()  # (this worker's writes before its arrival)
+    if atomic_add(done, 0, 1) == WORKERS - 1:
+        thread_fence()  # (every worker's writes seen)
+        done[0] = 0
+        _above_cut(tops, top_wide, mode, child, src, tri, bnodes, nodes)
 
 
 def wants_wide_tree(device: Any, leaf_size: int) -> bool:
@@ -259,8 +264,8 @@ class WideTree:
         self._cut = cut
         self._held = None
         if self.nodes.shape[0]:
-            for kernel_, dim, inputs in self._runs(bvh, _BUILD, cut.child, cut.src):
-                launch(kernel_, dim=dim, device=dev, inputs=inputs)
+            launch(_refit_tasks, dim=WORKERS, device=dev,
+                   inputs=self._inputs(bvh, _BUILD, cut.child, cut.src))  # fmt: skip
         else:
             self.tree_points.write()
         cut.child = cut.src = None  # (the collapse's scratch: not kept)
@@ -269,7 +274,7 @@ class WideTree:
     def refit(self, bvh: Bvh) -> None:
         """Copy the faces' corners from the current points into the vertex copy, refit
         ``bvh``'s bounds (links untouched) and the wide tree's boxes and leaves, in one
-        pass (two launches); nothing is written when the mesh check's counters are set.
+        launch; nothing is written when the mesh check's counters are set.
         A wide tree the collapse refused (or of no faces) leaves the tree to
         ``bvh.refit_checked`` and the copy to ``TreePoints.write``."""
         if not self.nodes.shape[0]:
@@ -279,31 +284,27 @@ class WideTree:
         for step in self._refit_steps(bvh):
             step()
 
-    def _runs(self, bvh: Bvh, mode: int, child: array, src: array) -> list[tuple]:
-        """The two launches of a pass in ``mode`` (kernel, dim, inputs)."""
+    def _inputs(self, bvh: Bvh, mode: int, child: array, src: array) -> list:
+        """``_refit_tasks``' arguments for a pass in ``mode``."""
         tp, cut = self.tree_points, self._cut
-        return [
-            (_refit_tasks, WORKERS,
-             [tp.points, tp.indices, bvh.item_order, self._spans, cut.tasks, cut.trees,
-              cut.workers, tp.found, mode, child, src, tp.tri, bvh.packed_nodes, self.nodes,
-              self.leaves]),
-            (_refit_top, 1, [cut.tops, cut.top_wide, tp.found, mode, child, src, tp.tri,
-                             bvh.packed_nodes, self.nodes]),
-        ]  # fmt: skip
+        return [tp.points, tp.indices, bvh.item_order, self._spans, cut.tasks, cut.trees,
+                cut.workers, cut.tops, cut.top_wide, tp.found, cut.done, mode, child, src,
+                tp.tri, bvh.packed_nodes, self.nodes, self.leaves]  # fmt: skip
 
     def _refit_steps(self, bvh: Bvh) -> list[Callable[[], object]]:
-        """The refit's two launches, prepared once per set of arrays; plain launches
-        while a graph capture is open (it records those)."""
+        """The refit's launch, prepared once per set of arrays; a plain launch while a
+        graph capture is open (it records that)."""
         tp, dev = self.tree_points, self.device
         key = (tp.points, tp.indices, bvh.item_order, bvh.packed_nodes, tp.tri)
         held = self._held
         if not graphs.ACTIVE and held is not None and all(a is b for a, b in zip(held[0], key)):
             return held[1]
         no_links = self._cut.tasks[:0]  # (a refit keeps the nodes' links)
-        runs = self._runs(bvh, _REFIT, no_links, no_links)
+        inputs = self._inputs(bvh, _REFIT, no_links, no_links)
         if graphs.ACTIVE:
-            return [functools.partial(launch, k, dim=d, device=dev, inputs=i) for k, d, i in runs]
-        steps = [launch(k, dim=d, device=dev, inputs=i, record_cmd=True).launch
-                 for k, d, i in runs]  # fmt: skip
+            return [functools.partial(launch, _refit_tasks, dim=WORKERS, device=dev,
+                                      inputs=inputs)]  # fmt: skip
+        steps = [launch(_refit_tasks, dim=WORKERS, device=dev, inputs=inputs,
+                        record_cmd=True).launch]  # fmt: skip
         self._held = (key, steps)
         return steps
