@@ -43,15 +43,16 @@ def _gather_tree_points(
     points: array(dtype=vec3), indices: array(dtype=int32), items: array(dtype=int32),
     found: array(dtype=int32), tri: array(dtype=vec3),
 ):  # fmt: skip
-    # Thread k copies the corners of face items[k] to tri[3k .. 3k + 2]. The indices
-    # were checked (in range) by the mesh's face-box kernel before any gather; when
-    # that check found something (``found``: its counters), nothing is read or written.
-    k = tid()
+    # Thread c copies corner c % 3 of face items[c // 3] to tri[c] (a thread a corner:
+    # a warp's stores are 384 consecutive bytes; a thread a face, 36 bytes apart each,
+    # took the H200 twice as long). The indices were checked (in range) by the mesh's
+    # face-box kernel before any gather; when that check found something (``found``:
+    # its counters), nothing is read or written.
+    c = tid()
+    f = items[c // 3]
     if any_set(found):
         return
-    f = items[k]
-    for j in range(3):
-        tri[k * 3 + j] = points[indices[f * 3 + j]]
+    tri[c] = points[indices[f * 3 + c % 3]]
 
 
 def _stream_of(device) -> object:
@@ -91,7 +92,7 @@ class TreePoints:
         if items is None or items.shape[0] == 0:
             return
         if graphs.ACTIVE:  # a plain launch, which an open graph capture records
-            launch(_gather_tree_points, dim=items.shape[0], device=self.tri.device,
+            launch(_gather_tree_points, dim=3 * items.shape[0], device=self.tri.device,
                    inputs=[self.points, self.indices, items, self.found, self.tri])  # fmt: skip
             return
         self.prepared()()
@@ -110,7 +111,7 @@ class TreePoints:
         held = self._gather.get(stream)
         if held is None or not _same(held[0], key):
             inputs = [self.points, self.indices, items, self.found, self.tri]
-            gather = launch(_gather_tree_points, dim=items.shape[0], device=device,
+            gather = launch(_gather_tree_points, dim=3 * items.shape[0], device=device,
                             inputs=inputs, record_cmd=True, stream=stream).launch  # fmt: skip
             held = self._gather[stream] = (key, gather)
         return held[1]

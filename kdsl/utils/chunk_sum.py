@@ -9,11 +9,6 @@ last level writes to ``out[0]``. The order of the additions depends on the lengt
 alone, so a sum gives the same bits every time on every device (not those of NumPy's
 or CuPy's pairwise sums: the rounding differs in the last bits).
 
-Each thread's loop over its chunk has a constant trip count (``CHUNK``) when the chunk
-is full, so the CUDA compiler unrolls it and issues the chunk's loads before the adds
-(in the same order): a level costs about one memory round trip, not one every few
-values (session 12, docs/performance.md).
-
 A ``guard`` (int32 values on the device) skips the write of ``out[0]`` when any of
 them is nonzero, so a sum issued behind a check (a mesh's first bad index and point)
 leaves ``out`` as it was when the check found something, without the host waiting for
@@ -54,28 +49,6 @@ def _sum_chunks(
     dst[t] = s
 
 
-@kernel
-def _sum_full_chunks(
-    src: array(dtype=float32), n: int32, guard: array(dtype=int32), dst: array(dtype=float32),
-):  # fmt: skip
-    # ``_sum_chunks`` for chunks of ``CHUNK``: the same additions in the same order, the
-    # loop's trip count a constant (unrolled, its loads issued together) on a full chunk.
-    for g in range(guard.shape[0]):
-        if guard[g] != 0:
-            return
-    t = tid()
-    at = t * CHUNK
-    s = float32(0.0)
-    if at + CHUNK <= n:
-        for j in range(CHUNK):
-            s += src[at + j]
-    else:
-        for j in range(CHUNK):
-            if at + j < n:
-                s += src[at + j]
-    dst[t] = s
-
-
 def sum_levels(n: int, chunk: int = CHUNK) -> list[int]:
     """The number of values each level of a sum of ``n`` values writes (the last: 1)."""
     sizes = [max(n, 1)]
@@ -93,10 +66,10 @@ class ChunkSum:
     """A prepared ``out[0] = sum(values)`` (see the module docstring): ``values`` a
     contiguous 1-d float32 array, ``out`` a float32 array of at least one element on its
     device, ``guard`` None or an int32 array there. The launches are prepared once, on
-    ``stream`` (a ``kdsl.Stream`` of its device; None: the one current when it is made);
-    ``steps`` lists them (for a caller that captures
-    them as a graph). An empty ``values`` sums to 0.0. ``scratch``: float32 values on the
-    device for the levels before the last (``scratch_size``; allocated when None)."""
+    ``stream`` (a ``kdsl.Stream`` of the device; None: the one current when it is made);
+    ``steps`` lists them (for a caller that captures them as a graph). An empty
+    ``values`` sums to 0.0. ``scratch``: float32 values on the device for the levels
+    before the last (``scratch_size``; allocated when None)."""
 
     __slots__ = ("steps", "_scratch")
 
@@ -133,15 +106,10 @@ class ChunkSum:
         for k, size in enumerate(sizes):
             last = k == len(sizes) - 1
             dst = o[:1] if last else self._scratch[at : at + size]
-            guard = g if last and g is not None else none
-            if chunk == CHUNK:
-                k, inputs = _sum_full_chunks, [src, n, guard, dst]
-            else:
-                k, inputs = _sum_chunks, [src, n, chunk, guard, dst]
-            self.steps.append(
-                launch(k, dim=size, device=device, record_cmd=True, inputs=inputs,
-                       stream=stream).launch
-            )
+            self.steps.append(launch(
+                _sum_chunks, dim=size, device=device, record_cmd=True, stream=stream,
+                inputs=[src, n, chunk, g if last and g is not None else none, dst],
+            ).launch)  # fmt: skip
             src, n, at = dst, size, at + size
 
     def __call__(self) -> None:

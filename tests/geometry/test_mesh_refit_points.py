@@ -216,7 +216,7 @@ def test_refit_kernels_on_interp_match_cpu(bottom_up, bottom_up_on_cpu):
         inputs=[copy.points, copy.indices, n_pts, n_tris, boxes.lowers, boxes.uppers,
                 boxes.edges, boxes.found],
     )  # fmt: skip
-    wp.launch(_gather_tree_points, dim=n_tris, backend="interp",
+    wp.launch(_gather_tree_points, dim=3 * n_tris, backend="interp",
               inputs=[copy.points, copy.indices, copy.items, boxes.found, copy.tri])  # fmt: skip
     none = wp.empty(0, dtype=wp.int32)  # no parent links: the leaves only
     links = [tree.skip, tree.parent, tree.arrivals] if bottom_up else [tree.skip, none, none]

@@ -55,7 +55,6 @@ def test_the_order_of_its_additions(device, n):
 @pytest.mark.parametrize("device", DEVICES)
 @pytest.mark.parametrize("n", [0, 7, 26, 1000])
 def test_other_chunk_sizes(device, n):
-    # (the default chunk has its own unrolled kernel; other sizes the general one)
     host = np.random.default_rng(n).random(n).astype(np.float32)
     out = wp.full(1, -1.0, dtype=wp.float32, device=device)
     ChunkSum(wp.array(host, dtype=wp.float32, device=device), out, chunk=5)()
