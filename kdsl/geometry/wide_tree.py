@@ -27,6 +27,7 @@ from collections.abc import Callable
 from typing import Any
 
 from kdsl.frontend.api import atomic_add, func, kernel, static, thread_fence, tid
+from kdsl.frontend.builtins_prefetch import PREFETCH as prefetch
 from kdsl.frontend.constants import nan
 from kdsl.geometry.bvh import Bvh
 from kdsl.geometry.device_tree import any_set
@@ -122,8 +123,10 @@ def _gather_corners(
 ):  # fmt: skip
     """Copy the corners of the faces at item positions ``span`` into the vertex copy
     (the indices were checked before)."""
+    last = items.shape[0] - 1
     for i in range(span[1]):
         at = span[0] + i
+        prefetch(indices, items[min(at + _AHEAD, last)] * 3)  # (faces in item order: misses)
         f = items[at] * 3
         tri[at * 3] = points[indices[f]]
         tri[at * 3 + 1] = points[indices[f + 1]]
@@ -161,6 +164,8 @@ def _refit_binary(n: int, tri: array(dtype=vec3), bnodes: array(dtype=BvhNode)):
     bnodes[n] = nd
 
 
+#: How far ahead (faces, nodes) the pass prefetches what it will read.
+_AHEAD = 16
 #: ``_refit_tasks``' modes: a build's first fill (the vertex copy gathered from the
 #: points, the leaves, the wide nodes' links and boxes) and a refit (the copy, the
 #: leaves, the binary tree's bounds and the wide nodes' boxes).
@@ -209,7 +214,9 @@ def _refit_tasks(
         if mode == _REFIT:
             tr = trees[t]
             for m in range(tr[1] - tr[0]):
-                _refit_binary(tr[1] - 1 - m, tri, bnodes)
+                n = tr[1] - 1 - m
+                prefetch(bnodes, max(n - _AHEAD, 0))  # (backwards: ahead of the prefetchers)
+                _refit_binary(n, tri, bnodes)
         for w in range(tk[0], tk[1]):
             _wide_node(child, src, w, bnodes, nodes, mode == _BUILD)
     thread_fence()  # (this worker's writes before its arrival)
