@@ -20,6 +20,12 @@ kin). ``lib`` (always run) calls the library's ``mesh_query_ray``. The variants
     right-linked nodes: an inner node's packed ``first`` is ``-1 - right``, so both
     children load at once, and a stack entry is a payload and an entry ``t``) without
     the stackless fallback (-2 where the stack would overflow);
+  - ``addr``: the library's walk with its arrays (nodes, the leaves' corners, the face
+    numbers) read through the records' addresses (``packed_nodes``: constant strides,
+    no stride in registers) instead of the records' arrays;
+  - ``split``: ``addr`` with the stackless pass chosen before the walk (for a tree
+    that may overflow the stack) instead of taken after an overflow in the same loop,
+    so the stack walk has no fallback; ``split_rec``: the same on the records' arrays;
   - ``*_r64``: the kernel compiled with ``cuda_max_registers=64``;
 - any hit (``any_*``, compared with ``any_lib``, the library's
   ``mesh_query_ray_anyhit``, timed beside Warp's any-hit kernel ``warp_any``):
@@ -59,7 +65,7 @@ from pathlib import Path
 import numpy as np
 
 import kdsl as wp
-from kdsl.stdlib.bvh import BvhNode, BvhRecord
+from kdsl.stdlib.bvh import BvhNode, BvhRecord, packed_nodes, tree_items
 from kdsl.stdlib.mesh import MeshRecord
 from kdsl.stdlib.mesh_primitives import (
     RayShear,
@@ -79,6 +85,9 @@ STACK = 32
 #: The variants: name -> ``variant_kernel``'s keywords (its defaults: the library's walk).
 VARIANTS = {
     "prefetch": {"walk": "prefetch"},
+    "addr": {"walk": "addr"},
+    "split": {"walk": "split"},
+    "split_rec": {"walk": "split_rec"},
     "payload": {"walk": "payload"},
     "lib_r64": {"walk": "lib", "regs": 64},
     "any_lib": {"walk": "any_lib"},
@@ -270,6 +279,144 @@ def payload_walk(id: wp.uint64, start: wp.vec3, dir: wp.vec3, max_t: float) -> i
     if lost:
         return -2
     return hit.slot
+
+
+def _split_walk(by_address: bool, split: bool):
+    """The library's walk (``mesh._ray_closest_slot``, session 12) with its arrays
+    (nodes, the leaves' corners, the face numbers) read through the records' addresses
+    (``by_address``: constant strides, ``packed_nodes``) or the records' arrays, and its
+    stackless pass in the loop (one leaf-test site) or, with ``split``, chosen before
+    the walk (a tree that may overflow the stack takes the stackless pass alone; the
+    stack walk then has no fallback; here the choice reads ``skip[0] < 0``, a load
+    that is false, where the library would read the tree's height)."""
+
+    @wp.func
+    def node_array(bvh: BvhRecord) -> wp.array(dtype=BvhNode):
+        if wp.static(by_address):
+            return packed_nodes(bvh)
+        return bvh.nodes
+
+    @wp.func
+    def item_array(bvh: BvhRecord) -> wp.array(dtype=wp.int32):
+        if wp.static(by_address):
+            return tree_items(bvh)
+        return bvh.items
+
+    @wp.func
+    def tri_array(rec: MeshRecord) -> wp.array(dtype=wp.vec3):
+        if wp.static(by_address):
+            return wp.array(ptr=rec.tri_ptr, shape=(rec.tri.shape[0],), dtype=wp.vec3)
+        return rec.tri
+
+    @wp.func
+    def leaf(tri: wp.array(dtype=wp.vec3), items: wp.array(dtype=wp.int32), first: int,
+             count: int, shear: RayShear, start: wp.vec3, best: Hit) -> Hit:  # fmt: skip
+        hit = best
+        for k in range(first, first + count):
+            h = intersect_ray_triangle(shear, start, tri[k * 3], tri[k * 3 + 1], tri[k * 3 + 2])
+            t = h[0]
+            if t >= 0.0 and t <= hit.t:
+                f = items[k]
+                if t < hit.t or (hit.slot >= 0 and f < hit.face):
+                    hit.t = t
+                    hit.face = f
+                    hit.slot = k
+        return hit
+
+    @wp.func
+    def next_leaf(nodes: wp.array(dtype=BvhNode), node: int, stop: int, start: wp.vec3,
+                  inv: wp.vec3, max_t: float) -> wp.vec3i:  # fmt: skip
+        n = node
+        while n < stop:
+            nd = nodes[n]
+            if ray_box_enter(nd.lower, nd.upper, start, inv) <= max_t:
+                if nd.first >= 0:
+                    return wp.vec3i(nd.first, nd.next, n + 1)
+                n = n + 1
+            else:
+                n = skip_of(nd, n)
+        return wp.vec3i(0, 0, stop)
+
+    @wp.func
+    def walk(id: wp.uint64, start: wp.vec3, dir: wp.vec3, max_t: float) -> int:
+        rec = wp.object_record(id, MeshRecord)
+        bvh = wp.object_record(rec.bvh, BvhRecord)
+        nodes = node_array(bvh)
+        tri = tri_array(rec)
+        items = item_array(bvh)
+        shear = ray_shear(dir)
+        inv = wp.vec3(safe_inverse(dir[0]), safe_inverse(dir[1]), safe_inverse(dir[2]))
+        hit = Hit()
+        hit.t = max_t
+        hit.face = -1
+        hit.slot = -1
+        span = root_range(bvh, -1)
+        sa = wp.ext.empty(STACK, dtype=wp.int32)
+        sb = wp.ext.empty(STACK, dtype=wp.int32)
+        st = wp.ext.empty(STACK, dtype=wp.float32)
+        count = 0
+        sweep = span[1]
+        active = False
+        a = 0
+        b = 0
+        if span[0] < span[1]:
+            nd = nodes[span[0]]
+            active = ray_box_enter(nd.lower, nd.upper, start, inv) <= hit.t
+            p = payload(nd, span[0])
+            a = p[0]
+            b = p[1]
+        if wp.static(split):  # noqa: SIM102 - a static branch
+            if rec.num_points < 0:  # (false: the library would read the tree's height here)
+                node = span[0]
+                while node < span[1]:
+                    step = next_leaf(nodes, node, span[1], start, inv, hit.t)
+                    node = step[2]
+                    hit = leaf(tri, items, step[0], step[1], shear, start, hit)
+                return hit.slot
+        while active or (not wp.static(split) and sweep < span[1]):
+            if active:
+                while b < 0:
+                    right = -1 - b
+                    left_nd = nodes[a]
+                    right_nd = nodes[right]
+                    t_l = ray_box_enter(left_nd.lower, left_nd.upper, start, inv)
+                    t_r = ray_box_enter(right_nd.lower, right_nd.upper, start, inv)
+                    l_in = t_l <= hit.t
+                    r_in = t_r <= hit.t
+                    lp = payload(left_nd, a)
+                    rp = payload(right_nd, right)
+                    if r_in and (not l_in or t_r < t_l):
+                        if l_in:
+                            count = push(sa, sb, st, count, lp[0], lp[1], t_l)
+                        a = rp[0]
+                        b = rp[1]
+                    elif l_in:
+                        if r_in:
+                            count = push(sa, sb, st, count, rp[0], rp[1], t_r)
+                        a = lp[0]
+                        b = lp[1]
+                    else:
+                        b = 0
+                    if count > STACK:
+                        count = STACK
+                        if wp.static(not split):
+                            sweep = span[0]
+            else:
+                step = next_leaf(nodes, sweep, span[1], start, inv, hit.t)
+                sweep = step[2]
+                a = step[0]
+                b = step[1]
+            hit = leaf(tri, items, a, b, shear, start, hit)
+            active = False
+            while count > 0 and not active:
+                count = count - 1
+                if st[count] <= hit.t:
+                    a = sa[count]
+                    b = sb[count]
+                    active = True
+        return hit.slot
+
+    return walk
 
 
 @wp.func
@@ -644,7 +791,10 @@ def variant_kernel(walk: str, regs: int | None = None):
             face[i] = hits(mesh, start[i], d[i], MAX_T)
 
         return counted
-    search = payload_walk if walk == "payload" else prefetch_walk
+    if walk in ("addr", "split", "split_rec"):
+        search = _split_walk(walk != "split_rec", walk != "addr")
+    else:
+        search = payload_walk if walk == "payload" else prefetch_walk
 
     @wp.kernel(enable_backward=False, **options)
     def rays(mesh: wp.uint64, start: wp.array(dtype=wp.vec3), d: wp.array(dtype=wp.vec3),

@@ -178,6 +178,7 @@ class Bvh:
                 "items": tree.items, "group_roots": tree.group_roots,
                 "item_lowers": self.lowers, "item_uppers": self.uppers,
                 "root": 0 if tree.slots else -1, "nodes": self._nodes,
+                "nodes_ptr": _address(self._nodes), "items_ptr": _address(tree.items),
             }
         )  # fmt: skip
 
@@ -209,6 +210,16 @@ class Bvh:
             steps = refit_steps(self._tree, self.lowers, self.uppers, self._nodes, found)
             held = self._refit_held = (key, steps)
         return held[1]
+
+
+def _address(a: array) -> int:
+    """The address of contiguous array ``a``'s first element (0 when empty), for a
+    record's ``*_ptr`` fields (``kdsl.stdlib.bvh.packed_nodes``)."""
+    if a.shape[0] == 0:
+        return 0
+    if not a.is_contiguous:
+        raise BvhError(f"internal error: a BVH array the walks read by address is strided: {a!r}")
+    return a.ptr
 
 
 #: The constructor a BVH gets without ``constructor=``, per device kind: the one that

@@ -213,5 +213,6 @@ class Mesh:
                 "edge_length_sum": self._faces.edge_sum,
                 "support_winding_number": int(self.support_winding_number),
                 "wide": 0 if self._wide is None else self._wide.id,
+                "tri_ptr": self._tree_points.tri.ptr,  # (contiguous: one allocation)
             }
         )  # fmt: skip

@@ -13,7 +13,10 @@ Kernels reach it through its record (``BvhRecord``, read with ``object_record``)
   arrays), ``group_roots[g]`` is the root node of group ``g``'s subtree;
 - ``nodes`` packs each node's bounds, ``first`` and ``skip`` (or a leaf's count) in 32
   bytes (``BvhNode``), which the traversal reads; ``lowers``, ``uppers`` and ``first``
-  are views of it. A leaf's bounds are exactly its items' union (``refit``), so a
+  are views of it. ``nodes_ptr`` and ``items_ptr`` are the addresses of ``nodes`` and
+  ``items`` (both contiguous): ``packed_nodes`` and ``tree_items`` rebuild them as
+  arrays whose stride is a constant, so that a GPU walk keeps no stride in registers
+  (a record's array holds its stride as a run-time value). A leaf's bounds are exactly its items' union (``refit``), so a
   leaf of one item that the query's shape touches is reported without testing the
   item's box again.
 
@@ -87,6 +90,21 @@ class BvhRecord:
     group_roots: wp.array(dtype=wp.int32)
     root: wp.int32
     nodes: wp.array(dtype=BvhNode)
+    nodes_ptr: wp.uint64  # the address of ``nodes`` (contiguous): ``packed_nodes``
+    items_ptr: wp.uint64  # the address of ``items`` (contiguous): ``tree_items``
+
+
+@func
+def packed_nodes(rec: BvhRecord) -> wp.array(dtype=BvhNode):
+    """``rec.nodes`` made from its address: the same elements, indexed with a constant
+    stride (see the module docstring)."""
+    return wp.array(ptr=rec.nodes_ptr, shape=(rec.nodes.shape[0],), dtype=BvhNode)
+
+
+@func
+def tree_items(rec: BvhRecord) -> wp.array(dtype=wp.int32):
+    """``rec.items`` made from its address (as ``packed_nodes``)."""
+    return wp.array(ptr=rec.items_ptr, shape=(rec.items.shape[0],), dtype=wp.int32)
 
 
 @wp.struct

@@ -95,7 +95,9 @@ class MeshRecord:
     (the id of the BVH over the faces' boxes), ``tri`` (each face's corners in the
     BVH's item order: ``tri[3 k + j]`` is corner ``j`` of face ``items[k]``,
     ``kdsl.geometry.mesh_tree_points``), ``wide`` (the id of the mesh's 4-wide tree,
-    ``kdsl.stdlib.mesh_wide``; 0 on a device that keeps none) and per-mesh constants."""
+    ``kdsl.stdlib.mesh_wide``; 0 on a device that keeps none), ``tri_ptr`` (the address
+    of ``tri``, which is contiguous: an array made from it in a kernel, ``array(ptr=...)``,
+    has a constant stride, see ``kdsl.stdlib.bvh.packed_nodes``) and per-mesh constants."""
 
     tag: wp.uint64
     points: wp.array(dtype=wp.vec3)
@@ -108,6 +110,7 @@ class MeshRecord:
     edge_length_sum: wp.array(dtype=wp.float32)  # one element: the faces' edges, summed
     support_winding_number: wp.int32
     wide: wp.uint64
+    tri_ptr: wp.uint64  # the address of ``tri`` (contiguous)
 
 
 @wp.struct
