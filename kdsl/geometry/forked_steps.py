@@ -38,19 +38,23 @@ def side_streams(device: Any, count: int) -> list[Stream]:
 
 
 class ForkedSteps:
-    """``main`` (prepared launches on ``stream``) and ``branches`` (pairs of a side stream
-    and launches prepared on it) run side by side behind the work issued on ``stream``,
-    which then waits for all of them (see the module docstring); ``graphed``: replayed
-    as one CUDA graph from the second run. ``steps`` lists every launch (main's first)."""
+    """``head`` then ``main`` (prepared launches on ``stream``) and ``branches`` (pairs of a
+    side stream and steps issued on it: launches prepared there, or a read back's
+    ``IntsReader.copy_on``) run side by side behind ``head`` and the work issued on
+    ``stream`` before, which then waits for all of them (see the module docstring);
+    ``graphed``: replayed as one CUDA graph from the second run. ``steps`` lists every
+    step (``head``'s first, then ``main``'s)."""
 
-    __slots__ = ("_events", "_graph", "_raw", "branches", "device", "main", "steps", "stream")
+    __slots__ = ("_events", "_graph", "_raw", "branches", "device", "head", "main", "steps",
+                 "stream")  # fmt: skip
 
     def __init__(self, main: Sequence[Callable[[], object]],
                  branches: Sequence[tuple[Stream | None, Sequence[Callable[[], object]]]],
-                 stream: Stream | None, graphed: bool) -> None:  # fmt: skip
-        self.main, self.stream = list(main), stream
+                 stream: Stream | None, graphed: bool,
+                 head: Sequence[Callable[[], object]] = ()) -> None:  # fmt: skip
+        self.head, self.main, self.stream = list(head), list(main), stream
         self.branches = [(side, list(steps)) for side, steps in branches if steps]
-        self.steps = self.main + [s for _, steps in self.branches for s in steps]
+        self.steps = self.head + self.main + [s for _, steps in self.branches for s in steps]
         self.device = None if stream is None else stream.device
         self._events: list[int] = []
         self._raw: tuple = ()
@@ -91,6 +95,8 @@ class ForkedSteps:
     def _fork_join(self) -> None:
         rt = cupy().cuda.runtime
         main, sides, events = self._raw
+        for step in self.head:
+            step()
         rt.eventRecord(events[0], main)
         for side in sides:
             rt.streamWaitEvent(side, events[0], 0)

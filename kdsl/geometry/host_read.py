@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from kdsl.errors import KdslRuntimeError
 from kdsl.runtime.array import array
 from kdsl.runtime.device import cuda_device_count, cupy
 from kdsl.runtime.graphs import state as graphs
@@ -75,6 +76,24 @@ class IntsReader:
         finally:
             rt.setDevice(current)
 
+    def copy_on(self, stream: Any) -> None:
+        """Enqueue the read on ``stream`` (a ``kdsl.Stream`` of the device already behind
+        the work that writes ``source``: a branch of ``ForkedSteps``), as ``start``
+        does. Inside a graph capture of that stream the event ``values`` waits for is
+        recorded as a node of the graph (an external event record), so every replay of
+        the graph records it: the host then waits for the copy, not for the graph."""
+        if self._device.is_cpu:
+            self._values = tuple(int(x) for x in self._source.numpy())
+            return
+        rt = cupy().cuda.runtime
+        raw = stream.cuda_stream
+        rt.memcpyAsync(self._host.ctypes.data, self._ptr, self._nbytes, rt.memcpyDeviceToHost,
+                       raw)  # fmt: skip
+        if stream.is_capturing:
+            _record_external(self._event.ptr, raw)
+        else:
+            rt.eventRecord(self._event.ptr, raw)
+
     def values(self) -> tuple[int, ...]:
         """The values as of ``start`` (waiting for the read on a GPU)."""
         if self._device.is_cpu:
@@ -91,3 +110,22 @@ def _enqueue(rt: Any, host: int, ptr: int, nbytes: int, stream: int, issued: int
     rt.streamWaitEvent(side, issued, 0)
     rt.memcpyAsync(host, ptr, nbytes, rt.memcpyDeviceToHost, side)
     rt.eventRecord(done, side)
+
+
+#: The driver's ``cuEventRecordWithFlags`` (ctypes), loaded on first use.
+_RECORD: list = []
+
+
+def _record_external(event: int, stream: int) -> None:
+    """Record ``event`` on the capturing ``stream`` as an event node of the graph
+    (``CU_EVENT_RECORD_EXTERNAL``; CuPy has no binding for it). A failure raises, which
+    ends the capture: the caller's steps then run without a graph."""
+    if not _RECORD:
+        import ctypes
+
+        fn = ctypes.CDLL("libcuda.so.1").cuEventRecordWithFlags
+        fn.argtypes, fn.restype = [ctypes.c_void_p, ctypes.c_void_p, ctypes.c_uint], ctypes.c_int
+        _RECORD.append(fn)
+    err = _RECORD[0](event, stream, 1)
+    if err:
+        raise KdslRuntimeError(f"cuEventRecordWithFlags failed in a graph capture (CUresult {err})")

@@ -20,6 +20,7 @@ graph from the second refit (``StepGraph``), then waits and raises.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable, Sequence
 from typing import Any
 
@@ -33,6 +34,7 @@ from kdsl.geometry.recycle import RecycleBin
 from kdsl.runtime.alloc import empty, zeros
 from kdsl.runtime.array import array
 from kdsl.runtime.carve import carve
+from kdsl.runtime.graphs import state as graphs
 from kdsl.runtime.launch import launch
 from kdsl.runtime.stream import current_stream
 from kdsl.types import float32, int32, vec3
@@ -108,7 +110,8 @@ class FaceBoxes:
         #: The edge sum's prepared launches per stream they were prepared on.
         self._sums: dict[Any, list] = {}
         #: The last two runs of the sum and a ``start``'s ``then``/``beside``
-        #: (``ForkedSteps``), with what they were made of: (then, beside, stream, run).
+        #: (``ForkedSteps``), with what they were made of: (then, beside, stream, run,
+        #: check: the check's launch when the run issues it, else None).
         self._tails: list[tuple] = []
         #: (points, indices, stream) of the prepared check, and the check.
         self._check: tuple | None = None
@@ -121,15 +124,18 @@ class FaceBoxes:
         """Issue the check of the mesh, the writes of its faces' boxes and edge lengths,
         the read back of the check's answers and the edge sum, and behind the check the
         prepared launches ``then`` (on the stream) and ``beside`` (prepared on
-        ``side_streams(device, 2)[1]``): a refit's BVH refit and the copy's gather, which
-        read the check's counters on the device. ``finish`` waits for the answers;
-        nothing waits here. With a ``then`` or ``beside`` on a GPU, the sum (on the first
-        side stream), ``then`` and ``beside`` run side by side and the stream waits for
-        all three (``ForkedSteps``), as one graph from the second call with the same
-        launches."""
+        ``beside_stream()``): a refit's BVH refit and the copy's gather, which read the
+        check's counters on the device. ``finish`` waits for the answers; nothing waits
+        here. With a ``then`` or ``beside`` on a GPU, ``then`` runs on the stream beside
+        the read back and the sum (one side stream) and ``beside`` (another), and the
+        stream waits for all three (``ForkedSteps``): from the second call with the same
+        launches the check and all of it are one CUDA graph, whose replay records the
+        event the read back's wait is for."""
         num_points, num_tris = points.shape[0], self.lowers.shape[0]
         if max(num_points, num_tris) == 0:
             return
+        if graphs.ACTIVE:  # (a read back cannot be part of the caller's capture)
+            graphs.refuse_host_read(points.device, "a mesh's check")
         self.clean = False
         device = points.device
         stream = None if device.is_cpu else current_stream(device)
@@ -141,9 +147,13 @@ class FaceBoxes:
                         self.edges, self.found], record_cmd=True,
             ).launch  # fmt: skip
             held = self._check = (points, indices, stream, check)
-        held[3]()
-        self._read.start()  # the answers only (on a side stream: the rest does not wait)
-        self._tail(stream, then, beside)()  # (the sum writes nothing when the check found something)
+        if stream is not None and (then or beside):
+            self._tail(stream, held[3], then, beside)()  # the check and everything after it
+        else:
+            held[3]()
+            self._read.start()  # the answers only (on a side stream: the rest does not wait)
+            self._tail(stream, None, then, beside)()  # (the sum writes nothing when the
+            # check found something)
         self._pending = True
 
     def beside_stream(self) -> Any:
@@ -161,22 +171,26 @@ class FaceBoxes:
             self._sums[stream] = steps
         return steps
 
-    def _tail(self, stream, then: Sequence[Callable[[], object]],
+    def _tail(self, stream, check: Callable[[], object] | None,
+              then: Sequence[Callable[[], object]],
               beside: Sequence[Callable[[], object]]) -> Callable[[], None]:  # fmt: skip
-        """What ``start`` runs after the read: the one made before for the same launches
-        and stream (the last two are kept: a construction's and a refit's), else a new
-        one."""
+        """What ``start`` runs: the check (unless None: issued already, with the read
+        back), then the sum, ``then`` and ``beside`` (see ``start``); the one made before
+        for the same launches and stream (the last two are kept: a construction's and a
+        refit's), else a new one."""
         for t in self._tails:
-            if t[2] is stream and _same_steps(t[0], then) and _same_steps(t[1], beside):
+            if (t[2] is stream and t[4] is check and _same_steps(t[0], then)
+                    and _same_steps(t[1], beside)):  # fmt: skip
                 return t[3]
         graphed = graphs_on(self.lowers.device)
-        if stream is None or not (then or beside):  # the sum on the stream, then ``then``
+        if check is None:  # the sum on the stream, then ``then`` and ``beside``
             run = ForkedSteps([*self._sum_steps(stream), *then, *beside], [], stream, graphed)
         else:
             side, other = side_streams(stream.device, 2)
-            run = ForkedSteps(then, [(side, self._sum_steps(side)), (other, beside)], stream,
-                              graphed)  # fmt: skip
-        self._tails = [*self._tails[-1:], (tuple(then), tuple(beside), stream, run)]
+            read = functools.partial(self._read.copy_on, side)
+            run = ForkedSteps(then, [(side, [read, *self._sum_steps(side)]), (other, beside)],
+                              stream, graphed, head=[check])  # fmt: skip
+        self._tails = [*self._tails[-1:], (tuple(then), tuple(beside), stream, run, check)]
         return run
 
     def finish(self) -> tuple[int, int]:

@@ -284,3 +284,24 @@ def test_the_refit_runs_its_three_launches_side_by_side(device, monkeypatch):
     wp.copy(mesh.points, wp.array(bad, dtype=V3, device=device))
     mesh.refit()
     _check_against_brute_force(mesh, faces)
+
+
+@pytest.mark.parametrize("device", DEVICES)
+def test_a_refit_inside_a_capture_is_refused(device):
+    """A refit waits for its check's answers, which a graph capture cannot hold: inside
+    one it raises before issuing anything, and the mesh refits as before after it."""
+    from kdsl.errors import KdslError
+
+    pts, faces = icosphere(1, bumps=0.05, seed=3)
+    mesh = wp.Mesh(wp.array(pts, dtype=V3, device=device),
+                   wp.array(faces, dtype=wp.int32, device=device))  # fmt: skip
+    mesh.refit()
+    wp.capture_begin(device=device)
+    try:
+        with pytest.raises(KdslError, match="capture"):
+            mesh.refit()
+    finally:
+        wp.capture_end(device=device)
+    wp.copy(mesh.points, wp.array(pts * 1.5, dtype=V3, device=device))
+    mesh.refit()
+    _check_against_brute_force(mesh, faces)
