@@ -60,7 +60,7 @@ class IntsReader:
         if graphs.ACTIVE:
             graphs.refuse_host_read(self._device, "a check's read back")
         if self._device.is_cpu:
-            self._values = tuple(int(x) for x in self._source.numpy())
+            self._values = tuple(self._source.numpy().tolist())
             return
         rt = cupy().cuda.runtime
         raw = current_stream(self._device).cuda_stream
@@ -83,7 +83,7 @@ class IntsReader:
         recorded as a node of the graph (an external event record), so every replay of
         the graph records it: the host then waits for the copy, not for the graph."""
         if self._device.is_cpu:
-            self._values = tuple(int(x) for x in self._source.numpy())
+            self._values = tuple(self._source.numpy().tolist())
             return
         rt = cupy().cuda.runtime
         raw = stream.cuda_stream
@@ -99,7 +99,7 @@ class IntsReader:
         if self._device.is_cpu:
             return self._values
         cupy().cuda.runtime.eventSynchronize(self._event.ptr)
-        return tuple(int(x) for x in self._host)
+        return tuple(self._host.tolist())
 
 
 def _enqueue(rt: Any, host: int, ptr: int, nbytes: int, stream: int, issued: int, side: int,
