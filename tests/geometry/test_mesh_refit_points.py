@@ -296,12 +296,8 @@ def test_a_refit_inside_a_capture_is_refused(device):
     mesh = wp.Mesh(wp.array(pts, dtype=V3, device=device),
                    wp.array(faces, dtype=wp.int32, device=device))  # fmt: skip
     mesh.refit()
-    wp.capture_begin(device=device)
-    try:
-        with pytest.raises(KdslError, match="capture"):
-            mesh.refit()
-    finally:
-        wp.capture_end(device=device)
+    with wp.ScopedCapture(device=device), pytest.raises(KdslError, match="capture"):
+        mesh.refit()
     wp.copy(mesh.points, wp.array(pts * 1.5, dtype=V3, device=device))
     mesh.refit()
     _check_against_brute_force(mesh, faces)
