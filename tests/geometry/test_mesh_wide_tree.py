@@ -308,6 +308,7 @@ def test_the_leaf_test_vectorizes_across_lanes():
     assert "fdiv float" not in text
     assert text.count("shufflevector") < 50
     assert text.count("<2 x float>") < 50
+    assert "@llvm.prefetch" in text  # a node visit prefetches its children (kd.prefetch)
 
 
 @pytest.mark.skipif(not wp.is_cuda_available(), reason="no GPU")
