@@ -16,16 +16,19 @@ kin). ``lib`` (always run) calls the library's ``mesh_query_ray``. The variants
     the left child, so an inner node was carried with its right child read from the
     BVH's ``skip`` array a level ahead (``skip[n + 1]``), a waiting node with its
     ``first``, ``next`` and right child; with the stackless fallback;
-  - ``payload``: the library's walk since session 12 (Warp's discipline on the
-    right-linked nodes: an inner node's packed ``first`` is ``-1 - right``, so both
-    children load at once, and a stack entry is a payload and an entry ``t``) without
-    the stackless fallback (-2 where the stack would overflow);
-  - ``addr``: the library's walk with its arrays (nodes, the leaves' corners, the face
+  - ``onesite``: the first walk of session 12 (``acb138b``): Warp's discipline on the
+    right-linked nodes (an inner node's packed ``first`` is ``-1 - right``, so both
+    children load at once, and a stack entry is a payload and an entry ``t``) on the
+    records' arrays, the stackless pass taken after an overflow in the same loop;
+  - ``payload``: the same without the stackless pass (-2 where the stack would
+    overflow);
+  - ``addr``: ``onesite`` with its arrays (nodes, the leaves' corners, the face
     numbers) read through the records' addresses (``packed_nodes``: constant strides,
     no stride in registers) instead of the records' arrays;
-  - ``split``: ``addr`` with the stackless pass chosen before the walk (for a tree
-    that may overflow the stack) instead of taken after an overflow in the same loop,
-    so the stack walk has no fallback; ``split_rec``: the same on the records' arrays;
+  - ``split``: ``addr`` with the stackless pass chosen before the walk (for a tree that
+    may overflow the stack), so the stack walk has no fallback: the library's walk
+    since ``lib`` reads the tree's height (here a record's value that is never
+    negative stands for it); ``split_rec``: the same on the records' arrays;
   - ``*_r64``: the kernel compiled with ``cuda_max_registers=64``;
 - any hit (``any_*``, compared with ``any_lib``, the library's
   ``mesh_query_ray_anyhit``, timed beside Warp's any-hit kernel ``warp_any``):
@@ -85,6 +88,7 @@ STACK = 32
 #: The variants: name -> ``variant_kernel``'s keywords (its defaults: the library's walk).
 VARIANTS = {
     "prefetch": {"walk": "prefetch"},
+    "onesite": {"walk": "onesite"},
     "addr": {"walk": "addr"},
     "split": {"walk": "split"},
     "split_rec": {"walk": "split_rec"},
@@ -791,8 +795,8 @@ def variant_kernel(walk: str, regs: int | None = None):
             face[i] = hits(mesh, start[i], d[i], MAX_T)
 
         return counted
-    if walk in ("addr", "split", "split_rec"):
-        search = _split_walk(walk != "split_rec", walk != "addr")
+    if walk in ("onesite", "addr", "split", "split_rec"):
+        search = _split_walk(walk in ("addr", "split"), walk.startswith("split"))
     else:
         search = payload_walk if walk == "payload" else prefetch_walk
 

@@ -16,12 +16,13 @@ from kdsl.geometry.lbvh import build_lbvh
 from kdsl.geometry.median import build_median
 from kdsl.geometry.sah import build_sah
 from kdsl.ir import types as T
-from kdsl.runtime.alloc import empty
+from kdsl.runtime.alloc import empty, zeros
 from kdsl.runtime.array import array
 from kdsl.runtime.graphs import state as graphs
 from kdsl.runtime.objects import ObjectRecord
 from kdsl.runtime.stream import current_stream
 from kdsl.stdlib.bvh import BvhNode, BvhRecord
+from kdsl.types import int32
 
 VEC3 = T.VectorType(3, T.F32)
 
@@ -179,8 +180,13 @@ class Bvh:
                 "item_lowers": self.lowers, "item_uppers": self.uppers,
                 "root": 0 if tree.slots else -1, "nodes": self._nodes,
                 "nodes_ptr": _address(self._nodes), "items_ptr": _address(tree.items),
+                "height": tree.height if tree.height is not None else self._zero_height(),
             }
         )  # fmt: skip
+
+    def _zero_height(self) -> array:
+        """A one-element zero on the device: the height of an empty tree."""
+        return zeros(1, dtype=int32, device=self.device)
 
     def refit(self) -> None:
         """Recompute the node bounds from the current boxes (the tree keeps its shape), with

@@ -78,6 +78,10 @@ class DeviceTree:
     node_count: array | None = None
     #: Whether the constructor wrote the packed nodes' bounds too (no refit needed).
     bounded: bool = False
+    #: A one-element int32 array on the device: the tree's height (the most levels
+    #: below the root; 0 for a leaf root), which bounds the entries a walk's stack
+    #: holds. None for an empty tree.
+    height: array | None = None
     #: Builds the same tree arrays again from the boxes' current values, when the
     #: constructor can (``lbvh``); None otherwise.
     rebuild: Callable[[], object] | None = None
@@ -148,6 +152,7 @@ def upload_tree(tree: Tree, device) -> DeviceTree:
         _device_ints(tree.skip, device), _device_ints(tree.first, device),
         _device_ints(tree.count, device), _device_ints(tree.items, device),
         _device_ints(tree.group_roots, device), none, none, tree.num_nodes,
+        height=_device_ints(np.array([tree.level.max(initial=0)]), device),
     ))  # fmt: skip
 
 

@@ -263,14 +263,16 @@ def _emit_hierarchy(
     items: array(dtype=int32), parent: array(dtype=int32), left: array(dtype=int32),
     right: array(dtype=int32), node_lo: array(dtype=vec3), node_hi: array(dtype=vec3),
     node_a: array(dtype=int32), node_b: array(dtype=int32), sizes: array(dtype=int32),
+    heights: array(dtype=int32), height: array(dtype=int32),
     arrivals: array(dtype=int32), use_scan: int32, starts: array(dtype=int32),
     before: array(dtype=int32), group_roots: array(dtype=int32),
 ):  # fmt: skip
     # Thread k: sorted item k (its index into ``items``, its box), then up the tree (see
     # the module docstring). Inner node s's parent is s (this node is its left child) or
     # a - 1 (its right child): the side whose neighbouring key shares the longer prefix.
-    # Each inner node gets its range, bounds and kept size (its subtree's kept nodes);
-    # the root's kept size, the tree's node count, goes to ``before[n]``. With
+    # Each inner node gets its range, bounds, kept size (its subtree's kept nodes) and
+    # kept height (the most levels below it: 0 for a leaf); the root's kept size, the
+    # tree's node count, goes to ``before[n]``, its height to ``height[0]``. With
     # ``use_scan``, the kept nodes are also counted by their first position a into
     # ``starts[a + 1]``. Every group's root is set to -1 (``_preorder`` writes them).
     k = tid()
@@ -285,22 +287,26 @@ def _emit_hierarchy(
     a = k
     b = k
     size = 1  # kept nodes in the subtree of ``node`` (a leaf's dropped subtree: 1)
+    h = 0  # the kept height of ``node``'s subtree
     while True:
         if node < n - 1:  # an inner node, complete: publish it
             leaf = _is_leaf(keys, a, b, leaf_size, group_shift)
             if leaf:
                 size = 1
+                h = 0
             node_lo[node] = lo
             node_hi[node] = hi
             node_a[node] = a
             node_b[node] = b
             sizes[node] = size
+            heights[node] = h
             if use_scan != 0 and not leaf:  # its children are kept
                 atomic_add(starts, a + 1, 1)
                 atomic_add(starts, node + 2, 1)
         if a == 0 and b == n - 1:  # the root, always kept
             parent[node] = -1
             before[n] = size
+            height[0] = h
             if use_scan != 0:
                 atomic_add(starts, 1, 1)
             return
@@ -329,6 +335,9 @@ def _emit_hierarchy(
         a = vmin(a, _range_a(n, node_a, s))
         b = vmax(b, _range_b(n, node_b, s))
         size = size + _kept_size(n, sizes, s) + 1
+        if s < n - 1:
+            h = vmax(h, heights[s])
+        h = h + 1
         node = p
 
 
@@ -514,7 +523,7 @@ class LbvhBuild:
         # refit's counters, which refits leave even: see ``device_tree``).
         layout = {"items": n, "skip": slots, "first": slots, "count": slots, "parent": slots,
                   "left": n - 1, "right": n - 1, "node_a": n - 1, "node_b": n - 1,
-                  "kept": n - 1, "before": n + 1,
+                  "kept": n - 1, "heights": n - 1, "height": 1, "before": n + 1,
                   "pre_parent": slots if bottom_up else 0, "group_roots": roots}  # fmt: skip
         zero_sizes = {"starts": n + 1, "climbs": n - 1, "arrivals": slots if bottom_up else 0,
                       "bounds": BOUND_SLOTS}  # fmt: skip
@@ -563,8 +572,8 @@ class LbvhBuild:
             prepared(_emit_hierarchy, n, [
                 keys, n, leaf_size, group_shift, (1 << index_bits) - 1, lowers, uppers,
                 ints["items"], ints["parent"], ints["left"], ints["right"], node_lo, node_hi,
-                node_a, node_b, ints["kept"], zero["climbs"], int(use_scan), zero["starts"],
-                ints["before"], ints["group_roots"]]).launch,
+                node_a, node_b, ints["kept"], ints["heights"], ints["height"], zero["climbs"],
+                int(use_scan), zero["starts"], ints["before"], ints["group_roots"]]).launch,
             *([ScanInto(zero["starts"], ints["before"])] if use_scan else []),
             prepared(_preorder, slots, [
                 keys, n, leaf_size, group_shift, has_groups, ints["items"], lowers, uppers,
@@ -585,7 +594,7 @@ class LbvhBuild:
         self._tree_fields = (
             ints["skip"], ints["first"], ints["count"], ints["items"],
             ints["group_roots"][:num_groups], ints["pre_parent"], zero["arrivals"], slots,
-            nodes, views, ints["before"][n:],
+            nodes, views, ints["before"][n:], ints["height"],
         )  # fmt: skip
         #: Whether the last run completed (a run cut short may leave counters nonzero).
         self.clean = True
@@ -604,8 +613,9 @@ class LbvhBuild:
 
     def new_tree(self) -> DeviceTree:
         """A ``DeviceTree`` over this build's arrays (one per owner: see ``build_lbvh``)."""
-        *links, slots, nodes, views, node_count = self._tree_fields
-        return DeviceTree(*links, slots, nodes, views, node_count=node_count, bounded=True)
+        *links, slots, nodes, views, node_count, height = self._tree_fields
+        return DeviceTree(*links, slots, nodes, views, node_count=node_count, bounded=True,
+                          height=height)  # fmt: skip
 
 
 #: The builds of collected trees, for the next tree over the same boxes (``recycle``):

@@ -10,7 +10,9 @@ Kernels reach it through its record (``BvhRecord``, read with ``object_record``)
   names too (``first[n] = -1 - right``, ``right_child``: "right-linked" nodes, so a
   walk loads both children at once);
 - ``item_lowers`` / ``item_uppers`` are the boxes the BVH was built over (the user's
-  arrays), ``group_roots[g]`` is the root node of group ``g``'s subtree;
+  arrays), ``group_roots[g]`` is the root node of group ``g``'s subtree; ``height[0]``
+  the tree's height (the most levels below the root, 0 for a leaf root or an empty
+  tree), which bounds how many nodes a walk with a stack keeps waiting;
 - ``nodes`` packs each node's bounds, ``first`` and ``skip`` (or a leaf's count) in 32
   bytes (``BvhNode``), which the traversal reads; ``lowers``, ``uppers`` and ``first``
   are views of it. ``nodes_ptr`` and ``items_ptr`` are the addresses of ``nodes`` and
@@ -92,6 +94,7 @@ class BvhRecord:
     nodes: wp.array(dtype=BvhNode)
     nodes_ptr: wp.uint64  # the address of ``nodes`` (contiguous): ``packed_nodes``
     items_ptr: wp.uint64  # the address of ``items`` (contiguous): ``tree_items``
+    height: wp.array(dtype=wp.int32)  # one element: the tree's height (see the docstring)
 
 
 @func

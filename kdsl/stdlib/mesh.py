@@ -41,7 +41,9 @@ from kdsl.stdlib.bvh import (
     bvh_query_aabb,
     bvh_query_next,
     bvh_query_sphere,
+    packed_nodes,
     right_child,
+    tree_items,
 )
 from kdsl.stdlib.mesh_primitives import (
     RayShear,
@@ -170,6 +172,13 @@ def _corner(rec: MeshRecord, k: int, corner: int) -> wp.vec3:
     """Corner ``corner`` of the face at position ``k`` of the BVH's items (the leaves'
     copy, ``rec.tri``: no index loads)."""
     return rec.tri[k * 3 + corner]
+
+
+@func
+def _tri_copy(rec: MeshRecord) -> wp.array(dtype=wp.vec3):
+    """``rec.tri`` made from its address: indexed with a constant stride, so a GPU walk
+    keeps no stride in registers (``kdsl.stdlib.bvh.packed_nodes``)."""
+    return wp.array(ptr=rec.tri_ptr, shape=(rec.tri.shape[0],), dtype=wp.vec3)
 
 
 @func
@@ -559,20 +568,18 @@ class _FirstHit:
 
 @func
 def _ray_leaf(
-    rec: MeshRecord, bvh: BvhRecord, first: int, count: int, shear: RayShear,
-    start: wp.vec3, best: _FirstHit,
+    tri: wp.array(dtype=wp.vec3), items: wp.array(dtype=wp.int32), first: int, count: int,
+    shear: RayShear, start: wp.vec3, best: _FirstHit,
 ) -> _FirstHit:  # fmt: skip
     """``best`` updated with the hits of the ``count`` faces of a leaf from
-    ``items[first]``: a hit at ``t >= 0`` replaces it when nearer, or as near on a
-    lower face."""
+    ``items[first]`` (``tri``: the record's ``tri``, ``items`` the BVH's): a hit at
+    ``t >= 0`` replaces it when nearer, or as near on a lower face."""
     hit = best
     for k in range(first, first + count):
-        h = intersect_ray_triangle(
-            shear, start, _corner(rec, k, 0), _corner(rec, k, 1), _corner(rec, k, 2)
-        )
+        h = intersect_ray_triangle(shear, start, tri[k * 3], tri[k * 3 + 1], tri[k * 3 + 2])
         t = h[0]
         if t >= 0.0 and t <= hit.t:  # the face's number is loaded only here
-            f = bvh.items[k]
+            f = items[k]
             if t < hit.t or (hit.slot >= 0 and f < hit.face):
                 hit.t = t
                 hit.face = f
@@ -586,12 +593,15 @@ def _wait_payload(
     keys: wp.array(dtype=wp.float32), count: int, first: int, next: int, key: float,
 ) -> int:  # fmt: skip
     """``_wait`` for a node carried as its payload (``first``, ``next``: see
-    ``_ray_closest_slot``), so that taking it off the stack loads nothing."""
+    ``_ray_closest_slot``), so that taking it off the stack loads nothing. A full stack
+    keeps its count and drops the node (which a walk that checked the tree's height
+    never meets)."""
     if count < WALK_STACK:
         firsts[count] = first
         nexts[count] = next
         keys[count] = key
-    return count + 1
+        return count + 1
+    return count
 
 
 @func
@@ -617,11 +627,19 @@ def _ray_closest_slot(id: wp.uint64, start: wp.vec3, dir: wp.vec3, max_t: float,
     leaf's faces ``[a, a + b)``; so a level loads both children's nodes at once, with
     no load waiting on another, and a waiting node is a payload and an entry ``t``, so
     taking it off the stack loads nothing (docs/performance.md, "Right-linked nodes,
-    session 12"). A tree deeper than the stack (``WALK_STACK``) overflows into a
-    stackless pass over the whole range, bounded by the hit found so far, in the same
-    loop (one leaf test site): the answer never depends on the order."""
+    session 12"). The nodes, the leaves' corners and the face numbers are read through
+    arrays made from their addresses (``packed_nodes``), whose strides are constants.
+    A tree taller than the stack (``BvhRecord.height`` above ``WALK_STACK``: its walk
+    could overflow the stack) takes a stackless pass over the whole range instead,
+    bounded by the hit found so far; chosen before the walk, it leaves the stack walk
+    without a fallback, which keeps the kernel within 64 registers on an H200 (4 blocks
+    of 256 threads a multiprocessor; a fallback after an overflow, in the same loop,
+    took 76). The answer never depends on the order."""
     rec = wp.object_record(id, MeshRecord)
     bvh = wp.object_record(rec.bvh, BvhRecord)
+    nodes = packed_nodes(bvh)  # (the arrays by address: constant strides)
+    tri = _tri_copy(rec)
+    items = tree_items(bvh)
     shear = ray_shear(dir)
     inv = wp.vec3(safe_inverse(dir[0]), safe_inverse(dir[1]), safe_inverse(dir[2]))
     hit = _FirstHit()
@@ -633,53 +651,50 @@ def _ray_closest_slot(id: wp.uint64, start: wp.vec3, dir: wp.vec3, max_t: float,
     nexts = wp.ext.empty(WALK_STACK, dtype=wp.int32)
     enters = wp.ext.empty(WALK_STACK, dtype=wp.float32)
     count = 0
-    sweep = span[1]  # the stackless pass's next node: none until the stack overflows
     active = False  # a node is to be visited: its payload (a, b)
     a = 0
     b = 0
     if span[0] < span[1]:
-        nd = bvh.nodes[span[0]]
+        nd = nodes[span[0]]
         active = ray_box_enter(nd.lower, nd.upper, start, inv) <= hit.t
         p = _payload(nd, span[0])
         a = p[0]
         b = p[1]
-    while active or sweep < span[1]:
-        if active:
-            # Down the nearer children to a leaf (or to where both children are
-            # missed: b = 0), then the leaf's faces: "while-while", as the closest point.
-            while b < 0:
-                right = right_child(b)
-                left_nd = bvh.nodes[a]
-                right_nd = bvh.nodes[right]
-                t_left = ray_box_enter(left_nd.lower, left_nd.upper, start, inv)
-                t_right = ray_box_enter(right_nd.lower, right_nd.upper, start, inv)
-                left_in = t_left <= hit.t  # (false for NaN: a missed box)
-                right_in = t_right <= hit.t
-                lp = _payload(left_nd, a)
-                rp = _payload(right_nd, right)
-                if right_in and (not left_in or t_right < t_left):  # the right one first
-                    if left_in:
-                        count = _wait_payload(firsts, nexts, enters, count, lp[0], lp[1],
-                                              t_left)  # fmt: skip
-                    a = rp[0]
-                    b = rp[1]
-                elif left_in:
-                    if right_in:
-                        count = _wait_payload(firsts, nexts, enters, count, rp[0], rp[1],
-                                              t_right)  # fmt: skip
-                    a = lp[0]
-                    b = lp[1]
-                else:  # both missed: no leaf to test
-                    b = 0
-                if count > WALK_STACK:  # full: a stackless pass once it is empty
-                    count = WALK_STACK
-                    sweep = span[0]
-        else:  # after an overflow, the stackless pass: its next leaf
-            step = _next_ray_leaf(bvh, sweep, span[1], start, inv, hit.t)
-            sweep = step[2]
-            a = step[0]
-            b = step[1]
-        hit = _ray_leaf(rec, bvh, a, b, shear, start, hit)
+    if bvh.height[0] > WALK_STACK:  # the stack could overflow: the stackless pass
+        node = span[0]
+        while node < span[1]:
+            step = _next_ray_leaf(nodes, node, span[1], start, inv, hit.t)
+            node = step[2]
+            hit = _ray_leaf(tri, items, step[0], step[1], shear, start, hit)
+        return hit.slot
+    while active:
+        # Down the nearer children to a leaf (or to where both children are missed: b
+        # = 0), then the leaf's faces: "while-while", as the closest point.
+        while b < 0:
+            right = right_child(b)
+            left_nd = nodes[a]
+            right_nd = nodes[right]
+            t_left = ray_box_enter(left_nd.lower, left_nd.upper, start, inv)
+            t_right = ray_box_enter(right_nd.lower, right_nd.upper, start, inv)
+            left_in = t_left <= hit.t  # (false for NaN: a missed box)
+            right_in = t_right <= hit.t
+            lp = _payload(left_nd, a)
+            rp = _payload(right_nd, right)
+            if right_in and (not left_in or t_right < t_left):  # the right one first
+                if left_in:
+                    count = _wait_payload(firsts, nexts, enters, count, lp[0], lp[1],
+                                          t_left)  # fmt: skip
+                a = rp[0]
+                b = rp[1]
+            elif left_in:
+                if right_in:
+                    count = _wait_payload(firsts, nexts, enters, count, rp[0], rp[1],
+                                          t_right)  # fmt: skip
+                a = lp[0]
+                b = lp[1]
+            else:  # both missed: no leaf to test
+                b = 0
+        hit = _ray_leaf(tri, items, a, b, shear, start, hit)
         # the nearest waiting node not beyond the hit found so far
         active = False
         while count > 0 and not active:
@@ -786,7 +801,7 @@ def mesh_query_ray_anyhit(
     span = _root_range(bvh, root)
     node = span[0]
     while node < span[1] and not found:
-        step = _next_ray_leaf(bvh, node, span[1], start, inv, max_t)
+        step = _next_ray_leaf(bvh.nodes, node, span[1], start, inv, max_t)
         node = step[2]
         for k in range(step[0], step[0] + step[1]):
             h = intersect_ray_triangle(
@@ -799,12 +814,14 @@ def mesh_query_ray_anyhit(
 
 @func
 def _next_ray_leaf(
-    bvh: BvhRecord, node: int, stop: int, start: wp.vec3, inv: wp.vec3, max_t: float
-) -> wp.vec3i:
-    """``_next_near_leaf`` for a ray (``inv``: its direction's componentwise inverse):
-    the next leaf whose box the ray meets at some ``0 <= t <= max_t``."""
+    nodes: wp.array(dtype=BvhNode), node: int, stop: int, start: wp.vec3, inv: wp.vec3,
+    max_t: float,
+) -> wp.vec3i:  # fmt: skip
+    """``_next_near_leaf`` for a ray (``inv``: its direction's componentwise inverse) over
+    a BVH's packed ``nodes``: the next leaf whose box the ray meets at some ``0 <= t <=
+    max_t``."""
     while node < stop:
-        nd = bvh.nodes[node]
+        nd = nodes[node]
         if ray_box_entry(nd.lower, nd.upper, start, inv, max_t):
             if nd.first >= 0:
                 return wp.vec3i(nd.first, nd.next, node + 1)
@@ -827,7 +844,7 @@ def mesh_query_ray_count_intersections(
     span = _root_range(bvh, root)
     node = span[0]
     while node < span[1]:
-        step = _next_ray_leaf(bvh, node, span[1], start, inv, FLT_MAX)
+        step = _next_ray_leaf(bvh.nodes, node, span[1], start, inv, FLT_MAX)
         node = step[2]
         for k in range(step[0], step[0] + step[1]):
             h = intersect_ray_triangle(

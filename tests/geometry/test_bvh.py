@@ -137,6 +137,21 @@ def check_tree(bvh: wp.Bvh, n: int, leaf_size: int) -> None:
             assert b < skip[node] and skip[b] == skip[node]
             np.testing.assert_array_equal(lo[node], np.minimum(lo[a], lo[b]))
             np.testing.assert_array_equal(hi[node], np.maximum(hi[a], hi[b]))
+    height = t.height.numpy()[0] if t.height is not None else 0  # (None: an empty tree)
+    assert height == tree_height(skip, first, t.num_nodes)
+
+
+def tree_height(skip, first, num_nodes: int) -> int:
+    """The most levels below the root (the depth of the deepest node), from the
+    preorder links."""
+    ends, deepest = [], 0
+    for n in range(num_nodes):
+        while ends and ends[-1] <= n:
+            ends.pop()
+        deepest = max(deepest, len(ends))
+        if first[n] < 0:
+            ends.append(skip[n])
+    return deepest
 
 
 @pytest.mark.parametrize("backend", BACKENDS)

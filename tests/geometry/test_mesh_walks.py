@@ -4,8 +4,8 @@ icosphere of 1,280 faces (5,120 off the interpreter) with leaves of 1 and 4 face
 points inside (the centre, where every face is nearly as close as the closest),
 outside and on the shell, against a float64 brute force; rays on a group's subtree
 against the brute force over that group's faces; and a tree deeper than the ordered
-walks' stack (``WALK_STACK``), where they finish with a stackless pass (for the closest
-ray hit also with the first hit in an entry the overflow lost)."""
+walks' stack (``WALK_STACK``), where they take a stackless pass (for the closest ray
+hit also one where a stack walk would lose the entry holding the first hit)."""
 
 from __future__ import annotations
 
@@ -240,9 +240,10 @@ def _wide_chain(winner: int) -> tuple[np.ndarray, np.ndarray]:
 
 @pytest.mark.parametrize("backend", BACKENDS)
 def test_ray_walks_overflowing_the_stack_match_brute_force(backend):
-    """The closest hit's stack overflows on every ray and the first hit lies in a lost
-    entry (a walk without its stackless pass answers another face here), so only the
-    stackless pass finds it; any hit and counted hits are checked too."""
+    """A tree taller than the closest hit's stack, on which a stack walk would overflow
+    on every ray and lose the entry holding the first hit (a stack walk answers another
+    face here): the walk must take its stackless pass (``BvhRecord.height``); any hit
+    and counted hits are checked too."""
     dev = _device(backend)
     rng = np.random.default_rng(3)
     n = 8 if backend == "interp" else 16
