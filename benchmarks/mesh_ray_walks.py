@@ -34,10 +34,12 @@ kin). ``lib`` (always run) calls the library's ``mesh_query_ray``. The variants
   ``mesh_query_ray_anyhit``, timed beside Warp's any-hit kernel ``warp_any``):
   ``any_stack`` walks the right-linked nodes with a stack of payloads (both children
   loaded at once, the left one first), ``any_near`` the same entering the nearer child
-  first; neither has a fallback (-2 on overflow);
+  first; neither has a fallback (-2 on overflow); ``any_addr``: the library's walk
+  with its arrays through the records' addresses;
 - counted hits (``count_*``, compared with ``count_lib``,
   ``mesh_query_ray_count_intersections``, beside Warp's ``warp_count``): ``count_stack``
-  as ``any_stack`` without the early exit;
+  as ``any_stack`` without the early exit; ``count_stack_addr`` the same through the
+  records' addresses;
 - closest points (``point_*``, the workload's query points, ``mesh_query_point_no_sign``
   at ``MAX_DIST``; faces and ``u`` compared with ``point_lib``, the library's, beside
   Warp's ``warp_point``): ``point_skip``, the library's binary walk before session 12,
@@ -99,6 +101,8 @@ VARIANTS = {
     "any_near": {"walk": "any_near"},
     "count_lib": {"walk": "count_lib"},
     "count_stack": {"walk": "count_stack"},
+    "any_addr": {"walk": "any_addr"},
+    "count_stack_addr": {"walk": "count_stack_addr"},
     "point_lib": {"walk": "point_lib"},
     "point_skip": {"walk": "point_skip"},
 }
@@ -141,14 +145,13 @@ def leaf_hits(rec: MeshRecord, bvh: BvhRecord, first: int, count: int, shear: Ra
 
 
 @wp.func
-def leaf_count(rec: MeshRecord, first: int, count: int, shear: RayShear, start: wp.vec3,
-               max_t: float) -> int:  # fmt: skip
-    """The faces of a leaf the ray hits at ``0 <= t < max_t``."""
+def leaf_count(tri: wp.array(dtype=wp.vec3), first: int, count: int, shear: RayShear,
+               start: wp.vec3, max_t: float) -> int:  # fmt: skip
+    """The faces of a leaf (corners in ``tri``, a mesh's ``tri``) the ray hits at ``0 <=
+    t < max_t``."""
     n = 0
     for k in range(first, first + count):
-        h = intersect_ray_triangle(
-            shear, start, rec.tri[k * 3], rec.tri[k * 3 + 1], rec.tri[k * 3 + 2]
-        )
+        h = intersect_ray_triangle(shear, start, tri[k * 3], tri[k * 3 + 1], tri[k * 3 + 2])
         if h[0] >= 0.0 and h[0] < max_t:
             n = n + 1
     return n
@@ -521,16 +524,80 @@ def prefetch_walk(id: wp.uint64, start: wp.vec3, dir: wp.vec3, max_t: float) -> 
     return hit.slot
 
 
-def _stack_count_walk(stop_at_first: bool, nearer_first: bool):
-    """Hits counted on the right-linked nodes with a stack of payloads (no entry ``t``:
-    every box the ray meets before ``max_t`` is entered): a level loads both children
-    at once; ``stop_at_first``: the any hit (1 or 0); ``nearer_first``: the child the
-    ray enters first is visited first, else the left one. -2 on a stack overflow."""
+@wp.func
+def next_leaf_in(nodes: wp.array(dtype=BvhNode), node: int, stop: int, start: wp.vec3,
+                 inv: wp.vec3, max_t: float) -> wp.vec3i:  # fmt: skip
+    """``next_ray_leaf`` over a nodes array."""
+    n = node
+    while n < stop:
+        nd = nodes[n]
+        if ray_box_enter(nd.lower, nd.upper, start, inv) <= max_t:
+            if nd.first >= 0:
+                return wp.vec3i(nd.first, nd.next, n + 1)
+            n = n + 1
+        else:
+            n = skip_of(nd, n)
+    return wp.vec3i(0, 0, stop)
+
+
+def _arrays(by_address: bool):
+    """``(nodes, tri)``: functions giving a BVH's nodes and a mesh's corner copy, through
+    the records' addresses (``by_address``: constant strides) or the records' arrays."""
+
+    @wp.func
+    def nodes_of(bvh: BvhRecord) -> wp.array(dtype=BvhNode):
+        if wp.static(by_address):
+            return packed_nodes(bvh)
+        return bvh.nodes
+
+    @wp.func
+    def tri_of(rec: MeshRecord) -> wp.array(dtype=wp.vec3):
+        if wp.static(by_address):
+            return wp.array(ptr=rec.tri_ptr, shape=(rec.tri.shape[0],), dtype=wp.vec3)
+        return rec.tri
+
+    return nodes_of, tri_of
+
+
+def _stackless_any(by_address: bool):
+    """The library's any hit (``mesh_query_ray_anyhit``: stackless, leaf to leaf) on the
+    records' arrays or (``by_address``) through their addresses: 1 or 0."""
+    nodes_of, tri_of = _arrays(by_address)
 
     @wp.func
     def walk(id: wp.uint64, start: wp.vec3, dir: wp.vec3, max_t: float) -> int:
         rec = wp.object_record(id, MeshRecord)
         bvh = wp.object_record(rec.bvh, BvhRecord)
+        nodes = nodes_of(bvh)
+        tri = tri_of(rec)
+        shear = ray_shear(dir)
+        inv = wp.vec3(safe_inverse(dir[0]), safe_inverse(dir[1]), safe_inverse(dir[2]))
+        found = 0
+        span = root_range(bvh, -1)
+        node = span[0]
+        while node < span[1] and found == 0:
+            step = next_leaf_in(nodes, node, span[1], start, inv, max_t)
+            node = step[2]
+            found = wp.min(leaf_count(tri, step[0], step[1], shear, start, max_t), 1)
+        return found
+
+    return walk
+
+
+def _stack_count_walk(stop_at_first: bool, nearer_first: bool, by_address: bool = False):
+    """Hits counted on the right-linked nodes with a stack of payloads (no entry ``t``:
+    every box the ray meets before ``max_t`` is entered): a level loads both children
+    at once; ``stop_at_first``: the any hit (1 or 0); ``nearer_first``: the child the
+    ray enters first is visited first, else the left one; ``by_address``: the arrays
+    through the records' addresses. -2 on a stack overflow."""
+    nodes_of, tri_of = _arrays(by_address)
+
+    @wp.func
+    def walk(id: wp.uint64, start: wp.vec3, dir: wp.vec3, max_t: float) -> int:
+        rec = wp.object_record(id, MeshRecord)
+        bvh = wp.object_record(rec.bvh, BvhRecord)
+        nodes = nodes_of(bvh)
+        tri = tri_of(rec)
         shear = ray_shear(dir)
         inv = wp.vec3(safe_inverse(dir[0]), safe_inverse(dir[1]), safe_inverse(dir[2]))
         sa = wp.ext.empty(STACK, dtype=wp.int32)
@@ -543,7 +610,7 @@ def _stack_count_walk(stop_at_first: bool, nearer_first: bool):
         a = 0
         b = 0
         if root >= 0:
-            nd = bvh.nodes[root]
+            nd = nodes[root]
             active = ray_box_enter(nd.lower, nd.upper, start, inv) <= max_t
             p = payload(nd, root)
             a = p[0]
@@ -551,8 +618,8 @@ def _stack_count_walk(stop_at_first: bool, nearer_first: bool):
         while active:
             while b < 0:
                 right = -1 - b
-                left_nd = bvh.nodes[a]
-                right_nd = bvh.nodes[right]
+                left_nd = nodes[a]
+                right_nd = nodes[right]
                 t_l = ray_box_enter(left_nd.lower, left_nd.upper, start, inv)
                 t_r = ray_box_enter(right_nd.lower, right_nd.upper, start, inv)
                 l_in = t_l <= max_t
@@ -577,7 +644,7 @@ def _stack_count_walk(stop_at_first: bool, nearer_first: bool):
                 if count > STACK:
                     lost = True
                     count = STACK
-            found = found + leaf_count(rec, a, b, shear, start, max_t)
+            found = found + leaf_count(tri, a, b, shear, start, max_t)
             active = count > 0
             if wp.static(stop_at_first):
                 active = active and found == 0
@@ -784,8 +851,12 @@ def variant_kernel(walk: str, regs: int | None = None):
                 t[i] = closest_point_to_triangle(a, b, c, start[i])[0]
 
         return point
-    if walk in ("any_stack", "any_near", "count_stack"):
-        hits = _stack_count_walk(walk.startswith("any"), walk == "any_near")
+    if walk in ("any_stack", "any_near", "count_stack", "count_stack_addr", "any_addr"):
+        if walk == "any_addr":
+            hits = _stackless_any(True)
+        else:
+            hits = _stack_count_walk(walk.startswith("any"), walk == "any_near",
+                                     walk.endswith("_addr"))  # fmt: skip
 
         @wp.kernel(enable_backward=False, **options)
         def counted(mesh: wp.uint64, start: wp.array(dtype=wp.vec3),
