@@ -43,7 +43,9 @@ kin). ``lib`` (always run) calls the library's ``mesh_query_ray``. The variants
 - closest points (``point_*``, the workload's query points, ``mesh_query_point_no_sign``
   at ``MAX_DIST``; faces and ``u`` compared with ``point_lib``, the library's, beside
   Warp's ``warp_point``): ``point_skip``, the library's binary walk before session 12,
-  where the far child's load waited for the near child's (its ``skip``).
+  where the far child's load waited for the near child's (its ``skip``);
+  ``point_link``, the walk of ``364b2f8`` (the far child from the node's link);
+  ``point_addr``, that walk through the records' addresses.
 
 Session 11 (docs/performance.md, "Mesh rays on the GPU, session 11") also ran the
 session-10 search filled and not (``old_lib``, ``git show
@@ -105,6 +107,8 @@ VARIANTS = {
     "count_stack_addr": {"walk": "count_stack_addr"},
     "point_lib": {"walk": "point_lib"},
     "point_skip": {"walk": "point_skip"},
+    "point_link": {"walk": "point_link"},
+    "point_addr": {"walk": "point_addr"},
 }
 #: Each family's reference variant (answers compared with it) and Warp's row.
 FAMILIES = {"ray": ("lib", "warp"), "any": ("any_lib", "warp_any"),
@@ -127,16 +131,16 @@ class Hit:
 
 
 @wp.func
-def leaf_hits(rec: MeshRecord, bvh: BvhRecord, first: int, count: int, shear: RayShear,
-              start: wp.vec3, best: Hit) -> Hit:  # fmt: skip
+def leaf_hits(tri: wp.array(dtype=wp.vec3), items: wp.array(dtype=wp.int32), first: int,
+              count: int, shear: RayShear, start: wp.vec3, best: Hit) -> Hit:  # fmt: skip
+    """The library's leaf test of the closest hit (corners in ``tri``, a mesh's copy;
+    face numbers in ``items``, the BVH's item order)."""
     hit = best
     for k in range(first, first + count):
-        h = intersect_ray_triangle(
-            shear, start, rec.tri[k * 3], rec.tri[k * 3 + 1], rec.tri[k * 3 + 2]
-        )
+        h = intersect_ray_triangle(shear, start, tri[k * 3], tri[k * 3 + 1], tri[k * 3 + 2])
         t = h[0]
         if t >= 0.0 and t <= hit.t:
-            f = bvh.items[k]
+            f = items[k]
             if t < hit.t or (hit.slot >= 0 and f < hit.face):
                 hit.t = t
                 hit.face = f
@@ -175,11 +179,13 @@ def skip_of(nd: BvhNode, node: int) -> int:
 
 
 @wp.func
-def next_ray_leaf(bvh: BvhRecord, node: int, stop: int, start: wp.vec3, inv: wp.vec3,
-                  max_t: float) -> wp.vec3i:  # fmt: skip
+def next_ray_leaf(nodes: wp.array(dtype=BvhNode), node: int, stop: int, start: wp.vec3,
+                  inv: wp.vec3, max_t: float) -> wp.vec3i:  # fmt: skip
+    """The library's stackless step (``mesh._next_ray_leaf``): the next leaf before
+    ``stop`` whose box the ray meets by ``max_t``: ``(first, count, node after it)``."""
     n = node
     while n < stop:
-        nd = bvh.nodes[n]
+        nd = nodes[n]
         if ray_box_enter(nd.lower, nd.upper, start, inv) <= max_t:
             if nd.first >= 0:
                 return wp.vec3i(nd.first, nd.next, n + 1)
@@ -202,7 +208,7 @@ def payload(nd: BvhNode, node: int) -> wp.vec2i:
 def push(sa: wp.array(dtype=wp.int32), sb: wp.array(dtype=wp.int32),
          st: wp.array(dtype=wp.float32), count: int, a: int, b: int, t: float) -> int:  # fmt: skip
     """Payload ``(a, b)`` entered at ``t`` onto the stack of ``count`` entries: the new
-    count (``STACK + 1``: full, the entry is lost and the walk answers -2)."""
+    count (``STACK + 1``: full, the entry is lost)."""
     if count < STACK:
         sa[count] = a
         sb[count] = b
@@ -222,135 +228,48 @@ def push2(sa: wp.array(dtype=wp.int32), sb: wp.array(dtype=wp.int32), count: int
     return STACK + 1
 
 
-@wp.func
-def payload_walk(id: wp.uint64, start: wp.vec3, dir: wp.vec3, max_t: float) -> int:
-    """The library's walk since session 12 (``mesh._ray_closest_slot``) without its
-    stackless fallback: -2 where the stack would overflow."""
-    rec = wp.object_record(id, MeshRecord)
-    bvh = wp.object_record(rec.bvh, BvhRecord)
-    shear = ray_shear(dir)
-    inv = wp.vec3(safe_inverse(dir[0]), safe_inverse(dir[1]), safe_inverse(dir[2]))
-    hit = Hit()
-    hit.t = max_t
-    hit.face = -1
-    hit.slot = -1
-    sa = wp.ext.empty(STACK, dtype=wp.int32)
-    sb = wp.ext.empty(STACK, dtype=wp.int32)
-    st = wp.ext.empty(STACK, dtype=wp.float32)
-    count = 0
-    lost = False
-    root = bvh.root
-    active = False
-    a = 0
-    b = 0
-    if root >= 0:
-        nd = bvh.nodes[root]
-        active = ray_box_enter(nd.lower, nd.upper, start, inv) <= hit.t
-        p = payload(nd, root)
-        a = p[0]
-        b = p[1]
-    while active:
-        while b < 0:  # an inner node: both children, loaded independently
-            right = -1 - b
-            left_nd = bvh.nodes[a]
-            right_nd = bvh.nodes[right]
-            t_l = ray_box_enter(left_nd.lower, left_nd.upper, start, inv)
-            t_r = ray_box_enter(right_nd.lower, right_nd.upper, start, inv)
-            l_in = t_l <= hit.t
-            r_in = t_r <= hit.t
-            lp = payload(left_nd, a)
-            rp = payload(right_nd, right)
-            if r_in and (not l_in or t_r < t_l):  # the right child first
-                if l_in:
-                    count = push(sa, sb, st, count, lp[0], lp[1], t_l)
-                a = rp[0]
-                b = rp[1]
-            elif l_in:
-                if r_in:
-                    count = push(sa, sb, st, count, rp[0], rp[1], t_r)
-                a = lp[0]
-                b = lp[1]
-            else:
-                b = 0  # both missed: nothing to test
-            if count > STACK:
-                lost = True
-                count = STACK
-        hit = leaf_hits(rec, bvh, a, b, shear, start, hit)
-        active = False
-        while count > 0 and not active:
-            count = count - 1
-            if st[count] <= hit.t:
-                a = sa[count]
-                b = sb[count]
-                active = True
-    if lost:
-        return -2
-    return hit.slot
-
-
-def _split_walk(by_address: bool, split: bool):
-    """The library's walk (``mesh._ray_closest_slot``, session 12) with its arrays
-    (nodes, the leaves' corners, the face numbers) read through the records' addresses
-    (``by_address``: constant strides, ``packed_nodes``) or the records' arrays, and its
-    stackless pass in the loop (one leaf-test site) or, with ``split``, chosen before
-    the walk (a tree that may overflow the stack takes the stackless pass alone; the
-    stack walk then has no fallback; here the choice reads ``skip[0] < 0``, a load
-    that is false, where the library would read the tree's height)."""
+def _arrays(by_address: bool):
+    """``(nodes_of, items_of, tri_of)``: functions giving a BVH's nodes and item order
+    and a mesh's corner copy, through the records' addresses (``by_address``: constant
+    strides, ``packed_nodes``) or the records' arrays."""
 
     @wp.func
-    def node_array(bvh: BvhRecord) -> wp.array(dtype=BvhNode):
+    def nodes_of(bvh: BvhRecord) -> wp.array(dtype=BvhNode):
         if wp.static(by_address):
             return packed_nodes(bvh)
         return bvh.nodes
 
     @wp.func
-    def item_array(bvh: BvhRecord) -> wp.array(dtype=wp.int32):
+    def items_of(bvh: BvhRecord) -> wp.array(dtype=wp.int32):
         if wp.static(by_address):
             return tree_items(bvh)
         return bvh.items
 
     @wp.func
-    def tri_array(rec: MeshRecord) -> wp.array(dtype=wp.vec3):
+    def tri_of(rec: MeshRecord) -> wp.array(dtype=wp.vec3):
         if wp.static(by_address):
             return wp.array(ptr=rec.tri_ptr, shape=(rec.tri.shape[0],), dtype=wp.vec3)
         return rec.tri
 
-    @wp.func
-    def leaf(tri: wp.array(dtype=wp.vec3), items: wp.array(dtype=wp.int32), first: int,
-             count: int, shear: RayShear, start: wp.vec3, best: Hit) -> Hit:  # fmt: skip
-        hit = best
-        for k in range(first, first + count):
-            h = intersect_ray_triangle(shear, start, tri[k * 3], tri[k * 3 + 1], tri[k * 3 + 2])
-            t = h[0]
-            if t >= 0.0 and t <= hit.t:
-                f = items[k]
-                if t < hit.t or (hit.slot >= 0 and f < hit.face):
-                    hit.t = t
-                    hit.face = f
-                    hit.slot = k
-        return hit
+    return nodes_of, items_of, tri_of
 
-    @wp.func
-    def next_leaf(nodes: wp.array(dtype=BvhNode), node: int, stop: int, start: wp.vec3,
-                  inv: wp.vec3, max_t: float) -> wp.vec3i:  # fmt: skip
-        n = node
-        while n < stop:
-            nd = nodes[n]
-            if ray_box_enter(nd.lower, nd.upper, start, inv) <= max_t:
-                if nd.first >= 0:
-                    return wp.vec3i(nd.first, nd.next, n + 1)
-                n = n + 1
-            else:
-                n = skip_of(nd, n)
-        return wp.vec3i(0, 0, stop)
+
+def _payload_walk(by_address: bool, split: bool, fallback: bool = True):
+    """The payload walk on right-linked nodes (the library's since session 12, Warp's
+    discipline) with its arrays read through the records' addresses (``by_address``)
+    or the records' arrays, and its stackless pass in the loop after an overflow (one
+    leaf-test site; without ``fallback``, -2 where the stack overflows) or, with
+    ``split``, chosen before the walk, as the library does by the tree's height (here
+    ``num_points < 0``, a load that is false, stands for it)."""
+    nodes_of, items_of, tri_of = _arrays(by_address)
 
     @wp.func
     def walk(id: wp.uint64, start: wp.vec3, dir: wp.vec3, max_t: float) -> int:
         rec = wp.object_record(id, MeshRecord)
         bvh = wp.object_record(rec.bvh, BvhRecord)
-        nodes = node_array(bvh)
-        tri = tri_array(rec)
-        items = item_array(bvh)
+        nodes = nodes_of(bvh)
+        tri = tri_of(rec)
+        items = items_of(bvh)
         shear = ray_shear(dir)
         inv = wp.vec3(safe_inverse(dir[0]), safe_inverse(dir[1]), safe_inverse(dir[2]))
         hit = Hit()
@@ -362,6 +281,7 @@ def _split_walk(by_address: bool, split: bool):
         sb = wp.ext.empty(STACK, dtype=wp.int32)
         st = wp.ext.empty(STACK, dtype=wp.float32)
         count = 0
+        lost = False
         sweep = span[1]
         active = False
         a = 0
@@ -373,16 +293,16 @@ def _split_walk(by_address: bool, split: bool):
             a = p[0]
             b = p[1]
         if wp.static(split):  # noqa: SIM102 - a static branch
-            if rec.num_points < 0:  # (false: the library would read the tree's height here)
+            if rec.num_points < 0:  # (false: the library reads the tree's height here)
                 node = span[0]
                 while node < span[1]:
-                    step = next_leaf(nodes, node, span[1], start, inv, hit.t)
+                    step = next_ray_leaf(nodes, node, span[1], start, inv, hit.t)
                     node = step[2]
-                    hit = leaf(tri, items, step[0], step[1], shear, start, hit)
+                    hit = leaf_hits(tri, items, step[0], step[1], shear, start, hit)
                 return hit.slot
-        while active or (not wp.static(split) and sweep < span[1]):
+        while active or (wp.static(fallback and not split) and sweep < span[1]):
             if active:
-                while b < 0:
+                while b < 0:  # an inner node: both children, loaded independently
                     right = -1 - b
                     left_nd = nodes[a]
                     right_nd = nodes[right]
@@ -392,7 +312,7 @@ def _split_walk(by_address: bool, split: bool):
                     r_in = t_r <= hit.t
                     lp = payload(left_nd, a)
                     rp = payload(right_nd, right)
-                    if r_in and (not l_in or t_r < t_l):
+                    if r_in and (not l_in or t_r < t_l):  # the right child first
                         if l_in:
                             count = push(sa, sb, st, count, lp[0], lp[1], t_l)
                         a = rp[0]
@@ -403,17 +323,18 @@ def _split_walk(by_address: bool, split: bool):
                         a = lp[0]
                         b = lp[1]
                     else:
-                        b = 0
+                        b = 0  # both missed: nothing to test
                     if count > STACK:
                         count = STACK
-                        if wp.static(not split):
+                        lost = True
+                        if wp.static(fallback and not split):
                             sweep = span[0]
             else:
-                step = next_leaf(nodes, sweep, span[1], start, inv, hit.t)
+                step = next_ray_leaf(nodes, sweep, span[1], start, inv, hit.t)
                 sweep = step[2]
                 a = step[0]
                 b = step[1]
-            hit = leaf(tri, items, a, b, shear, start, hit)
+            hit = leaf_hits(tri, items, a, b, shear, start, hit)
             active = False
             while count > 0 and not active:
                 count = count - 1
@@ -421,6 +342,9 @@ def _split_walk(by_address: bool, split: bool):
                     a = sa[count]
                     b = sb[count]
                     active = True
+        if wp.static(not fallback):  # noqa: SIM102 - a static branch
+            if lost:
+                return -2
         return hit.slot
 
     return walk
@@ -506,11 +430,11 @@ def prefetch_walk(id: wp.uint64, start: wp.vec3, dir: wp.vec3, max_t: float) -> 
                     first = 0
                     items = 0
         else:
-            step = next_ray_leaf(bvh, sweep, span[1], start, inv, hit.t)
+            step = next_ray_leaf(bvh.nodes, sweep, span[1], start, inv, hit.t)
             sweep = step[2]
             first = step[0]
             items = step[1]
-        hit = leaf_hits(rec, bvh, first, items, shear, start, hit)
+        hit = leaf_hits(rec.tri, bvh.items, first, items, shear, start, hit)
         active = False
         while count > 0 and not active:
             count = count - 1
@@ -524,45 +448,10 @@ def prefetch_walk(id: wp.uint64, start: wp.vec3, dir: wp.vec3, max_t: float) -> 
     return hit.slot
 
 
-@wp.func
-def next_leaf_in(nodes: wp.array(dtype=BvhNode), node: int, stop: int, start: wp.vec3,
-                 inv: wp.vec3, max_t: float) -> wp.vec3i:  # fmt: skip
-    """``next_ray_leaf`` over a nodes array."""
-    n = node
-    while n < stop:
-        nd = nodes[n]
-        if ray_box_enter(nd.lower, nd.upper, start, inv) <= max_t:
-            if nd.first >= 0:
-                return wp.vec3i(nd.first, nd.next, n + 1)
-            n = n + 1
-        else:
-            n = skip_of(nd, n)
-    return wp.vec3i(0, 0, stop)
-
-
-def _arrays(by_address: bool):
-    """``(nodes, tri)``: functions giving a BVH's nodes and a mesh's corner copy, through
-    the records' addresses (``by_address``: constant strides) or the records' arrays."""
-
-    @wp.func
-    def nodes_of(bvh: BvhRecord) -> wp.array(dtype=BvhNode):
-        if wp.static(by_address):
-            return packed_nodes(bvh)
-        return bvh.nodes
-
-    @wp.func
-    def tri_of(rec: MeshRecord) -> wp.array(dtype=wp.vec3):
-        if wp.static(by_address):
-            return wp.array(ptr=rec.tri_ptr, shape=(rec.tri.shape[0],), dtype=wp.vec3)
-        return rec.tri
-
-    return nodes_of, tri_of
-
-
 def _stackless_any(by_address: bool):
     """The library's any hit (``mesh_query_ray_anyhit``: stackless, leaf to leaf) on the
     records' arrays or (``by_address``) through their addresses: 1 or 0."""
-    nodes_of, tri_of = _arrays(by_address)
+    nodes_of, _items_of, tri_of = _arrays(by_address)
 
     @wp.func
     def walk(id: wp.uint64, start: wp.vec3, dir: wp.vec3, max_t: float) -> int:
@@ -576,7 +465,7 @@ def _stackless_any(by_address: bool):
         span = root_range(bvh, -1)
         node = span[0]
         while node < span[1] and found == 0:
-            step = next_leaf_in(nodes, node, span[1], start, inv, max_t)
+            step = next_ray_leaf(nodes, node, span[1], start, inv, max_t)
             node = step[2]
             found = wp.min(leaf_count(tri, step[0], step[1], shear, start, max_t), 1)
         return found
@@ -590,7 +479,7 @@ def _stack_count_walk(stop_at_first: bool, nearer_first: bool, by_address: bool 
     at once; ``stop_at_first``: the any hit (1 or 0); ``nearer_first``: the child the
     ray enters first is visited first, else the left one; ``by_address``: the arrays
     through the records' addresses. -2 on a stack overflow."""
-    nodes_of, tri_of = _arrays(by_address)
+    nodes_of, _items_of, tri_of = _arrays(by_address)
 
     @wp.func
     def walk(id: wp.uint64, start: wp.vec3, dir: wp.vec3, max_t: float) -> int:
@@ -662,20 +551,20 @@ def _stack_count_walk(stop_at_first: bool, nearer_first: bool, by_address: bool 
 
 
 @wp.func
-def closest_in_leaf(rec: MeshRecord, bvh: BvhRecord, first: int, count: int, point: wp.vec3,
-                    best: wp.vec2) -> wp.vec2:  # fmt: skip
+def closest_in_leaf(tri: wp.array(dtype=wp.vec3), items: wp.array(dtype=wp.int32), first: int,
+                    count: int, point: wp.vec3, best: wp.vec2) -> wp.vec2:  # fmt: skip
     """The library's leaf test of the closest point: ``best`` is (squared distance,
     face as a float)."""
     out = best
     for k in range(first, first + count):
-        a = rec.tri[k * 3]
-        b = rec.tri[k * 3 + 1]
-        c = rec.tri[k * 3 + 2]
+        a = tri[k * 3]
+        b = tri[k * 3 + 1]
+        c = tri[k * 3 + 2]
         uv = closest_point_to_triangle(a, b, c, point)
         q = a * uv[0] + b * uv[1] + c * (1.0 - uv[0] - uv[1])
         d = wp.length_sq(q - point)
         if d <= out[0]:
-            f = bvh.items[k]
+            f = items[k]
             if d < out[0] or (out[1] >= 0.0 and float(f) < out[1]):  # noqa: SIM102
                 if not is_sliver(a, b, c):
                     out = wp.vec2(d, float(f))
@@ -683,11 +572,11 @@ def closest_in_leaf(rec: MeshRecord, bvh: BvhRecord, first: int, count: int, poi
 
 
 @wp.func
-def next_near_leaf(bvh: BvhRecord, node: int, stop: int, point: wp.vec3,
+def next_near_leaf(nodes: wp.array(dtype=BvhNode), node: int, stop: int, point: wp.vec3,
                    bound_sq: float) -> wp.vec3i:  # fmt: skip
     n = node
     while n < stop:
-        nd = bvh.nodes[n]
+        nd = nodes[n]
         if box_distance_sq(nd.lower, nd.upper, point) <= bound_sq:
             if nd.first >= 0:
                 return wp.vec3i(nd.first, nd.next, n + 1)
@@ -697,70 +586,82 @@ def next_near_leaf(bvh: BvhRecord, node: int, stop: int, point: wp.vec3,
     return wp.vec3i(0, 0, stop)
 
 
-@wp.func
-def closest_skip(id: wp.uint64, point: wp.vec3, max_dist: float) -> int:
-    """The library's closest-point search before session 12 (``mesh._closest_face``'s
-    binary walk): the far child is the near child's successor, read from the near
-    child's node (``skip``), so its load waits for the near one's."""
-    rec = wp.object_record(id, MeshRecord)
-    bvh = wp.object_record(rec.bvh, BvhRecord)
-    best = wp.vec2(max_dist * max_dist, -1.0)
-    span = root_range(bvh, -1)
-    nodes = wp.ext.empty(STACK, dtype=wp.int32)
-    dists = wp.ext.empty(STACK, dtype=wp.float32)
-    count = 0
-    sweep = span[1]
-    if span[0] < span[1]:
-        nodes[0] = span[0]
-        dists[0] = 0.0
-        count = 1
-    while count > 0 or sweep < span[1]:
-        first = 0
-        items = 0
-        if count == 0:
-            step = next_near_leaf(bvh, sweep, span[1], point, best[0])
-            sweep = step[2]
-            first = step[0]
-            items = step[1]
-        else:
-            count = count - 1
-            node = nodes[count]
-            if dists[count] <= best[0]:
-                nd = bvh.nodes[node]
-                inner = nd.first < 0
-                while inner:
-                    near = node + 1
-                    near_nd = bvh.nodes[near]
-                    far = skip_of(near_nd, near)
-                    far_nd = bvh.nodes[far]
-                    d_near = box_distance_sq(near_nd.lower, near_nd.upper, point)
-                    d_far = box_distance_sq(far_nd.lower, far_nd.upper, point)
-                    if d_far < d_near:
-                        tmp = near
-                        near = far
-                        far = tmp
-                        near_nd = far_nd
-                        tmp_d = d_near
-                        d_near = d_far
-                        d_far = tmp_d
-                    if d_far <= best[0]:
-                        if count < STACK:
-                            nodes[count] = far
-                            dists[count] = d_far
-                        count = count + 1
-                        if count > STACK:
-                            count = STACK
-                            sweep = span[0]
-                    inner = False
-                    if d_near <= best[0]:
-                        node = near
-                        nd = near_nd
-                        inner = nd.first < 0
-                if nd.first >= 0:
-                    first = nd.first
-                    items = nd.next
-        best = closest_in_leaf(rec, bvh, first, items, point, best)
-    return int(best[1])
+def _closest_walk(far_from_link: bool, by_address: bool):
+    """The library's closest-point search (``mesh._closest_face``'s binary walk): the
+    far child from the inner node's right link (``far_from_link``: both child loads at
+    once, since ``364b2f8``) or, before, from the near child's node (``skip``: the far
+    load waited for the near one's); the arrays through the records' addresses
+    (``by_address``) or the records' arrays."""
+    nodes_of, items_of, tri_of = _arrays(by_address)
+
+    @wp.func
+    def walk(id: wp.uint64, point: wp.vec3, max_dist: float) -> int:
+        rec = wp.object_record(id, MeshRecord)
+        bvh = wp.object_record(rec.bvh, BvhRecord)
+        tree = nodes_of(bvh)
+        tri = tri_of(rec)
+        items = items_of(bvh)
+        best = wp.vec2(max_dist * max_dist, -1.0)
+        span = root_range(bvh, -1)
+        nodes = wp.ext.empty(STACK, dtype=wp.int32)
+        dists = wp.ext.empty(STACK, dtype=wp.float32)
+        count = 0
+        sweep = span[1]
+        if span[0] < span[1]:
+            nodes[0] = span[0]
+            dists[0] = 0.0
+            count = 1
+        while count > 0 or sweep < span[1]:
+            first = 0
+            leaf_items = 0
+            if count == 0:
+                step = next_near_leaf(tree, sweep, span[1], point, best[0])
+                sweep = step[2]
+                first = step[0]
+                leaf_items = step[1]
+            else:
+                count = count - 1
+                node = nodes[count]
+                if dists[count] <= best[0]:
+                    nd = tree[node]
+                    inner = nd.first < 0
+                    while inner:
+                        near = node + 1
+                        far = -1 - nd.first  # (the link; before: the near child's skip)
+                        near_nd = tree[near]
+                        if wp.static(not far_from_link):
+                            far = skip_of(near_nd, near)
+                        far_nd = tree[far]
+                        d_near = box_distance_sq(near_nd.lower, near_nd.upper, point)
+                        d_far = box_distance_sq(far_nd.lower, far_nd.upper, point)
+                        if d_far < d_near:
+                            tmp = near
+                            near = far
+                            far = tmp
+                            near_nd = far_nd
+                            tmp_d = d_near
+                            d_near = d_far
+                            d_far = tmp_d
+                        if d_far <= best[0]:
+                            if count < STACK:
+                                nodes[count] = far
+                                dists[count] = d_far
+                            count = count + 1
+                            if count > STACK:
+                                count = STACK
+                                sweep = span[0]
+                        inner = False
+                        if d_near <= best[0]:
+                            node = near
+                            nd = near_nd
+                            inner = nd.first < 0
+                    if nd.first >= 0:
+                        first = nd.first
+                        leaf_items = nd.next
+            best = closest_in_leaf(tri, items, first, leaf_items, point, best)
+        return int(best[1])
+
+    return walk
 
 
 @wp.func
@@ -835,14 +736,15 @@ def variant_kernel(walk: str, regs: int | None = None):
         return _library_count(wp)
     if walk == "point_lib":
         return _library_point(wp)
-    if walk == "point_skip":
+    if walk in ("point_skip", "point_link", "point_addr"):
+        closest = _closest_walk(walk != "point_skip", walk == "point_addr")
 
         @wp.kernel(enable_backward=False, **options)
         def point(mesh: wp.uint64, start: wp.array(dtype=wp.vec3),
                   d: wp.array(dtype=wp.vec3), face: wp.array(dtype=wp.int32),
                   t: wp.array(dtype=float)):  # fmt: skip
             i = wp.tid()
-            f = closest_skip(mesh, start[i], MAX_DIST)
+            f = closest(mesh, start[i], MAX_DIST)
             face[i] = f
             if f >= 0:  # the library's tail: the barycentrics on the face found
                 a = wp.mesh_get_point(mesh, f * 3)
@@ -866,10 +768,11 @@ def variant_kernel(walk: str, regs: int | None = None):
             face[i] = hits(mesh, start[i], d[i], MAX_T)
 
         return counted
-    if walk in ("onesite", "addr", "split", "split_rec"):
-        search = _split_walk(walk in ("addr", "split"), walk.startswith("split"))
-    else:
-        search = payload_walk if walk == "payload" else prefetch_walk
+    if walk == "prefetch":
+        search = prefetch_walk
+    else:  # onesite, payload, addr, split, split_rec
+        search = _payload_walk(walk in ("addr", "split"), walk.startswith("split"),
+                               walk != "payload")  # fmt: skip
 
     @wp.kernel(enable_backward=False, **options)
     def rays(mesh: wp.uint64, start: wp.array(dtype=wp.vec3), d: wp.array(dtype=wp.vec3),
