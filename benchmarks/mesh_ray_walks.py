@@ -34,12 +34,13 @@ kin). ``lib`` (always run) calls the library's ``mesh_query_ray``. The variants
   ``mesh_query_ray_anyhit``, timed beside Warp's any-hit kernel ``warp_any``):
   ``any_stack`` walks the right-linked nodes with a stack of payloads (both children
   loaded at once, the left one first), ``any_near`` the same entering the nearer child
-  first; neither has a fallback (-2 on overflow); ``any_addr``: the library's walk
-  with its arrays through the records' addresses;
+  first; neither has a fallback (-2 on overflow); ``any_addr`` / ``any_rec``: the
+  library's stackless walk through the records' addresses / on the records' arrays;
 - counted hits (``count_*``, compared with ``count_lib``,
   ``mesh_query_ray_count_intersections``, beside Warp's ``warp_count``): ``count_stack``
   as ``any_stack`` without the early exit; ``count_stack_addr`` the same through the
-  records' addresses;
+  records' addresses; ``count_rec`` the library's stackless count on the records'
+  arrays;
 - closest points (``point_*``, the workload's query points, ``mesh_query_point_no_sign``
   at ``MAX_DIST``; faces and ``u`` compared with ``point_lib``, the library's, beside
   Warp's ``warp_point``): ``point_skip``, the library's binary walk before session 12,
@@ -104,6 +105,8 @@ VARIANTS = {
     "count_lib": {"walk": "count_lib"},
     "count_stack": {"walk": "count_stack"},
     "any_addr": {"walk": "any_addr"},
+    "any_rec": {"walk": "any_rec"},
+    "count_rec": {"walk": "count_rec"},
     "count_stack_addr": {"walk": "count_stack_addr"},
     "point_lib": {"walk": "point_lib"},
     "point_skip": {"walk": "point_skip"},
@@ -448,9 +451,10 @@ def prefetch_walk(id: wp.uint64, start: wp.vec3, dir: wp.vec3, max_t: float) -> 
     return hit.slot
 
 
-def _stackless_any(by_address: bool):
-    """The library's any hit (``mesh_query_ray_anyhit``: stackless, leaf to leaf) on the
-    records' arrays or (``by_address``) through their addresses: 1 or 0."""
+def _stackless_count(stop_at_first: bool, by_address: bool):
+    """The library's any hit (``mesh_query_ray_anyhit``: stackless, leaf to leaf; 1 or 0)
+    or, without ``stop_at_first``, its counted hits, on the records' arrays or
+    (``by_address``) through their addresses."""
     nodes_of, _items_of, tri_of = _arrays(by_address)
 
     @wp.func
@@ -464,10 +468,12 @@ def _stackless_any(by_address: bool):
         found = 0
         span = root_range(bvh, -1)
         node = span[0]
-        while node < span[1] and found == 0:
+        while node < span[1] and (found == 0 or not wp.static(stop_at_first)):
             step = next_ray_leaf(nodes, node, span[1], start, inv, max_t)
             node = step[2]
-            found = wp.min(leaf_count(tri, step[0], step[1], shear, start, max_t), 1)
+            found = found + leaf_count(tri, step[0], step[1], shear, start, max_t)
+        if wp.static(stop_at_first):
+            return wp.min(found, 1)
         return found
 
     return walk
@@ -753,9 +759,10 @@ def variant_kernel(walk: str, regs: int | None = None):
                 t[i] = closest_point_to_triangle(a, b, c, start[i])[0]
 
         return point
-    if walk in ("any_stack", "any_near", "count_stack", "count_stack_addr", "any_addr"):
-        if walk == "any_addr":
-            hits = _stackless_any(True)
+    if walk in ("any_stack", "any_near", "count_stack", "count_stack_addr", "any_addr",
+                "any_rec", "count_rec"):  # fmt: skip
+        if walk in ("any_addr", "any_rec", "count_rec"):
+            hits = _stackless_count(walk.startswith("any"), walk == "any_addr")
         else:
             hits = _stack_count_walk(walk.startswith("any"), walk == "any_near",
                                      walk.endswith("_addr"))  # fmt: skip
