@@ -241,21 +241,22 @@ class _Closest:
 
 @func
 def _closest_in_leaf(
-    rec: MeshRecord, bvh: BvhRecord, first: int, count: int, point: wp.vec3, best: _Closest
-) -> _Closest:
-    """``best`` updated with the ``count`` faces of a leaf from ``items[first]``: a face
-    replaces it when strictly closer, or as close with a lower index; slivers are left
-    out."""
+    tri: wp.array(dtype=wp.vec3), items: wp.array(dtype=wp.int32), first: int, count: int,
+    point: wp.vec3, best: _Closest,
+) -> _Closest:  # fmt: skip
+    """``best`` updated with the ``count`` faces of a leaf from ``items[first]`` (``tri``:
+    the record's ``tri``, ``items`` the BVH's): a face replaces it when strictly closer,
+    or as close with a lower index; slivers are left out."""
     out = best
     for k in range(first, first + count):
-        a = _corner(rec, k, 0)
-        b = _corner(rec, k, 1)
-        c = _corner(rec, k, 2)
+        a = tri[k * 3]
+        b = tri[k * 3 + 1]
+        c = tri[k * 3 + 2]
         uv = closest_point_to_triangle(a, b, c, point)
         q = a * uv[0] + b * uv[1] + c * (1.0 - uv[0] - uv[1])
         d = wp.length_sq(q - point)
         if d <= out.dist_sq:  # the face's number is loaded only here
-            f = bvh.items[k]
+            f = items[k]
             if d < out.dist_sq or (out.face >= 0 and f < out.face):  # noqa: SIM102
                 # The sliver test (a square root and a division) only for a face that wins.
                 if not is_sliver(a, b, c):
@@ -304,6 +305,9 @@ def _closest_face(id: wp.uint64, point: wp.vec3, max_dist: float) -> int:
         if wide != WIDE_OVERFLOW:
             return wide
     bvh = wp.object_record(rec.bvh, BvhRecord)
+    tree = packed_nodes(bvh)  # (the arrays by address: constant strides)
+    tri = _tri_copy(rec)
+    items = tree_items(bvh)
     best = _Closest()
     best.dist_sq = max_dist * max_dist
     best.face = -1
@@ -317,24 +321,24 @@ def _closest_face(id: wp.uint64, point: wp.vec3, max_dist: float) -> int:
         dists[0] = 0.0
         count = 1
     while count > 0 or sweep < span[1]:
-        first = 0  # the leaf to test: its items [first, first + items)
-        items = 0
+        first = 0  # the leaf to test: its faces [first, first + count)
+        count_in = 0
         if count == 0:  # after an overflow, the stackless pass: its next leaf
-            step = _next_near_leaf(bvh, sweep, span[1], point, best.dist_sq)
+            step = _next_near_leaf(tree, sweep, span[1], point, best.dist_sq)
             sweep = step[2]
             first = step[0]
-            items = step[1]
+            count_in = step[1]
         else:
             count = count - 1
             node = nodes[count]
             if dists[count] <= best.dist_sq:
-                nd = bvh.nodes[node]
+                nd = tree[node]
                 inner = nd.first < 0
                 while inner:  # down the nearer child, the other onto the stack
                     near = node + 1
                     far = right_child(nd.first)  # (right-linked: both loads at once)
-                    near_nd = bvh.nodes[near]
-                    far_nd = bvh.nodes[far]
+                    near_nd = tree[near]
+                    far_nd = tree[far]
                     d_near = box_distance_sq(near_nd.lower, near_nd.upper, point)
                     d_far = box_distance_sq(far_nd.lower, far_nd.upper, point)
                     if d_far < d_near:
@@ -357,8 +361,8 @@ def _closest_face(id: wp.uint64, point: wp.vec3, max_dist: float) -> int:
                         inner = nd.first < 0
                 if nd.first >= 0:  # a leaf reached (an inner node: both children pruned)
                     first = nd.first
-                    items = nd.next
-        best = _closest_in_leaf(rec, bvh, first, items, point, best)
+                    count_in = nd.next
+        best = _closest_in_leaf(tri, items, first, count_in, point, best)
     return best.face
 
 
@@ -373,7 +377,7 @@ def _adj_closest_face(id: wp.uint64, point: wp.vec3, max_dist: float, adj_ret: i
 
 @func
 def _next_near_leaf(
-    bvh: BvhRecord, node: int, stop: int, point: wp.vec3, bound_sq: float
+    nodes: wp.array(dtype=BvhNode), node: int, stop: int, point: wp.vec3, bound_sq: float
 ) -> wp.vec3i:
     """The walk from ``node`` to the next leaf before ``stop`` whose box lies within
     ``sqrt(bound_sq)`` of ``point``, jumping over the subtrees whose box does not:
@@ -386,7 +390,7 @@ def _next_near_leaf(
     threads of a warp, each at its own node, then test faces together, not in every
     iteration where any one of them is at a leaf. The nodes visited are the same."""
     while node < stop:
-        nd = bvh.nodes[node]
+        nd = nodes[node]
         if box_distance_sq(nd.lower, nd.upper, point) <= bound_sq:
             if nd.first >= 0:
                 return wp.vec3i(nd.first, nd.next, node + 1)
@@ -795,18 +799,18 @@ def mesh_query_ray_anyhit(
     (stops at the first hit found)."""
     rec = wp.object_record(id, MeshRecord)
     bvh = wp.object_record(rec.bvh, BvhRecord)
+    nodes = packed_nodes(bvh)  # (by address: constant strides)
+    tri = _tri_copy(rec)
     shear = ray_shear(dir)
     inv = wp.vec3(safe_inverse(dir[0]), safe_inverse(dir[1]), safe_inverse(dir[2]))
     found = False
     span = _root_range(bvh, root)
     node = span[0]
     while node < span[1] and not found:
-        step = _next_ray_leaf(bvh.nodes, node, span[1], start, inv, max_t)
+        step = _next_ray_leaf(nodes, node, span[1], start, inv, max_t)
         node = step[2]
         for k in range(step[0], step[0] + step[1]):
-            h = intersect_ray_triangle(
-                shear, start, _corner(rec, k, 0), _corner(rec, k, 1), _corner(rec, k, 2)
-            )
+            h = intersect_ray_triangle(shear, start, tri[k * 3], tri[k * 3 + 1], tri[k * 3 + 2])
             if h[0] >= 0.0 and h[0] < max_t:
                 found = True
     return found
@@ -838,18 +842,18 @@ def mesh_query_ray_count_intersections(
     """The number of faces the ray ``start + t * dir`` (every ``t >= 0``) hits."""
     rec = wp.object_record(id, MeshRecord)
     bvh = wp.object_record(rec.bvh, BvhRecord)
+    nodes = packed_nodes(bvh)  # (by address: constant strides)
+    tri = _tri_copy(rec)
     shear = ray_shear(dir)
     inv = wp.vec3(safe_inverse(dir[0]), safe_inverse(dir[1]), safe_inverse(dir[2]))
     n = 0
     span = _root_range(bvh, root)
     node = span[0]
     while node < span[1]:
-        step = _next_ray_leaf(bvh.nodes, node, span[1], start, inv, FLT_MAX)
+        step = _next_ray_leaf(nodes, node, span[1], start, inv, FLT_MAX)
         node = step[2]
         for k in range(step[0], step[0] + step[1]):
-            h = intersect_ray_triangle(
-                shear, start, _corner(rec, k, 0), _corner(rec, k, 1), _corner(rec, k, 2)
-            )
+            h = intersect_ray_triangle(shear, start, tri[k * 3], tri[k * 3 + 1], tri[k * 3 + 2])
             if h[0] >= 0.0:
                 n = n + 1
     return n
@@ -1068,7 +1072,7 @@ def mesh_query_point_sign_normal(
     node = span[0]
     while node < span[1]:
         reach = best + eps
-        step = _next_near_leaf(bvh, node, span[1], point, reach * reach)
+        step = _next_near_leaf(bvh.nodes, node, span[1], point, reach * reach)
         node = step[2]
         for k in range(step[0], step[0] + step[1]):
             a = _corner(rec, k, 0)
