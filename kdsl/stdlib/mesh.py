@@ -6,16 +6,21 @@ the ``kdsl.Bvh`` over its triangles' boxes, whose layout ``kdsl.stdlib.bvh`` doc
 The queries walk that BVH's packed nodes (``BvhNode``) stacklessly (a box the query
 cannot use is jumped over with ``skip``), so their state is a few integers and floats,
 with two exceptions where the visiting order pays: the closest point and the closest
-ray hit visit the nearer child first (by box distance, by entry ``t``), the other
-waiting on a stack of ``WALK_STACK`` entries (a thread-local array; deeper trees fall
-back to a stackless pass in the same loop, so each walk tests leaves at one place).
-Neither order changes an answer. The stackless walks alternate two loops
+ray hit visit the nearer child first (by box distance, by entry ``t``; the nodes are
+right-linked, so both children load at once), the other waiting on a stack of
+``WALK_STACK`` entries (a thread-local array; for the closest point, deeper trees fall
+back to a stackless pass in the same loop, so the walk tests leaves at one place; the
+closest hit walks a tree taller than its stack, ``BvhRecord.height``, with a
+stackless pass alone). Neither order changes an answer. The stackless walks alternate two loops
 ("while-while", Aila and Laine 2009): nodes up to the next leaf to test
 (``_next_near_leaf``), then that leaf's faces; the ordered ones descend to a leaf in an
 inner loop. On a GPU the threads of a warp then test faces together. A leaf's faces are
 read from the record's ``tri`` (each face's corners copied in the BVH's item order, so
 a leaf's faces are consecutive; ``kdsl.geometry.mesh_tree_points``), and a face's number
-is loaded only for a face that would be the answer.
+is loaded only for a face that would be the answer. The ray walks and the closest
+point's binary walk read the nodes, the corners and the face numbers through arrays
+made from the records' addresses (``packed_nodes``, ``_tri_copy``: constant strides,
+no stride in registers).
 
 Semantics are Warp 1.19's (signs, barycentric ``(u, v)`` weighing a face's first and
 second vertices, strict ``max_dist``/``max_t`` bounds). Where Warp's answer depends on
