@@ -255,11 +255,13 @@ def test_the_refit_runs_its_three_launches_side_by_side(device, monkeypatch):
     fork = tails[-1]
     gather = mesh._tree_points.prepared(mesh._faces.beside_stream())
     refit = mesh.bvh.refit_checked_steps(mesh._faces.found)
+    levels = len(sum_levels(len(faces)))
     assert all(any(s is f for f in fork.steps) for s in refit) and fork.steps[-1] is gather
-    assert len(fork.steps) == len(refit) + len(sum_levels(len(faces))) + 1  # + sum, gather
-    if device != "cpu":  # the BVH refit on the stream, the sum and the gather beside it
-        assert fork.main == refit
-        assert [len(b[1]) for b in fork.branches] == [len(sum_levels(len(faces))), 1]
+    if device == "cpu":  # the check and the read back issued before it, then one by one
+        assert len(fork.steps) == len(refit) + levels + 1 and not fork.head
+    else:  # the check, then the BVH refit beside the read back + the sum, and the gather
+        assert fork.head == [mesh._faces._check[3]] and fork.main == refit
+        assert [len(b[1]) for b in fork.branches] == [1 + levels, 1]
     # moves 1 and 3 assign new points (a new gather, a new fork), 2 moves them in place
     assert tails[1] is tails[2] and len({id(t) for t in tails}) == 3
     if device != "cpu":
