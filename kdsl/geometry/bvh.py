@@ -128,8 +128,10 @@ class Bvh:
 
     @property
     def packed_nodes(self) -> array:
-        """The packed nodes (``kdsl.stdlib.bvh.BvhNode``, one per slot) kernels walk; a
-        ``rebuild()`` may replace the array."""
+        """The packed nodes (``kdsl.stdlib.bvh.BvhNode``, one per slot) kernels walk: a
+        leaf's ``first`` is its first item position, an inner node's is ``-1 - right``
+        (its right child; the left one is the next node); a ``rebuild()`` may replace
+        the array."""
         return self._nodes
 
     def rebuild(self, constructor: str | None = None) -> None:
