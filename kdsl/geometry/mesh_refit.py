@@ -11,11 +11,14 @@ construction or a refit. The arrays it writes are allocated once per mesh
 pinned memory on a side stream, behind an event: ``host_read``) and the edge sum
 (``ChunkSum``: kdsl kernels, skipped on the device when the check found something, so
 the sum is left as it was); ``finish`` waits for the read only. A construction issues
-its BVH build between the two, so the host never waits for the build; a refit hands
+its BVH build between the two, so the host never waits for the build. A refit hands
 ``start`` the BVH's refit and the gather of the vertex copy (``MeshBvh.
 refit_checked_steps``, ``TreePoints.prepared``: they read the answers on the device and
-write nothing when they are set), which run behind the sum, the three as one CUDA
-graph from the second refit (``StepGraph``), then waits and raises.
+write nothing when they are set); on a GPU the check comes first, then the BVH's
+refit on the stream beside the read back with the sum and the gather on two side
+streams (``ForkedSteps``), all one CUDA graph from the second refit, whose replay
+records the event the host waits for; then ``finish`` raises (session 12,
+docs/performance.md).
 """
 
 from __future__ import annotations

@@ -16,9 +16,10 @@ at every ``refit()`` (after the points moved, in place or by assigning
 ``mesh.points``), and the mesh's BVH (``MeshBvh``) writes it again after every
 ``rebuild()``, which reorders the items.
 
-A ``refit()`` issues the gather right behind the mesh's check, before the host has the
-check's answers: the gather reads the check's counters on the device and leaves the
-copy as it was when they are set. (Writing the copy in the check itself, in item order,
+A ``refit()`` issues the gather behind the mesh's check (on a GPU on a side stream,
+beside the BVH's refit: ``mesh_refit``), before the host has the check's answers: the
+gather reads the check's counters on the device and leaves the copy as it was when
+they are set. (Writing the copy in the check itself, in item order,
 and in the BVH refit's leaf pass both measured slower on the H200: session 11,
 docs/performance.md.)
 """
