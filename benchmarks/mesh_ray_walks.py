@@ -134,6 +134,22 @@ class Hit:
 
 
 @wp.func
+def no_hit(max_t: float) -> Hit:
+    """A search's start: no face, bounded by ``max_t``."""
+    hit = Hit()
+    hit.t = max_t
+    hit.face = -1
+    hit.slot = -1
+    return hit
+
+
+@wp.func
+def inverse(dir: wp.vec3) -> wp.vec3:
+    """The ray direction's componentwise inverse for the slab tests (as the library's)."""
+    return wp.vec3(safe_inverse(dir[0]), safe_inverse(dir[1]), safe_inverse(dir[2]))
+
+
+@wp.func
 def leaf_hits(tri: wp.array(dtype=wp.vec3), items: wp.array(dtype=wp.int32), first: int,
               count: int, shear: RayShear, start: wp.vec3, best: Hit) -> Hit:  # fmt: skip
     """The library's leaf test of the closest hit (corners in ``tri``, a mesh's copy;
@@ -274,11 +290,8 @@ def _payload_walk(by_address: bool, split: bool, fallback: bool = True):
         tri = tri_of(rec)
         items = items_of(bvh)
         shear = ray_shear(dir)
-        inv = wp.vec3(safe_inverse(dir[0]), safe_inverse(dir[1]), safe_inverse(dir[2]))
-        hit = Hit()
-        hit.t = max_t
-        hit.face = -1
-        hit.slot = -1
+        inv = inverse(dir)
+        hit = no_hit(max_t)
         span = root_range(bvh, -1)
         sa = wp.ext.empty(STACK, dtype=wp.int32)
         sb = wp.ext.empty(STACK, dtype=wp.int32)
@@ -373,11 +386,8 @@ def prefetch_walk(id: wp.uint64, start: wp.vec3, dir: wp.vec3, max_t: float) -> 
     rec = wp.object_record(id, MeshRecord)
     bvh = wp.object_record(rec.bvh, BvhRecord)
     shear = ray_shear(dir)
-    inv = wp.vec3(safe_inverse(dir[0]), safe_inverse(dir[1]), safe_inverse(dir[2]))
-    hit = Hit()
-    hit.t = max_t
-    hit.face = -1
-    hit.slot = -1
+    inv = inverse(dir)
+    hit = no_hit(max_t)
     span = root_range(bvh, -1)
     nodes = wp.ext.empty(STACK, dtype=wp.int32)
     enters = wp.ext.empty(STACK, dtype=wp.float32)
@@ -464,7 +474,7 @@ def _stackless_count(stop_at_first: bool, by_address: bool):
         nodes = nodes_of(bvh)
         tri = tri_of(rec)
         shear = ray_shear(dir)
-        inv = wp.vec3(safe_inverse(dir[0]), safe_inverse(dir[1]), safe_inverse(dir[2]))
+        inv = inverse(dir)
         found = 0
         span = root_range(bvh, -1)
         node = span[0]
@@ -494,7 +504,7 @@ def _stack_count_walk(stop_at_first: bool, nearer_first: bool, by_address: bool 
         nodes = nodes_of(bvh)
         tri = tri_of(rec)
         shear = ray_shear(dir)
-        inv = wp.vec3(safe_inverse(dir[0]), safe_inverse(dir[1]), safe_inverse(dir[2]))
+        inv = inverse(dir)
         sa = wp.ext.empty(STACK, dtype=wp.int32)
         sb = wp.ext.empty(STACK, dtype=wp.int32)
         count = 0
