@@ -50,7 +50,7 @@ def _kdsl_rows(data: dict, device: str) -> dict:
     mesh = wp.Mesh(moving, idx)
 
     def move_refit():
-        wp.launch(move, dim=moving.shape[0], inputs=[moving, 1.0001])
+        wp.launch(move, dim=moving.shape[0], inputs=[moving, 1.0001], device=device)
         mesh.refit()
 
     def check():
