@@ -108,7 +108,7 @@ def pack_record(t: T.StructType, fields: dict[str, Any]) -> bytes:
     Python floats in float fields are packed by ``struct``, the rest by NumPy: a
     record write is on the path of every geometry object's construction.)
     """
-    template, packers = _packer(t)
+    template, packers, dt = _packer(t)
     buf = bytearray(template)
     for name, offset, words, scalar in packers:
         value = fields[name]
@@ -122,7 +122,7 @@ def pack_record(t: T.StructType, fields: dict[str, Any]) -> bytes:
                 continue
             except (struct.error, OverflowError):  # out of the field's range: NumPy's cast
                 pass
-        one = np.zeros((), dtype=record_dtype(t))  # NumPy's casts and errors, as before
+        one = np.zeros((), dtype=dt)  # NumPy's casts and errors, as before
         one[name] = [value.ptr or 0, *value.shape, *value.strides] if words else np.asarray(value)
         size = one.dtype.fields[name][0].itemsize
         buf[offset : offset + size] = one.tobytes()[offset : offset + size]
@@ -130,18 +130,18 @@ def pack_record(t: T.StructType, fields: dict[str, Any]) -> bytes:
 
 
 #: Per record type, by identity (hashing a struct type hashes all its fields): (the
-#: type, its bytes with the tag and zeros, one packer per other field).
-_packers: dict[int, tuple[T.StructType, bytes, list]] = {}
+#: type, its bytes with the tag and zeros, one packer per other field, its dtype).
+_packers: dict[int, tuple[T.StructType, bytes, list, np.dtype]] = {}
 #: The Python types ``struct`` packs exactly as NumPy casts them, per field kind.
 _EXACT = {"i": (int,), "u": (int,), "f": (float,)}
 
 
-def _packer(t: T.StructType) -> tuple[bytes, list]:
+def _packer(t: T.StructType) -> tuple[bytes, list, np.dtype]:
     """(template, [(field, offset, descriptor struct or None, (scalar struct, exact
-    Python types) or None)]) of record type ``t``, made once."""
+    Python types) or None)], record dtype) of record type ``t``, made once."""
     hit = _packers.get(id(t))
     if hit is not None and hit[0] is t:
-        return hit[1], hit[2]
+        return hit[1], hit[2], hit[3]
     dt = record_dtype(t)
     rec = np.zeros((), dtype=dt)
     rec[t.fields[0][0]] = record_tag(t.name)
@@ -153,8 +153,8 @@ def _packer(t: T.StructType) -> tuple[bytes, list]:
         if words is None and fdt.shape == () and fdt.kind in _EXACT and fdt.byteorder in "=<|":
             scalar = (struct.Struct("<" + fdt.char), _EXACT[fdt.kind])
         packers.append((name, offset, words, scalar))
-    _packers[id(t)] = (t, rec.tobytes(), packers)
-    return rec.tobytes(), packers
+    _packers[id(t)] = (t, rec.tobytes(), packers, dt)
+    return rec.tobytes(), packers, dt
 
 
 class ObjectRecord:
